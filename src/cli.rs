@@ -1,0 +1,80 @@
+//! Raw command-line flags (clap). Resolution into a [`crate::source::SourceSpec`] and session
+//! settings happens in `main`, on top of the configuration file.
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+/// Shape from sensors: turns the stream of an inertial scanning device into 3D curve networks.
+#[derive(Debug, Parser)]
+#[command(name = "sfs", version, about, long_about = None)]
+pub struct Cli {
+    /// Log format on standard error.
+    #[arg(long, value_enum, default_value_t = LogFormat::Human, global = true)]
+    pub log_format: LogFormat,
+    /// Log filter (tracing `EnvFilter` syntax); overrides RUST_LOG. Default: info.
+    #[arg(long, global = true)]
+    pub log: Option<String>,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LogFormat {
+    Human,
+    Json,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Replay a capture file through the pipeline and write DIR/report.json.
+    Replay(ReplayArgs),
+    /// Read a live device (serial port or standard input), capture every byte to
+    /// SESSION/capture.bin, and write SESSION/report.json when it ends (Ctrl-C).
+    Run(RunArgs),
+    /// Configuration files.
+    #[command(subcommand)]
+    Config(ConfigCommand),
+}
+
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// The capture file (raw bytes as the device sent them).
+    pub capture: PathBuf,
+    /// Output directory (created if missing).
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Replay as fast as possible, or paced by the device timestamps.
+    #[arg(long, default_value = "fast", value_parser = ["fast", "realtime"])]
+    pub pace: String,
+}
+
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// Configuration file (TOML). Flags below override it.
+    #[arg(long, short)]
+    pub config: Option<PathBuf>,
+    /// Serial port path (e.g. /dev/ttyUSB0).
+    #[arg(long, conflicts_with = "stdin")]
+    pub serial: Option<PathBuf>,
+    /// Serial speed in baud.
+    #[arg(long)]
+    pub baud: Option<u32>,
+    /// Silence, in milliseconds, after which the serial link counts as lost.
+    #[arg(long)]
+    pub watchdog_ms: Option<u64>,
+    /// Read the device stream from standard input.
+    #[arg(long)]
+    pub stdin: bool,
+    /// Session directory (created if missing; an existing capture.bin is appended to).
+    #[arg(long, short)]
+    pub session: PathBuf,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ConfigCommand {
+    /// Check a configuration file; every error names the key and the reason.
+    Check {
+        /// The file to check.
+        file: PathBuf,
+    },
+}

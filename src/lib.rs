@@ -1,0 +1,43 @@
+//! sfs: shape from sensors. A daemon that turns the stream of an inertial scanning device into
+//! 3D curve networks and smooth surfaces.
+//!
+//! # Layout, in the order the data flows
+//!
+//! - `device-protocol` (its own crate): bytes ⇄ packets, the wire format version 1.
+//! - [`source`]: where bytes come from (serial port, capture file, stdin), each on its own
+//!   thread behind one channel of [`source::SourceEvent`]s.
+//! - [`capture`]: lossless capture of live bytes, written before anything decodes them.
+//! - [`link`]: statistics of the decoded link (packets, rejects, gaps, reboots, STATUS).
+//! - [`session`]: one run of the pipeline, source → decoder → statistics → outputs.
+//! - [`report`]: `report.json`; [`atomic`]: atomic replacement of output files.
+//! - [`config`]: the resolved configuration (`config/*.toml`); [`cli`]: raw flags.
+//! - [`shutdown`]: the stop signal passed into every long-running part.
+//!
+//! Later stages (samples → orientations → tagged curves → filtered frames → network →
+//! surface → glTF) are added as modules in that order.
+
+pub mod atomic;
+pub mod capture;
+pub mod cli;
+pub mod config;
+pub mod link;
+pub mod report;
+pub mod session;
+pub mod shutdown;
+pub mod source;
+
+/// Exit codes of the `sfs` binary (a stated policy, also in the README).
+pub mod exit {
+    /// Success.
+    pub const OK: i32 = 0;
+    /// An unexpected internal error.
+    pub const INTERNAL: i32 = 1;
+    /// Wrong usage or an invalid configuration file.
+    pub const USAGE: i32 = 2;
+    /// The input (capture file, serial port, standard input) cannot be opened or read.
+    pub const INPUT: i32 = 3;
+    /// An output (session directory, capture, report) cannot be written.
+    pub const OUTPUT: i32 = 4;
+    /// A second interrupt signal: exit at once (files are left consistent, not finished).
+    pub const INTERRUPTED: i32 = 130;
+}

@@ -1,0 +1,212 @@
+//! The `sfs` binary: a thin layer over the library. Parses flags, resolves them with the
+//! configuration, installs logging and signal handling, runs, maps errors to exit codes.
+
+use clap::Parser;
+use sfs::cli::{Cli, Command, ConfigCommand, LogFormat, ReplayArgs, RunArgs};
+use sfs::config::{Config, ConfigError};
+use sfs::exit;
+use sfs::session::{self, Outcome, SessionError};
+use sfs::shutdown::Shutdown;
+use sfs::source::{SerialSpec, SourceError, SourceSpec};
+use std::path::Path;
+use std::time::Duration;
+
+fn main() {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let code = if e.use_stderr() {
+                exit::USAGE
+            } else {
+                exit::OK
+            };
+            let _ = e.print();
+            std::process::exit(code);
+        }
+    };
+    init_logging(cli.log_format, cli.log.as_deref());
+    std::process::exit(match cli.command {
+        Command::Replay(a) => replay(a),
+        Command::Run(a) => run(a),
+        Command::Config(ConfigCommand::Check { file }) => config_check(&file),
+    });
+}
+
+fn init_logging(format: LogFormat, filter: Option<&str>) {
+    use tracing_subscriber::EnvFilter;
+    let filter = match filter {
+        Some(f) => EnvFilter::new(f),
+        None => EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
+    };
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    match format {
+        LogFormat::Human => builder.init(),
+        LogFormat::Json => builder.json().init(),
+    }
+}
+
+fn replay(a: ReplayArgs) -> i32 {
+    let pace = match a.pace.parse() {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("sfs: --pace: {e}");
+            return exit::USAGE;
+        }
+    };
+    let spec = SourceSpec::Replay {
+        path: a.capture,
+        pace,
+    };
+    run_session(spec, &a.out)
+}
+
+fn run(a: RunArgs) -> i32 {
+    let spec = match resolve_run(&a) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("sfs: {e}");
+            return exit::USAGE;
+        }
+    };
+    run_session(spec, &a.session)
+}
+
+/// Flags over the configuration file over the defaults.
+fn resolve_run(a: &RunArgs) -> Result<SourceSpec, ConfigError> {
+    let cli_err = |key: &str, reason: &str| ConfigError {
+        file: "command line".into(),
+        key: key.into(),
+        reason: reason.into(),
+    };
+    let (cfg, file) = match &a.config {
+        Some(f) => (Config::load(f)?, f.clone()),
+        None => (Config::default(), "command line".into()),
+    };
+    let mut spec = if a.stdin {
+        SourceSpec::Stdin
+    } else if let Some(p) = &a.serial {
+        SourceSpec::Serial(SerialSpec::new(p, cfg.source.baud))
+    } else if a.config.is_some() {
+        cfg.source_spec(&file)?
+    } else {
+        return Err(cli_err(
+            "--serial",
+            "give --serial PATH, --stdin or --config FILE",
+        ));
+    };
+    if let SourceSpec::Serial(s) = &mut spec {
+        if let Some(b) = a.baud {
+            if b == 0 {
+                return Err(cli_err("--baud", "must be positive"));
+            }
+            s.baud = b;
+        }
+        if a.config.is_some() && a.serial.is_some() {
+            s.watchdog = Duration::from_millis(cfg.source.watchdog_ms);
+        }
+        if let Some(w) = a.watchdog_ms {
+            if w < 100 {
+                return Err(cli_err("--watchdog-ms", "minimum 100"));
+            }
+            s.watchdog = Duration::from_millis(w);
+        }
+    }
+    Ok(spec)
+}
+
+fn config_check(file: &Path) -> i32 {
+    match Config::load(file) {
+        Ok(_) => {
+            println!("{}: ok", file.display());
+            exit::OK
+        }
+        Err(e) => {
+            eprintln!("sfs: {e}");
+            exit::USAGE
+        }
+    }
+}
+
+fn run_session(spec: SourceSpec, out: &Path) -> i32 {
+    let rt = match tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("sfs: cannot start the runtime: {e}");
+            return exit::INTERNAL;
+        }
+    };
+    rt.block_on(async {
+        let shutdown = Shutdown::new();
+        tokio::spawn(signals(shutdown.clone()));
+        match session::run(spec, out, shutdown).await {
+            Ok(o) => {
+                print_summary(&o);
+                exit::OK
+            }
+            Err(e) => {
+                eprintln!("sfs: {e}");
+                match e {
+                    SessionError::Source(SourceError::Thread(_)) => exit::INTERNAL,
+                    SessionError::Source(_) => exit::INPUT,
+                    SessionError::Output { .. } => exit::OUTPUT,
+                }
+            }
+        }
+    })
+}
+
+/// First SIGINT/SIGTERM: orderly shutdown. Second: exit at once (every output file is replaced
+/// atomically and the capture is append-only, so nothing is left corrupt).
+async fn signals(shutdown: Shutdown) {
+    use tokio::signal::unix::{signal, SignalKind};
+    let (Ok(mut int), Ok(mut term)) = (
+        signal(SignalKind::interrupt()),
+        signal(SignalKind::terminate()),
+    ) else {
+        tracing::warn!("cannot install signal handlers");
+        return;
+    };
+    for n in 0.. {
+        tokio::select! {
+            _ = int.recv() => {}
+            _ = term.recv() => {}
+        }
+        if n == 0 {
+            tracing::info!("signal received: finishing (send again to exit at once)");
+            shutdown.trigger();
+        } else {
+            eprintln!("sfs: second signal, exiting now");
+            std::process::exit(exit::INTERRUPTED);
+        }
+    }
+}
+
+fn print_summary(o: &Outcome) {
+    let l = &o.report.link;
+    println!(
+        "{}: {} bytes, {} packets, {} rejected (crc {}, cobs {}, length {}), {} unknown, {} lost, {} reboots, {} clock wraps ({}, {:.2} s)",
+        o.report.source,
+        l.bytes,
+        l.packets.total(),
+        l.rejected.total(),
+        l.rejected.crc,
+        l.rejected.cobs,
+        l.rejected.length,
+        l.unknown_types,
+        l.lost_packets,
+        l.reboots,
+        l.clock_wraps,
+        o.report.ended,
+        o.report.wall_time_s,
+    );
+    if let Some(c) = &o.capture_path {
+        println!("capture: {}", c.display());
+    }
+    println!("report:  {}", o.report_path.display());
+}

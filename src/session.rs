@@ -1,0 +1,148 @@
+//! One session: a source feeding the decoder, with the capture, statistics and outputs.
+//!
+//! `bytes → source thread (capture first) → channel → decoder → link statistics → report.json`.
+//! Later stages (acquisition, reconstruction) hang off the decoder's packets here.
+
+use crate::capture::CaptureWriter;
+use crate::link::LinkStats;
+use crate::report::Report;
+use crate::shutdown::Shutdown;
+use crate::source::{self, EndReason, SourceError, SourceEvent, SourceSpec};
+use device_protocol::Decoder;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// Name of the lossless capture in a session directory.
+pub const CAPTURE_FILE: &str = "capture.bin";
+/// Name of the report in a session (or replay output) directory.
+pub const REPORT_FILE: &str = "report.json";
+
+/// How long the pipeline keeps draining a source after shutdown was asked for.
+const SHUTDOWN_GRACE: Duration = Duration::from_secs(2);
+
+/// Why a session could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    /// The input (capture file, serial port, stdin) is unavailable.
+    #[error(transparent)]
+    Source(#[from] SourceError),
+    /// The output directory or a file in it cannot be written.
+    #[error("cannot write {}: {source}", path.display())]
+    Output {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// What a finished session reports.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub report: Report,
+    pub report_path: PathBuf,
+    pub capture_path: Option<PathBuf>,
+}
+
+/// Runs a session from `spec` until its source ends or `shutdown` is triggered, then writes
+/// `out_dir/report.json`. A live source is captured to `out_dir/capture.bin` (appended to, so a
+/// resumed session continues it).
+pub async fn run(
+    spec: SourceSpec,
+    out_dir: &Path,
+    shutdown: Shutdown,
+) -> Result<Outcome, SessionError> {
+    let output_err = |path: &Path| {
+        let path = path.to_owned();
+        move |source| SessionError::Output { path, source }
+    };
+    std::fs::create_dir_all(out_dir).map_err(output_err(out_dir))?;
+    let capture_path = spec.is_live().then(|| out_dir.join(CAPTURE_FILE));
+    let capture = match &capture_path {
+        Some(p) => Some(CaptureWriter::open_append(p).map_err(output_err(p))?),
+        None => None,
+    };
+    let description = spec.describe();
+    tracing::info!(source = %description, out = %out_dir.display(), "session started");
+    let started = Instant::now();
+    let mut src = source::spawn(spec, capture, shutdown.clone())?;
+
+    let mut decoder = Decoder::new();
+    let mut stats = LinkStats::default();
+    let mut end = EndReason::Shutdown;
+    let mut deadline: Option<tokio::time::Instant> = None;
+    loop {
+        let ev = tokio::select! {
+            ev = src.events.recv() => ev,
+            _ = shutdown.triggered(), if deadline.is_none() => {
+                tracing::info!("shutdown requested: draining the source");
+                deadline = Some(tokio::time::Instant::now() + SHUTDOWN_GRACE);
+                continue;
+            }
+            _ = sleep_until(deadline), if deadline.is_some() => {
+                tracing::warn!("source did not stop in time; finishing without it");
+                break;
+            }
+        };
+        match ev {
+            Some(SourceEvent::Bytes(bytes)) => {
+                stats.bytes += bytes.len() as u64;
+                for e in decoder.feed(&bytes) {
+                    stats.observe(&e);
+                }
+            }
+            Some(SourceEvent::Connected { .. }) => stats.connects += 1,
+            Some(SourceEvent::Disconnected { .. }) => stats.disconnects += 1,
+            Some(SourceEvent::End { reason }) => {
+                end = reason;
+                break;
+            }
+            None => break,
+        }
+    }
+    drop(src.events); // a source still blocked on send sees the channel closed and stops
+                      // Let the source thread finish its final fsync; a thread blocked reading stdin is left.
+    let join_deadline = Instant::now() + Duration::from_secs(1);
+    while !src.thread.is_finished() && Instant::now() < join_deadline {
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    if src.thread.is_finished() {
+        let _ = src.thread.join();
+    }
+    if decoder.buffered() > 0 {
+        tracing::debug!(bytes = decoder.buffered(), "stream ended inside a frame");
+    }
+    let report = Report {
+        sfs_version: env!("CARGO_PKG_VERSION"),
+        source: description,
+        ended: match end {
+            EndReason::EndOfInput => "end_of_input",
+            EndReason::Shutdown => "shutdown",
+            EndReason::CaptureFailed => "capture_failed",
+            EndReason::ReadError => "read_error",
+        },
+        wall_time_s: started.elapsed().as_secs_f64(),
+        link: stats,
+    };
+    let report_path = out_dir.join(REPORT_FILE);
+    report
+        .write(&report_path)
+        .map_err(output_err(&report_path))?;
+    if end == EndReason::CaptureFailed {
+        return Err(SessionError::Output {
+            path: capture_path.clone().unwrap_or_default(),
+            source: std::io::Error::other("appending to the capture failed"),
+        });
+    }
+    Ok(Outcome {
+        report,
+        report_path,
+        capture_path,
+    })
+}
+
+async fn sleep_until(deadline: Option<tokio::time::Instant>) {
+    match deadline {
+        Some(d) => tokio::time::sleep_until(d).await,
+        None => std::future::pending().await,
+    }
+}
