@@ -18,7 +18,7 @@ pub const CAPTURE_FILE: &str = "capture.bin";
 pub const REPORT_FILE: &str = "report.json";
 
 /// How long the pipeline keeps draining a source after shutdown was asked for.
-const SHUTDOWN_GRACE: Duration = Duration::from_secs(2);
+const SHUTDOWN_GRACE: Duration = Duration::from_millis(300);
 
 /// Why a session could not run.
 #[derive(Debug, thiserror::Error)]

@@ -1,0 +1,162 @@
+//! `sfs replay` end to end through the real binary: statistics against a capture built with
+//! known faults, the summary, and the exit-code policy on bad input.
+
+mod common;
+use common::*;
+use std::process::Command;
+
+fn sfs() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_sfs"))
+}
+
+fn read_report(dir: &std::path::Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("report.json")).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+#[test]
+fn replay_counts_every_fault() {
+    let dir = tmpdir("replay-faults");
+    let (bytes, exp) = fault_stream(1000);
+    let cap = dir.join("faults.bin");
+    std::fs::write(&cap, &bytes).unwrap();
+    let out = sfs()
+        .args(["replay", cap.to_str().unwrap(), "--out"])
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains(&format!("{} bytes", bytes.len())),
+        "{stdout}"
+    );
+    let report = read_report(&dir.join("out"));
+    assert_eq!(report["ended"], "end_of_input");
+    let link = &report["link"];
+    assert_link(link, bytes.len(), &exp);
+    assert_eq!(link["status"]["flags"], 2);
+    assert_eq!(link["status"]["flag_names"][0], "magnetometer_saturated");
+    assert_eq!(link["status"]["dropped"], 12);
+    assert_eq!(link["hello"]["kind"], "morphorider");
+}
+
+#[test]
+fn replay_of_shipped_demo_log_is_clean() {
+    let dir = tmpdir("replay-demo");
+    let log = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/replay-logs/demo-morphorider.bin"
+    );
+    let out = sfs()
+        .args(["replay", log, "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let link = &read_report(&dir)["link"];
+    assert_eq!(link["bytes"], std::fs::metadata(log).unwrap().len());
+    assert!(link["packets"]["RIDER_SAMPLE"].as_u64().unwrap() > 1000);
+    assert!(link["packets"]["KEY"].as_u64().unwrap() > 10);
+    assert_eq!(link["rejected"]["cobs"], 0);
+    assert_eq!(link["rejected"]["length"], 0);
+    assert_eq!(link["unknown_types"], 0);
+    // Its two deliberately corrupted packets are both counted and both missing from the sequence.
+    assert_eq!(link["rejected"]["crc"], link["lost_packets"]);
+}
+
+#[test]
+fn missing_capture_is_one_line_error_with_input_exit_code() {
+    let dir = tmpdir("replay-missing");
+    let missing = dir.join("no-such-capture.bin");
+    let out = sfs()
+        .args(["--log", "off", "replay"])
+        .arg(&missing)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(sfs::exit::INPUT));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains(missing.to_str().unwrap()), "{err}");
+}
+
+#[test]
+fn directory_as_capture_is_an_input_error() {
+    let dir = tmpdir("replay-dir");
+    let out = sfs()
+        .args(["--log", "off", "replay"])
+        .arg(&dir)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(sfs::exit::INPUT));
+}
+
+#[test]
+fn unwritable_output_is_an_output_error() {
+    let dir = tmpdir("replay-unwritable");
+    let cap = dir.join("c.bin");
+    std::fs::write(&cap, fault_stream(10).0).unwrap();
+    let blocker = dir.join("file-not-dir");
+    std::fs::write(&blocker, b"x").unwrap();
+    let out = sfs()
+        .args(["--log", "off", "replay"])
+        .arg(&cap)
+        .arg("--out")
+        .arg(blocker.join("out"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(sfs::exit::OUTPUT));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("file-not-dir"), "{err}");
+}
+
+#[test]
+fn bad_usage_exits_2() {
+    let out = sfs().args(["replay"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(sfs::exit::USAGE));
+    let out = sfs()
+        .args(["replay", "x.bin", "--out", "o", "--pace", "slow"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(sfs::exit::USAGE));
+}
+
+#[test]
+fn realtime_pace_follows_device_clock() {
+    let dir = tmpdir("replay-realtime");
+    let mut b = Builder::new();
+    b.packet(hello());
+    for i in 0..60 {
+        b.sample(i); // 10 ms apart: 0.59 s of device time
+    }
+    let cap = dir.join("c.bin");
+    std::fs::write(&cap, &b.bytes).unwrap();
+    let t0 = std::time::Instant::now();
+    let out = sfs()
+        .args(["--log", "off", "replay", "--pace", "realtime"])
+        .arg(&cap)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    let wall = t0.elapsed().as_secs_f64();
+    assert!(out.status.success());
+    assert!(
+        wall >= 0.55,
+        "paced replay took only {wall:.3} s for 0.59 s of device time"
+    );
+    let link = &read_report(&dir.join("out"))["link"];
+    assert_eq!(link["packets"]["RIDER_SAMPLE"], 60);
+}
