@@ -9,6 +9,8 @@
 //! watchdog_ms = 3000       # silence that counts as a disconnect
 //! pace = "fast"            # replay only: "fast" | "realtime"
 //! ```
+//!
+//! A relative `path` of a capture file is relative to the configuration file's directory.
 
 use crate::source::{Pace, SerialSpec, SourceSpec};
 use serde::Deserialize;
@@ -79,14 +81,22 @@ fn default_pace() -> String {
 }
 
 impl Config {
-    /// Reads and validates `path`.
+    /// Reads and validates `path`. Relative paths inside it are taken relative to the
+    /// directory of the file, so a shipped configuration works from any working directory.
     pub fn load(path: &Path) -> Result<Config, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
             file: path.to_owned(),
             key: "-".into(),
             reason: format!("cannot read: {e}"),
         })?;
-        Self::parse(&text, path)
+        let mut cfg = Self::parse(&text, path)?;
+        let base = path.parent().unwrap_or(Path::new(""));
+        if let Some(p) = &mut cfg.source.path {
+            if p.is_relative() && cfg.source.kind != "serial" {
+                *p = base.join(&*p);
+            }
+        }
+        Ok(cfg)
     }
 
     /// Parses and validates `text` (read from `file`, for messages).

@@ -1,5 +1,5 @@
 //! Decoder throughput on a 100 MB mixed stream with 0.1 % corrupted packets.
-//! `cargo bench -p device-protocol --bench decoder`; target ≥ 300 MB/s (BENCHMARKS.md).
+//! `cargo bench --bench decoder`; target ≥ 300 MB/s (BENCHMARKS.md).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use device_protocol::*;
