@@ -17,6 +17,9 @@ pub const CAPTURE_FILE: &str = "capture.bin";
 /// Name of the report in a session (or replay output) directory.
 pub const REPORT_FILE: &str = "report.json";
 
+/// How often a running session logs its link statistics (when they changed).
+const STATS_LOG_INTERVAL: Duration = Duration::from_secs(10);
+
 /// How long the pipeline keeps draining a source after shutdown was asked for.
 const SHUTDOWN_GRACE: Duration = Duration::from_millis(300);
 
@@ -70,9 +73,21 @@ pub async fn run(
     let mut stats = LinkStats::default();
     let mut end = EndReason::Shutdown;
     let mut deadline: Option<tokio::time::Instant> = None;
+    let mut tick = tokio::time::interval_at(
+        tokio::time::Instant::now() + STATS_LOG_INTERVAL,
+        STATS_LOG_INTERVAL,
+    );
+    let mut logged = LinkStats::default();
     loop {
         let ev = tokio::select! {
             ev = src.events.recv() => ev,
+            _ = tick.tick() => {
+                if stats != logged {
+                    log_stats("link", &stats);
+                    logged = stats.clone();
+                }
+                continue;
+            }
             _ = shutdown.triggered(), if deadline.is_none() => {
                 tracing::info!("shutdown requested: draining the source");
                 deadline = Some(tokio::time::Instant::now() + SHUTDOWN_GRACE);
@@ -111,6 +126,7 @@ pub async fn run(
     if decoder.buffered() > 0 {
         tracing::debug!(bytes = decoder.buffered(), "stream ended inside a frame");
     }
+    log_stats("session ended", &stats);
     let report = Report {
         sfs_version: env!("CARGO_PKG_VERSION"),
         source: description,
@@ -138,6 +154,22 @@ pub async fn run(
         report_path,
         capture_path,
     })
+}
+
+fn log_stats(msg: &str, s: &LinkStats) {
+    tracing::info!(
+        bytes = s.bytes,
+        packets = s.packets.total(),
+        rejected_crc = s.rejected.crc,
+        rejected_cobs = s.rejected.cobs,
+        rejected_length = s.rejected.length,
+        unknown_types = s.unknown_types,
+        lost_packets = s.lost_packets,
+        reboots = s.reboots,
+        clock_wraps = s.clock_wraps,
+        disconnects = s.disconnects,
+        "{msg}"
+    );
 }
 
 async fn sleep_until(deadline: Option<tokio::time::Instant>) {
