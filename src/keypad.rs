@@ -1,0 +1,336 @@
+//! The keypad grammar of the wire format as a state machine.
+//!
+//! | key | meaning |
+//! |---|---|
+//! | `B` / `I` | start a curve on the boundary / in the interior |
+//! | `0`–`9` then Enter | tag the node with this index at the position of the Enter press |
+//! | `U` | undo the last node tag of the current curve |
+//! | `C` | cancel the current curve |
+//! | `E` | end the current curve (it needs at least two tags) |
+//!
+//! Anything out of grammar yields a [`Warning`] naming the curve, the node and the device
+//! time, and is handled without touching the other curves:
+//! a digit or Enter with no curve open is ignored; Enter with no digits is ignored; digits
+//! followed by another key are dropped; a repeated tag of the same node is ignored; `U` with
+//! no tag and `C`/`E` with no curve are ignored; `E` with fewer than two tags discards the
+//! curve; `B`/`I` while a curve is open ends it first (kept if it has two tags, else
+//! discarded); an unknown key is ignored.
+//!
+//! ```
+//! use sfs::keypad::{Keypad, KeyEvent};
+//! let mut k = Keypad::new();
+//! let mut ev = Vec::new();
+//! for (t, key) in [(0.0, b'B'), (1.0, b'3'), (1.1, b'\n'), (5.0, b'4'), (5.1, b'\n'), (6.0, b'E')] {
+//!     k.key(t, key, &mut ev);
+//! }
+//! assert!(matches!(ev.last(), Some(KeyEvent::Ended { curve: 0 })));
+//! ```
+
+/// Index of a curve in scan order, counting accepted curves (a cancelled curve's index is
+/// reused by the next one).
+pub type CurveIndex = usize;
+
+/// A grammar violation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Warning {
+    pub curve: Option<CurveIndex>,
+    pub node: Option<u32>,
+    /// Session time of the key, seconds.
+    pub t: f64,
+    pub message: String,
+}
+
+impl std::fmt::Display for Warning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.curve {
+            Some(c) => write!(f, "curve {c}")?,
+            None => write!(f, "no curve open")?,
+        }
+        if let Some(n) = self.node {
+            write!(f, ", node {n}")?;
+        }
+        write!(f, ", t = {:.3} s: {}", self.t, self.message)
+    }
+}
+
+/// What the keypad did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum KeyEvent {
+    Started {
+        curve: CurveIndex,
+        boundary: bool,
+    },
+    /// Node `node` tagged at time `t` (the Enter press).
+    Tagged {
+        curve: CurveIndex,
+        node: u32,
+        t: f64,
+    },
+    Untagged {
+        curve: CurveIndex,
+        node: u32,
+    },
+    /// The curve is dropped (cancel, or not enough tags).
+    Discarded { curve: CurveIndex },
+    /// The curve is complete.
+    Ended { curve: CurveIndex },
+    Warning(Warning),
+}
+
+/// Largest node index accepted (six digits).
+pub const MAX_NODE: u32 = 999_999;
+
+#[derive(Debug, Clone)]
+struct Open {
+    curve: CurveIndex,
+    tags: Vec<u32>,
+}
+
+/// The state machine. Feed it every KEY packet in order.
+#[derive(Debug, Clone, Default)]
+pub struct Keypad {
+    open: Option<Open>,
+    digits: String,
+    accepted: CurveIndex,
+}
+
+impl Keypad {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Index the next started curve will get.
+    pub fn next_curve(&self) -> CurveIndex {
+        self.accepted
+    }
+
+    /// The open curve, if any.
+    pub fn open_curve(&self) -> Option<CurveIndex> {
+        self.open.as_ref().map(|o| o.curve)
+    }
+
+    /// Tags of the open curve.
+    pub fn open_tags(&self) -> &[u32] {
+        self.open.as_ref().map_or(&[], |o| &o.tags)
+    }
+
+    fn warn(&self, out: &mut Vec<KeyEvent>, t: f64, node: Option<u32>, message: String) {
+        let w = Warning {
+            curve: self.open_curve(),
+            node,
+            t,
+            message,
+        };
+        tracing::warn!("keypad: {w}");
+        out.push(KeyEvent::Warning(w));
+    }
+
+    fn drop_digits(&mut self, t: f64, key: u8, out: &mut Vec<KeyEvent>) {
+        if !self.digits.is_empty() {
+            let d = std::mem::take(&mut self.digits);
+            self.warn(
+                out,
+                t,
+                d.parse().ok(),
+                format!("digits {d:?} were not confirmed with Enter before {:?}; ignored", key as char),
+            );
+        }
+    }
+
+    /// Ends the open curve: kept with two tags or more, else discarded.
+    fn finish(&mut self, t: f64, why: &str, out: &mut Vec<KeyEvent>) {
+        let Some(open) = &self.open else { return };
+        let curve = open.curve;
+        if open.tags.len() >= 2 {
+            self.accepted += 1;
+            self.open = None;
+            out.push(KeyEvent::Ended { curve });
+        } else {
+            let n = open.tags.len();
+            let node = open.tags.first().copied();
+            self.warn(
+                out,
+                t,
+                node,
+                format!("{why} with {n} node tag(s); a curve needs a start and an end node: discarded"),
+            );
+            self.open = None;
+            out.push(KeyEvent::Discarded { curve });
+        }
+    }
+
+    /// Processes one key pressed at session time `t`, appending what happened to `out`.
+    pub fn key(&mut self, t: f64, key: u8, out: &mut Vec<KeyEvent>) {
+        match key {
+            b'0'..=b'9' => {
+                if self.open.is_none() {
+                    self.warn(out, t, Some((key - b'0') as u32), "digit with no curve open; ignored".into());
+                } else if self.digits.len() >= 6 {
+                    self.warn(out, t, None, format!("node index longer than 6 digits ({}…); ignored", self.digits));
+                } else {
+                    self.digits.push(key as char);
+                }
+            }
+            b'\n' | b'\r' => {
+                let digits = std::mem::take(&mut self.digits);
+                if self.open.is_none() {
+                    self.warn(out, t, digits.parse().ok(), "Enter with no curve open; ignored".into());
+                    return;
+                }
+                if digits.is_empty() {
+                    self.warn(out, t, None, "Enter with no node index typed; ignored".into());
+                    return;
+                }
+                let node: u32 = digits.parse().expect("only digits, at most 6");
+                let open = self.open.as_mut().expect("checked");
+                if open.tags.last() == Some(&node) {
+                    self.warn(out, t, Some(node), "node tagged twice in a row; the repeat is ignored".into());
+                    return;
+                }
+                open.tags.push(node);
+                out.push(KeyEvent::Tagged {
+                    curve: open.curve,
+                    node,
+                    t,
+                });
+            }
+            b'B' | b'I' => {
+                self.drop_digits(t, key, out);
+                if self.open.is_some() {
+                    self.warn(out, t, self.open_tags().last().copied(), format!(
+                        "curve never ended (no E) before {:?} started the next one; ending it here",
+                        key as char
+                    ));
+                    self.finish(t, "ended implicitly", out);
+                }
+                let curve = self.accepted;
+                self.open = Some(Open {
+                    curve,
+                    tags: Vec::new(),
+                });
+                out.push(KeyEvent::Started {
+                    curve,
+                    boundary: key == b'B',
+                });
+            }
+            b'U' => {
+                self.drop_digits(t, key, out);
+                match self.open.as_mut().map(|o| (o.curve, o.tags.pop())) {
+                    Some((curve, Some(node))) => out.push(KeyEvent::Untagged { curve, node }),
+                    Some((_, None)) => self.warn(out, t, None, "U (undo) with no node tag to undo; ignored".into()),
+                    None => self.warn(out, t, None, "U (undo) with no curve open; ignored".into()),
+                }
+            }
+            b'C' => {
+                self.drop_digits(t, key, out);
+                match self.open.take() {
+                    Some(o) => out.push(KeyEvent::Discarded { curve: o.curve }),
+                    None => self.warn(out, t, None, "C (cancel) with no curve open; ignored".into()),
+                }
+            }
+            b'E' => {
+                self.drop_digits(t, key, out);
+                if self.open.is_none() {
+                    self.warn(out, t, None, "E (end) with no curve open; ignored".into());
+                } else {
+                    self.finish(t, "E pressed", out);
+                }
+            }
+            other => {
+                self.warn(out, t, None, format!("unknown key 0x{other:02X} ({:?}); ignored", other as char));
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(keys: &str) -> Vec<KeyEvent> {
+        let mut k = Keypad::new();
+        let mut out = Vec::new();
+        for (i, c) in keys.bytes().enumerate() {
+            k.key(i as f64, c, &mut out);
+        }
+        out
+    }
+
+    fn warnings(ev: &[KeyEvent]) -> Vec<&Warning> {
+        ev.iter()
+            .filter_map(|e| match e {
+                KeyEvent::Warning(w) => Some(w),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn ended(ev: &[KeyEvent]) -> Vec<CurveIndex> {
+        ev.iter()
+            .filter_map(|e| match e {
+                KeyEvent::Ended { curve } => Some(*curve),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn well_formed_session() {
+        let ev = run("B1\n2\n3\n1\nEI12\n0\n7\nE");
+        assert!(warnings(&ev).is_empty(), "{ev:?}");
+        assert_eq!(ended(&ev), [0, 1]);
+        let tags: Vec<u32> = ev
+            .iter()
+            .filter_map(|e| match e {
+                KeyEvent::Tagged { node, .. } => Some(*node),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(tags, [1, 2, 3, 1, 12, 0, 7]);
+        assert!(matches!(ev[0], KeyEvent::Started { curve: 0, boundary: true }));
+    }
+
+    #[test]
+    fn undo_and_cancel() {
+        let ev = run("I1\n5\nU2\nEI3\nCI3\n4\nE");
+        assert!(warnings(&ev).is_empty(), "{ev:?}");
+        assert!(ev.contains(&KeyEvent::Untagged { curve: 0, node: 5 }));
+        assert!(ev.contains(&KeyEvent::Discarded { curve: 1 }));
+        // The cancelled curve's index is reused by the rescan.
+        assert_eq!(ended(&ev), [0, 1]);
+    }
+
+    #[test]
+    fn every_violation_warns_with_curve_node_and_time() {
+        let cases: &[(&str, Option<usize>, &str)] = &[
+            ("5", None, "digit with no curve open"),
+            ("\n", None, "Enter with no curve open"),
+            ("B\n", Some(0), "no node index"),
+            ("B1\nE", Some(0), "needs a start and an end"),
+            ("B1\n2\nI", Some(0), "never ended"),
+            ("B1\n1\n", Some(0), "twice in a row"),
+            ("BU", Some(0), "no node tag to undo"),
+            ("U", None, "no curve open"),
+            ("C", None, "no curve open"),
+            ("E", None, "no curve open"),
+            ("B1\n2\n12E", Some(0), "not confirmed with Enter"),
+            ("BX", Some(0), "unknown key"),
+        ];
+        for (keys, curve, needle) in cases {
+            let ev = run(keys);
+            let w = warnings(&ev);
+            assert_eq!(w.len(), 1, "{keys:?}: {ev:?}");
+            assert_eq!(w[0].curve, *curve, "{keys:?}");
+            assert!(w[0].message.contains(needle), "{keys:?}: {}", w[0]);
+            assert_eq!(w[0].t, (keys.len() - 1) as f64, "{keys:?}: time of the offending key");
+        }
+    }
+
+    #[test]
+    fn implicit_end_keeps_a_complete_curve_and_violations_cost_no_other_curve() {
+        let ev = run("B1\n2\nI2\n3\nE5B4\nEI4\n1\nE");
+        assert_eq!(ended(&ev), [0, 1, 2]);
+        assert!(ev.contains(&KeyEvent::Discarded { curve: 2 }));
+        assert_eq!(warnings(&ev).len(), 3, "{ev:?}"); // no E, stray digit, E with one tag
+    }
+}
