@@ -22,6 +22,7 @@ pub mod cli;
 pub mod config;
 pub mod keypad;
 pub mod link;
+pub mod orientation;
 pub mod report;
 pub mod sensor;
 pub mod session;

@@ -1,0 +1,38 @@
+//! Orientation of every sample: the frame `[T B N]` in the world frame (x east, y magnetic
+//! north, z up), as a unit quaternion `q` with `v_world = q · v_frame`.
+//!
+//! - [`triad`]: absolute orientation from gravity and the magnetic field (Morphorider, arrays),
+//!   gravity trusted fully for tilt, the field only for heading.
+//! - [`ahrs`]: gyroscope fusion for the phone, driven by measured sample intervals.
+//! - [`qmethod`]: the weighted mean of unit quaternions (largest eigenvector of the 4×4
+//!   structure tensor), invariant to the sign of each input.
+//! - [`disturbance`]: the session's robust field reference and the per-sample flags.
+
+pub mod ahrs;
+pub mod disturbance;
+pub mod qmethod;
+pub mod triad;
+
+use nalgebra::{Matrix3, UnitQuaternion};
+
+/// Per-sample flags (bit set), stored with each raw sample of a scan.
+pub mod flags {
+    /// The device stood still (at a node, typing its index).
+    pub const STATIONARY: u8 = 1 << 0;
+    /// The magnetic field's norm or dip is off the session's reference.
+    pub const MAG_DISTURBED: u8 = 1 << 1;
+    /// The accelerometer's norm is far from g: motion acceleration corrupts the tilt.
+    pub const ACC_MOTION: u8 = 1 << 2;
+    /// A sensor touched its rails.
+    pub const SATURATED: u8 = 1 << 3;
+    /// Packets were lost just before this sample.
+    pub const AFTER_GAP: u8 = 1 << 4;
+    /// The orientation could not be computed from this sample (degenerate vectors); it is
+    /// the previous one, with zero weight.
+    pub const INVALID: u8 = 1 << 5;
+}
+
+/// Quaternion of the frame whose columns (in world coordinates) are `a`'s columns.
+pub fn quat_from_columns(a: &Matrix3<f64>) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_matrix(a)
+}
