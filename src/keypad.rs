@@ -71,9 +71,13 @@ pub enum KeyEvent {
         node: u32,
     },
     /// The curve is dropped (cancel, or not enough tags).
-    Discarded { curve: CurveIndex },
+    Discarded {
+        curve: CurveIndex,
+    },
     /// The curve is complete.
-    Ended { curve: CurveIndex },
+    Ended {
+        curve: CurveIndex,
+    },
     Warning(Warning),
 }
 
@@ -132,7 +136,10 @@ impl Keypad {
                 out,
                 t,
                 d.parse().ok(),
-                format!("digits {d:?} were not confirmed with Enter before {:?}; ignored", key as char),
+                format!(
+                    "digits {d:?} were not confirmed with Enter before {:?}; ignored",
+                    key as char
+                ),
             );
         }
     }
@@ -152,7 +159,9 @@ impl Keypad {
                 out,
                 t,
                 node,
-                format!("{why} with {n} node tag(s); a curve needs a start and an end node: discarded"),
+                format!(
+                    "{why} with {n} node tag(s); a curve needs a start and an end node: discarded"
+                ),
             );
             self.open = None;
             out.push(KeyEvent::Discarded { curve });
@@ -164,9 +173,22 @@ impl Keypad {
         match key {
             b'0'..=b'9' => {
                 if self.open.is_none() {
-                    self.warn(out, t, Some((key - b'0') as u32), "digit with no curve open; ignored".into());
+                    self.warn(
+                        out,
+                        t,
+                        Some((key - b'0') as u32),
+                        "digit with no curve open; ignored".into(),
+                    );
                 } else if self.digits.len() >= 6 {
-                    self.warn(out, t, None, format!("node index longer than 6 digits ({}…); ignored", self.digits));
+                    self.warn(
+                        out,
+                        t,
+                        None,
+                        format!(
+                            "node index longer than 6 digits ({}…); ignored",
+                            self.digits
+                        ),
+                    );
                 } else {
                     self.digits.push(key as char);
                 }
@@ -174,17 +196,32 @@ impl Keypad {
             b'\n' | b'\r' => {
                 let digits = std::mem::take(&mut self.digits);
                 if self.open.is_none() {
-                    self.warn(out, t, digits.parse().ok(), "Enter with no curve open; ignored".into());
+                    self.warn(
+                        out,
+                        t,
+                        digits.parse().ok(),
+                        "Enter with no curve open; ignored".into(),
+                    );
                     return;
                 }
                 if digits.is_empty() {
-                    self.warn(out, t, None, "Enter with no node index typed; ignored".into());
+                    self.warn(
+                        out,
+                        t,
+                        None,
+                        "Enter with no node index typed; ignored".into(),
+                    );
                     return;
                 }
                 let node: u32 = digits.parse().expect("only digits, at most 6");
                 let open = self.open.as_mut().expect("checked");
                 if open.tags.last() == Some(&node) {
-                    self.warn(out, t, Some(node), "node tagged twice in a row; the repeat is ignored".into());
+                    self.warn(
+                        out,
+                        t,
+                        Some(node),
+                        "node tagged twice in a row; the repeat is ignored".into(),
+                    );
                     return;
                 }
                 open.tags.push(node);
@@ -197,10 +234,15 @@ impl Keypad {
             b'B' | b'I' => {
                 self.drop_digits(t, key, out);
                 if self.open.is_some() {
-                    self.warn(out, t, self.open_tags().last().copied(), format!(
+                    self.warn(
+                        out,
+                        t,
+                        self.open_tags().last().copied(),
+                        format!(
                         "curve never ended (no E) before {:?} started the next one; ending it here",
                         key as char
-                    ));
+                    ),
+                    );
                     self.finish(t, "ended implicitly", out);
                 }
                 let curve = self.accepted;
@@ -217,7 +259,12 @@ impl Keypad {
                 self.drop_digits(t, key, out);
                 match self.open.as_mut().map(|o| (o.curve, o.tags.pop())) {
                     Some((curve, Some(node))) => out.push(KeyEvent::Untagged { curve, node }),
-                    Some((_, None)) => self.warn(out, t, None, "U (undo) with no node tag to undo; ignored".into()),
+                    Some((_, None)) => self.warn(
+                        out,
+                        t,
+                        None,
+                        "U (undo) with no node tag to undo; ignored".into(),
+                    ),
                     None => self.warn(out, t, None, "U (undo) with no curve open; ignored".into()),
                 }
             }
@@ -225,7 +272,12 @@ impl Keypad {
                 self.drop_digits(t, key, out);
                 match self.open.take() {
                     Some(o) => out.push(KeyEvent::Discarded { curve: o.curve }),
-                    None => self.warn(out, t, None, "C (cancel) with no curve open; ignored".into()),
+                    None => self.warn(
+                        out,
+                        t,
+                        None,
+                        "C (cancel) with no curve open; ignored".into(),
+                    ),
                 }
             }
             b'E' => {
@@ -237,7 +289,12 @@ impl Keypad {
                 }
             }
             other => {
-                self.warn(out, t, None, format!("unknown key 0x{other:02X} ({:?}); ignored", other as char));
+                self.warn(
+                    out,
+                    t,
+                    None,
+                    format!("unknown key 0x{other:02X} ({:?}); ignored", other as char),
+                );
             }
         }
     }
@@ -287,7 +344,13 @@ mod tests {
             })
             .collect();
         assert_eq!(tags, [1, 2, 3, 1, 12, 0, 7]);
-        assert!(matches!(ev[0], KeyEvent::Started { curve: 0, boundary: true }));
+        assert!(matches!(
+            ev[0],
+            KeyEvent::Started {
+                curve: 0,
+                boundary: true
+            }
+        ));
     }
 
     #[test]
@@ -322,7 +385,11 @@ mod tests {
             assert_eq!(w.len(), 1, "{keys:?}: {ev:?}");
             assert_eq!(w[0].curve, *curve, "{keys:?}");
             assert!(w[0].message.contains(needle), "{keys:?}: {}", w[0]);
-            assert_eq!(w[0].t, (keys.len() - 1) as f64, "{keys:?}: time of the offending key");
+            assert_eq!(
+                w[0].t,
+                (keys.len() - 1) as f64,
+                "{keys:?}: time of the offending key"
+            );
         }
     }
 

@@ -16,6 +16,7 @@
 //! Later stages (samples → orientations → tagged curves → filtered frames → network →
 //! surface → glTF) are added as modules in that order.
 
+pub mod acquisition;
 pub mod atomic;
 pub mod capture;
 pub mod cli;
@@ -24,6 +25,7 @@ pub mod keypad;
 pub mod link;
 pub mod orientation;
 pub mod report;
+pub mod scan;
 pub mod sensor;
 pub mod session;
 pub mod shutdown;

@@ -146,7 +146,7 @@ fn run_session(spec: SourceSpec, out: &Path) -> i32 {
     rt.block_on(async {
         let shutdown = Shutdown::new();
         tokio::spawn(signals(shutdown.clone()));
-        match session::run(spec, out, shutdown).await {
+        match session::run(spec, out, &session::Options::default(), shutdown).await {
             Ok(o) => {
                 print_summary(&o);
                 exit::OK

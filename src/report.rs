@@ -2,6 +2,7 @@
 //! their own objects next to `"link"`.
 
 use crate::link::LinkStats;
+use crate::scan::{Counts, Curve};
 use serde::Serialize;
 use std::path::Path;
 
@@ -17,6 +18,35 @@ pub struct Report {
     /// Wall-clock duration of the session in seconds.
     pub wall_time_s: f64,
     pub link: LinkStats,
+    /// One object per accepted curve, in scan order.
+    pub curves: Vec<CurveSummary>,
+    /// What acquisition counted (samples, flags, discarded curves).
+    pub acquisition: Counts,
+    /// Problems in words naming curve, node and time.
+    pub warnings: Vec<String>,
+}
+
+/// A curve in `report.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct CurveSummary {
+    pub index: usize,
+    pub boundary: bool,
+    /// The node sequence as scanned.
+    pub nodes: Vec<u32>,
+    pub samples: usize,
+    pub length_m: f64,
+}
+
+impl From<&Curve> for CurveSummary {
+    fn from(c: &Curve) -> Self {
+        CurveSummary {
+            index: c.index,
+            boundary: c.boundary,
+            nodes: c.nodes(),
+            samples: c.samples.len(),
+            length_m: c.length(),
+        }
+    }
 }
 
 impl Report {

@@ -235,7 +235,9 @@ mod tests {
         assert!(AxisMap::parse(&["y", "x", "z"])
             .unwrap_err()
             .contains("reflection"));
-        assert!(AxisMap::parse(&["x", "x", "z"]).unwrap_err().contains("twice"));
+        assert!(AxisMap::parse(&["x", "x", "z"])
+            .unwrap_err()
+            .contains("twice"));
         assert!(AxisMap::parse(&["x", "w", "z"]).is_err());
         let m = AxisMap::parse(&["-z", "y", "x"]).unwrap();
         assert_eq!(AxisMap::parse(&m.names()).unwrap(), m);
@@ -269,11 +271,7 @@ mod tests {
         let model = SensorModel::new(scales, cal.clone());
         let raw_acc = [100, -50, 981];
         let a = model.acc(raw_acc);
-        let expect = Vector3::new(
-            (1.0 - 0.1) * 1.01,
-            (-0.5 + 0.2) * 0.99,
-            9.81 - 0.3,
-        );
+        let expect = Vector3::new((1.0 - 0.1) * 1.01, (-0.5 + 0.2) * 0.99, 9.81 - 0.3);
         assert!((a - expect).norm() < 1e-12, "{a} vs {expect}");
         let m = model.mag([200, 100, -400]);
         let expect = cal.mag_soft_iron * (Vector3::new(20.0, 10.0, -40.0) - cal.mag_hard_iron);

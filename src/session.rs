@@ -3,9 +3,10 @@
 //! `bytes → source thread (capture first) → channel → decoder → link statistics → report.json`.
 //! Later stages (acquisition, reconstruction) hang off the decoder's packets here.
 
+use crate::acquisition::{Acquisition, AcquisitionConfig, Update};
 use crate::capture::CaptureWriter;
 use crate::link::LinkStats;
-use crate::report::Report;
+use crate::report::{CurveSummary, Report};
 use crate::shutdown::Shutdown;
 use crate::source::{self, EndReason, SourceError, SourceEvent, SourceSpec};
 use device_protocol::Decoder;
@@ -16,6 +17,14 @@ use std::time::{Duration, Instant};
 pub const CAPTURE_FILE: &str = "capture.bin";
 /// Name of the report in a session (or replay output) directory.
 pub const REPORT_FILE: &str = "report.json";
+/// Name of the acquired scan (curves of raw samples and tags).
+pub const SCAN_FILE: &str = "scan.json";
+
+/// What a session does with the packets (everything but the source).
+#[derive(Debug, Clone, Default)]
+pub struct Options {
+    pub acquisition: AcquisitionConfig,
+}
 
 /// How often a running session logs its link statistics (when they changed).
 const STATS_LOG_INTERVAL: Duration = Duration::from_secs(10);
@@ -52,6 +61,7 @@ pub struct Outcome {
 pub async fn run(
     spec: SourceSpec,
     out_dir: &Path,
+    options: &Options,
     shutdown: Shutdown,
 ) -> Result<Outcome, SessionError> {
     let output_err = |path: &Path| {
@@ -71,6 +81,7 @@ pub async fn run(
 
     let mut decoder = Decoder::new();
     let mut stats = LinkStats::default();
+    let mut acq = Acquisition::new(options.acquisition.clone());
     let mut end = EndReason::Shutdown;
     let mut deadline: Option<tokio::time::Instant> = None;
     let mut tick = tokio::time::interval_at(
@@ -103,6 +114,9 @@ pub async fn run(
                 stats.bytes += bytes.len() as u64;
                 for e in decoder.feed(&bytes) {
                     stats.observe(&e);
+                    match acq.event(&e) {
+                        Some(Update::CurveEnded(_)) | Some(Update::CurveUpdated(_)) | None => {}
+                    }
                 }
             }
             Some(SourceEvent::Connected { .. }) => stats.connects += 1,
@@ -127,6 +141,9 @@ pub async fn run(
         tracing::debug!(bytes = decoder.buffered(), "stream ended inside a frame");
     }
     log_stats("session ended", &stats);
+    let scan = acq.finish();
+    let scan_path = out_dir.join(SCAN_FILE);
+    write_json(&scan_path, &scan).map_err(output_err(&scan_path))?;
     let report = Report {
         sfs_version: env!("CARGO_PKG_VERSION"),
         source: description,
@@ -138,6 +155,9 @@ pub async fn run(
         },
         wall_time_s: started.elapsed().as_secs_f64(),
         link: stats,
+        curves: scan.curves.iter().map(CurveSummary::from).collect(),
+        acquisition: scan.counts.clone(),
+        warnings: scan.warnings.clone(),
     };
     let report_path = out_dir.join(REPORT_FILE);
     report
@@ -154,6 +174,12 @@ pub async fn run(
         report_path,
         capture_path,
     })
+}
+
+fn write_json<T: serde::Serialize>(path: &Path, v: &T) -> std::io::Result<()> {
+    let mut json = serde_json::to_vec(v).map_err(std::io::Error::other)?;
+    json.push(b'\n');
+    crate::atomic::write_atomic(path, &json)
 }
 
 fn log_stats(msg: &str, s: &LinkStats) {

@@ -87,7 +87,12 @@ fn start_session(
             .enable_all()
             .build()
             .unwrap()
-            .block_on(session::run(spec, &dir, shutdown))
+            .block_on(session::run(
+                spec,
+                &dir,
+                &session::Options::default(),
+                shutdown,
+            ))
     })
 }
 

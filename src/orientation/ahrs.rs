@@ -177,7 +177,9 @@ impl Ahrs {
                 }
                 match UnitQuaternion::rotation_between(&(acc / n), &Vector3::z()) {
                     Some(q) => q,
-                    None => UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+                    None => {
+                        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+                    }
                 }
             }
         };
@@ -400,10 +402,18 @@ mod tests {
         let truth = UnitQuaternion::from_euler_angles(-0.4, 0.3, 2.5);
         let mut q = UnitQuaternion::identity();
         for _ in 0..200 {
-            q = f.update(0.005, &rng.v(0.005), &(truth.inverse() * GRAV + rng.v(0.05)),
-                Some(&(truth.inverse() * FIELD + rng.v(0.5))));
+            q = f.update(
+                0.005,
+                &rng.v(0.005),
+                &(truth.inverse() * GRAV + rng.v(0.05)),
+                Some(&(truth.inverse() * FIELD + rng.v(0.5))),
+            );
         }
-        assert!(q.angle_to(&truth).to_degrees() < 1.0, "{}", q.angle_to(&truth).to_degrees());
+        assert!(
+            q.angle_to(&truth).to_degrees() < 1.0,
+            "{}",
+            q.angle_to(&truth).to_degrees()
+        );
     }
 
     #[test]
@@ -412,7 +422,12 @@ mod tests {
         let truth = UnitQuaternion::from_euler_angles(0.0, 0.0, 0.5);
         let acc = truth.inverse() * GRAV;
         for _ in 0..2000 {
-            f.update(0.005, &Vector3::zeros(), &acc, Some(&(truth.inverse() * FIELD)));
+            f.update(
+                0.005,
+                &Vector3::zeros(),
+                &acc,
+                Some(&(truth.inverse() * FIELD)),
+            );
         }
         // A magnet nearby: 30 µT added sideways for 10 s.
         let disturbed = truth.inverse() * (FIELD + Vector3::new(30.0, 0.0, 0.0));
@@ -421,7 +436,11 @@ mod tests {
             q = f.update(0.005, &Vector3::zeros(), &acc, Some(&disturbed));
         }
         assert!(f.mag_rejected);
-        assert!(q.angle_to(&truth).to_degrees() < 0.5, "{}", q.angle_to(&truth).to_degrees());
+        assert!(
+            q.angle_to(&truth).to_degrees() < 0.5,
+            "{}",
+            q.angle_to(&truth).to_degrees()
+        );
     }
 
     #[test]

@@ -135,14 +135,26 @@ impl FieldReference {
         Some((self.norm.median()?, self.dip.median()?))
     }
 
-    /// Whether `mag` deviates from the reference (false while there is none).
+    /// Whether `mag` deviates from the reference (false while there is none). For many
+    /// samples, take [`reference`](Self::reference) once and call [`mag_disturbed`].
     pub fn mag_disturbed(&self, acc: &Vector3<f64>, mag: &Vector3<f64>, th: &Thresholds) -> bool {
-        let Some((norm, dip)) = self.reference() else {
-            return false;
-        };
-        let Some(d) = dip_deg(acc, mag) else {
-            return true;
-        };
-        (mag.norm() - norm).abs() > th.mag_norm_rel * norm || (d - dip).abs() > th.mag_dip_deg
+        mag_disturbed(self.reference(), acc, mag, th)
     }
+}
+
+/// Whether `mag` deviates from `reference` = `(norm µT, dip °)` (false without a reference).
+#[inline]
+pub fn mag_disturbed(
+    reference: Option<(f64, f64)>,
+    acc: &Vector3<f64>,
+    mag: &Vector3<f64>,
+    th: &Thresholds,
+) -> bool {
+    let Some((norm, dip)) = reference else {
+        return false;
+    };
+    let Some(d) = dip_deg(acc, mag) else {
+        return true;
+    };
+    (mag.norm() - norm).abs() > th.mag_norm_rel * norm || (d - dip).abs() > th.mag_dip_deg
 }

@@ -13,8 +13,6 @@ pub mod disturbance;
 pub mod qmethod;
 pub mod triad;
 
-use nalgebra::{Matrix3, UnitQuaternion};
-
 /// Per-sample flags (bit set), stored with each raw sample of a scan.
 pub mod flags {
     /// The device stood still (at a node, typing its index).
@@ -30,9 +28,4 @@ pub mod flags {
     /// The orientation could not be computed from this sample (degenerate vectors); it is
     /// the previous one, with zero weight.
     pub const INVALID: u8 = 1 << 5;
-}
-
-/// Quaternion of the frame whose columns (in world coordinates) are `a`'s columns.
-pub fn quat_from_columns(a: &Matrix3<f64>) -> UnitQuaternion<f64> {
-    UnitQuaternion::from_matrix(a)
 }

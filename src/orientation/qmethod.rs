@@ -92,7 +92,11 @@ mod tests {
         let ws: Vec<f64> = (0..10).map(|i| 1.0 + i as f64).collect();
         let m1 = mean(qs.iter().copied().zip(ws.iter().copied())).unwrap();
         let flipped = qs.iter().enumerate().map(|(i, q)| {
-            let q = if i % 3 == 0 { UnitQuaternion::new_unchecked(-q.into_inner()) } else { *q };
+            let q = if i % 3 == 0 {
+                UnitQuaternion::new_unchecked(-q.into_inner())
+            } else {
+                *q
+            };
             (q, ws[i])
         });
         let m2 = mean(flipped).unwrap();
@@ -101,7 +105,10 @@ mod tests {
         let cost = |q: &UnitQuaternion<f64>| -> f64 {
             qs.iter()
                 .zip(&ws)
-                .map(|(p, w)| w * (q.to_rotation_matrix().matrix() - p.to_rotation_matrix().matrix()).norm_squared())
+                .map(|(p, w)| {
+                    w * (q.to_rotation_matrix().matrix() - p.to_rotation_matrix().matrix())
+                        .norm_squared()
+                })
                 .sum()
         };
         let c = cost(&m1);

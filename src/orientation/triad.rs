@@ -17,13 +17,13 @@
 //! assert!((t - Vector3::y()).norm() < 1e-12);
 //! ```
 
-use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
 /// Orientation from one accelerometer and one magnetometer vector (frame axes). `None` when
 /// a vector is zero or not finite, or the field is parallel to gravity (no heading).
 pub fn triad(acc: &Vector3<f64>, mag: &Vector3<f64>) -> Option<UnitQuaternion<f64>> {
     let a = acc.norm();
-    if !(a.is_finite() && a > 1e-9) || !mag.iter().all(|x| x.is_finite()) {
+    if !(a.is_finite() && a > 1e-9 && mag.iter().all(|x| x.is_finite())) {
         return None;
     }
     let up = acc / a;
@@ -35,8 +35,12 @@ pub fn triad(acc: &Vector3<f64>, mag: &Vector3<f64>) -> Option<UnitQuaternion<f6
     }
     let east = east / en;
     let north = up.cross(&east);
-    let world_from_frame = Matrix3::from_rows(&[east.transpose(), north.transpose(), up.transpose()]);
-    Some(UnitQuaternion::from_matrix(&world_from_frame))
+    let world_from_frame =
+        Matrix3::from_rows(&[east.transpose(), north.transpose(), up.transpose()]);
+    // Orthonormal by construction: the direct conversion is exact.
+    Some(UnitQuaternion::from_rotation_matrix(
+        &Rotation3::from_matrix_unchecked(world_from_frame),
+    ))
 }
 
 #[cfg(test)]
@@ -67,7 +71,8 @@ mod tests {
     #[test]
     fn dip_error_does_not_tilt() {
         // A disturbed dip changes nothing: tilt from gravity, heading from the horizontal part.
-        let truth = UnitQuaternion::from_rotation_matrix(&Rotation3::from_euler_angles(0.3, -0.2, 1.0));
+        let truth =
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_euler_angles(0.3, -0.2, 1.0));
         let g = Vector3::new(0.0, 0.0, 9.81);
         let acc = truth.inverse() * g;
         let q1 = triad(&acc, &(truth.inverse() * Vector3::new(0.0, 20.0, -43.0))).unwrap();

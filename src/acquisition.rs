@@ -1,0 +1,766 @@
+//! Acquisition: decoded packets → calibrated samples → orientations → keypad-tagged curves
+//! (the [`Scan`]).
+//!
+//! Feed every decoder [`Event`] to [`Acquisition::event`]; it reports when a curve ends (or a
+//! late SEGMENT_LENGTH changes a finished one). Raw samples of the open curve are kept until
+//! its `E`; then the curve is finalised: orientations (Morphorider: [`triad`] per sample;
+//! phone: the [`Ahrs`] output, computed causally as samples arrive), distances, flags.
+//!
+//! Time: the device clock (`t_us`, wrapping, restarting at power-up) becomes a monotonic
+//! session time in seconds: increments are `t_us` differences (wraps included), and a reboot
+//! adds nothing. Distance: Morphorider, wheel ticks × circumference / ticks per revolution
+//! (backwards motion kept, a reboot's counter reset bridged); phone, time while moving, scaled
+//! per segment to its measured length (SEGMENT_LENGTH or configuration) or to the nominal
+//! speed.
+
+use crate::keypad::{KeyEvent, Keypad};
+use crate::orientation::ahrs::{Ahrs, AhrsParams};
+use crate::orientation::disturbance::{acc_motion, mag_disturbed, FieldReference, Thresholds};
+use crate::orientation::flags;
+use crate::orientation::triad::triad;
+use crate::scan::{ArrayEpoch, Curve, DeviceInfo, Samples, Scan, Tag};
+use crate::sensor::{saturated, Calibration, Scales, SensorModel};
+use device_protocol::{DeviceKind, Event, Hello, Packet};
+use nalgebra::{UnitQuaternion, Vector3};
+use std::collections::BTreeMap;
+
+/// Settings of acquisition (documented defaults; `[acquisition]` and `[calibration]` in the
+/// configuration).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AcquisitionConfig {
+    /// Device calibration; `None`: no correction, the wire format's axes for the HELLO's kind.
+    pub calibration: Option<Calibration>,
+    pub thresholds: Thresholds,
+    /// Half-width of the window that decides whether the device stands still, s. Default 0.25.
+    pub stationary_window: f64,
+    /// Phone: gyroscope below this (rad/s) over the window counts as still. Default 3°/s.
+    pub stationary_gyro: f64,
+    /// Phone: speed assumed where no segment length is known, m/s. Default 0.05.
+    pub nominal_speed: f64,
+    /// Phone: measured segment lengths per curve index (m), from the configuration.
+    pub segment_lengths: BTreeMap<usize, Vec<f64>>,
+    pub ahrs: AhrsParams,
+    /// Sensor arrays: averaging window, s. Default 1.
+    pub array_window: f64,
+}
+
+impl Default for AcquisitionConfig {
+    fn default() -> Self {
+        AcquisitionConfig {
+            calibration: None,
+            thresholds: Thresholds::default(),
+            stationary_window: 0.25,
+            stationary_gyro: 3f64.to_radians(),
+            nominal_speed: 0.05,
+            segment_lengths: BTreeMap::new(),
+            ahrs: AhrsParams::default(),
+            array_window: 1.0,
+        }
+    }
+}
+
+/// What [`Acquisition::event`] reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Update {
+    /// Curve `index` was accepted.
+    CurveEnded(usize),
+    /// Curve `index` changed after it ended (a late SEGMENT_LENGTH).
+    CurveUpdated(usize),
+}
+
+#[derive(Debug, Clone)]
+struct Raw {
+    t: f64,
+    /// Session wheel distance (m), Morphorider.
+    wheel: f64,
+    acc: Vector3<f64>,
+    mag: Vector3<f64>,
+    gyro: Vector3<f64>,
+    /// Phone: the filter's orientation at this sample.
+    q: Option<UnitQuaternion<f64>>,
+    flags: u8,
+}
+
+#[derive(Debug, Clone)]
+struct OpenCurve {
+    index: usize,
+    boundary: bool,
+    tags: Vec<(u32, f64)>,
+    raw: Vec<Raw>,
+    segment_lengths: BTreeMap<u16, f64>,
+}
+
+/// Monotonic session time from the device clock.
+#[derive(Debug, Clone, Default)]
+struct Clock {
+    last: Option<u32>,
+    elapsed_us: u64,
+    restart: bool,
+}
+
+impl Clock {
+    fn advance(&mut self, t_us: u32) -> f64 {
+        if let Some(last) = self.last {
+            if !self.restart {
+                self.elapsed_us += t_us.wrapping_sub(last) as u64;
+            }
+        }
+        self.restart = false;
+        self.last = Some(t_us);
+        self.elapsed_us as f64 * 1e-6
+    }
+}
+
+#[derive(Debug, Clone, Default)]
+struct ArraySensor {
+    start: f64,
+    acc: Vector3<f64>,
+    mag: Vector3<f64>,
+    n: u32,
+    flags: u8,
+}
+
+/// The acquisition state. See the module documentation.
+#[derive(Debug)]
+pub struct Acquisition {
+    cfg: AcquisitionConfig,
+    model: Option<SensorModel>,
+    kind: Option<DeviceKind>,
+    clock: Clock,
+    wheel_last: Option<i32>,
+    wheel_m: f64,
+    wheel_reset: bool,
+    keypad: Keypad,
+    key_events: Vec<KeyEvent>,
+    open: Option<OpenCurve>,
+    scan: Scan,
+    field: FieldReference,
+    ahrs: Ahrs,
+    last_sample_t: Option<f64>,
+    gap: bool,
+    array: BTreeMap<u16, ArraySensor>,
+    /// Per-curve segment lengths received after the curve ended (phone).
+    late_lengths: BTreeMap<usize, BTreeMap<u16, f64>>,
+}
+
+impl Acquisition {
+    pub fn new(cfg: AcquisitionConfig) -> Self {
+        let ahrs = Ahrs::new(cfg.ahrs);
+        Acquisition {
+            cfg,
+            model: None,
+            kind: None,
+            clock: Clock::default(),
+            wheel_last: None,
+            wheel_m: 0.0,
+            wheel_reset: false,
+            keypad: Keypad::new(),
+            key_events: Vec::new(),
+            open: None,
+            scan: Scan::default(),
+            field: FieldReference::new(),
+            ahrs,
+            last_sample_t: None,
+            gap: false,
+            array: BTreeMap::new(),
+            late_lengths: BTreeMap::new(),
+        }
+    }
+
+    /// The scan so far (accepted curves only).
+    pub fn scan(&self) -> &Scan {
+        &self.scan
+    }
+
+    fn warn(&mut self, msg: String) {
+        tracing::warn!("{msg}");
+        self.scan.warnings.push(msg);
+    }
+
+    /// Processes one decoder event.
+    pub fn event(&mut self, ev: &Event) -> Option<Update> {
+        match ev {
+            Event::Packet { packet, .. } => self.packet(packet),
+            Event::DeviceReboot => {
+                self.clock.restart = true;
+                self.wheel_reset = true;
+                let t = self.clock.elapsed_us as f64 * 1e-6;
+                if let Some(o) = &self.open {
+                    let msg = format!(
+                        "curve {}, t = {t:.3} s: the device rebooted during the curve; its distance and time are bridged",
+                        o.index
+                    );
+                    self.warn(msg);
+                }
+                None
+            }
+            Event::SequenceGap { .. } => {
+                self.gap = true;
+                None
+            }
+            _ => None,
+        }
+    }
+
+    fn hello(&mut self, h: &Hello) {
+        let scales = Scales::from_hello(h);
+        let has_gyro = h.kind == DeviceKind::Phone;
+        if let Err(e) = scales.validate(has_gyro) {
+            self.warn(format!(
+                "HELLO of device {} is unusable: {e}; its samples are ignored until a valid HELLO",
+                h.device_id
+            ));
+            self.model = None;
+            return;
+        }
+        let same =
+            self.model.as_ref().is_some_and(|m| m.scales == scales) && self.kind == Some(h.kind);
+        if same {
+            return;
+        }
+        if self.kind.is_some() && self.kind != Some(h.kind) {
+            self.warn(format!(
+                "the device kind changed mid-session (now {:?}); later samples use it",
+                h.kind
+            ));
+        }
+        let cal = match &self.cfg.calibration {
+            Some(c) => c.clone(),
+            None => Calibration::default_for(h.kind),
+        };
+        self.model = Some(SensorModel::new(scales, cal));
+        self.kind = Some(h.kind);
+        self.scan.device = Some(DeviceInfo {
+            kind: match h.kind {
+                DeviceKind::Morphorider => "morphorider".into(),
+                DeviceKind::Phone => "phone".into(),
+                DeviceKind::SensorArray => "array".into(),
+                DeviceKind::Other(c) => format!("unknown({c})"),
+            },
+            device_id: h.device_id,
+            firmware: h.firmware,
+            rate_hz: h.rate_hz,
+        });
+    }
+
+    fn packet(&mut self, p: &Packet) -> Option<Update> {
+        match p {
+            Packet::Hello(h) => {
+                self.hello(h);
+                None
+            }
+            Packet::RiderSample(s) => {
+                self.scan.counts.samples += 1;
+                let t = self.clock.advance(s.t_us);
+                let model = self.usable(DeviceKind::Morphorider)?;
+                let (acc, mag) = (model.acc(s.acc), model.mag(s.mag));
+                let per_tick = model.scales.wheel_m_per_tick.unwrap_or(0.0);
+                if let Some(last) = self.wheel_last.filter(|_| !self.wheel_reset) {
+                    self.wheel_m += s.wheel.wrapping_sub(last) as f64 * per_tick;
+                }
+                self.wheel_reset = false;
+                self.wheel_last = Some(s.wheel);
+                let mut f = 0;
+                if saturated(s.acc) || saturated(s.mag) {
+                    f |= flags::SATURATED;
+                }
+                if f == 0 && !acc_motion(&acc, &self.cfg.thresholds) {
+                    self.field.add(&acc, &mag);
+                }
+                self.sample(Raw {
+                    t,
+                    wheel: self.wheel_m,
+                    acc,
+                    mag,
+                    gyro: Vector3::zeros(),
+                    q: None,
+                    flags: f,
+                });
+                None
+            }
+            Packet::PhoneSample(s) => {
+                self.scan.counts.samples += 1;
+                let t = self.clock.advance(s.t_us);
+                let model = self.usable(DeviceKind::Phone)?;
+                let (acc, gyro, mag) = (model.acc(s.acc), model.gyro(s.gyro), model.mag(s.mag));
+                let mut f = 0;
+                if saturated(s.acc) || saturated(s.mag) || saturated(s.gyro) {
+                    f |= flags::SATURATED;
+                }
+                let dt = self.last_sample_t.map_or(0.0, |l| t - l);
+                self.last_sample_t = Some(t);
+                let q = self.ahrs.update(dt, &gyro, &acc, Some(&mag));
+                if self.ahrs.mag_rejected {
+                    f |= flags::MAG_DISTURBED;
+                }
+                if !acc_motion(&acc, &self.cfg.thresholds) {
+                    self.field.add(&acc, &mag);
+                }
+                self.sample(Raw {
+                    t,
+                    wheel: 0.0,
+                    acc,
+                    mag,
+                    gyro,
+                    q: Some(q),
+                    flags: f,
+                });
+                None
+            }
+            Packet::ArraySample(s) => {
+                self.scan.counts.samples += 1;
+                let t = self.clock.advance(s.t_us);
+                let model = self.usable(DeviceKind::SensorArray)?;
+                let (acc, mag) = (model.acc(s.acc), model.mag(s.mag));
+                let sat = saturated(s.acc) || saturated(s.mag);
+                self.array_sample(t, s.sensor, acc, mag, sat);
+                None
+            }
+            Packet::Key(k) => {
+                let t = self.clock.advance(k.t_us);
+                self.key(t, k.key)
+            }
+            Packet::SegmentLength(s) => {
+                let t = self.clock.advance(s.t_us);
+                self.segment_length(t, s.segment, s.length_um as f64 * 1e-6)
+            }
+            Packet::Status(s) => {
+                self.clock.advance(s.t_us);
+                None
+            }
+        }
+    }
+
+    /// The sensor model if a HELLO of `kind` was seen; counts the sample otherwise.
+    fn usable(&mut self, kind: DeviceKind) -> Option<SensorModel> {
+        match (&self.model, self.kind) {
+            (None, _) => {
+                self.scan.counts.before_hello += 1;
+                None
+            }
+            (Some(m), Some(k)) if k == kind => Some(m.clone()),
+            _ => {
+                self.scan.counts.wrong_kind += 1;
+                None
+            }
+        }
+    }
+
+    fn sample(&mut self, mut raw: Raw) {
+        if std::mem::take(&mut self.gap) {
+            raw.flags |= flags::AFTER_GAP;
+        }
+        match &mut self.open {
+            Some(o) => o.raw.push(raw),
+            None => self.scan.counts.outside_curves += 1,
+        }
+    }
+
+    fn key(&mut self, t: f64, key: u8) -> Option<Update> {
+        let mut events = std::mem::take(&mut self.key_events);
+        events.clear();
+        self.keypad.key(t, key, &mut events);
+        let mut update = None;
+        for ev in events.drain(..) {
+            match ev {
+                KeyEvent::Started { curve, boundary } => {
+                    self.open = Some(OpenCurve {
+                        index: curve,
+                        boundary,
+                        tags: Vec::new(),
+                        raw: Vec::new(),
+                        segment_lengths: BTreeMap::new(),
+                    });
+                }
+                KeyEvent::Tagged { node, t, .. } => {
+                    if let Some(o) = &mut self.open {
+                        o.tags.push((node, t));
+                    }
+                }
+                KeyEvent::Untagged { .. } => {
+                    if let Some(o) = &mut self.open {
+                        o.tags.pop();
+                    }
+                }
+                KeyEvent::Discarded { .. } => {
+                    if let Some(o) = self.open.take() {
+                        self.scan.counts.curves_discarded += 1;
+                        self.scan.counts.outside_curves += o.raw.len() as u64;
+                    }
+                }
+                KeyEvent::Ended { curve } => {
+                    if let Some(o) = self.open.take() {
+                        let c = self.finalise(o);
+                        self.scan.curves.push(c);
+                        update = Some(Update::CurveEnded(curve));
+                    }
+                }
+                KeyEvent::Warning(w) => self.scan.warnings.push(w.to_string()),
+            }
+        }
+        self.key_events = events;
+        update
+    }
+
+    fn segment_length(&mut self, t: f64, segment: u16, len: f64) -> Option<Update> {
+        if !(len.is_finite() && len > 0.0) {
+            self.warn(format!(
+                "t = {t:.3} s: SEGMENT_LENGTH of segment {segment} is {len} m; ignored"
+            ));
+            return None;
+        }
+        if let Some(o) = &mut self.open {
+            o.segment_lengths.insert(segment, len);
+            return None;
+        }
+        let Some(last) = self.scan.curves.last() else {
+            self.warn(format!(
+                "t = {t:.3} s: SEGMENT_LENGTH {segment} with no curve scanned yet; ignored"
+            ));
+            return None;
+        };
+        let index = last.index;
+        let nseg = last.tags.len().saturating_sub(1);
+        if segment as usize >= nseg {
+            self.warn(format!(
+                "curve {index}, t = {t:.3} s: SEGMENT_LENGTH for segment {segment}, but the curve has {nseg} segment(s); ignored"
+            ));
+            return None;
+        }
+        self.late_lengths
+            .entry(index)
+            .or_default()
+            .insert(segment, len);
+        let lengths = self.late_lengths[&index].clone();
+        let curve = self.scan.curves.last_mut().expect("checked");
+        for (s, l) in lengths {
+            curve.segment_lengths[s as usize] = Some(l);
+        }
+        if self.kind == Some(DeviceKind::Phone) {
+            let speed = self.cfg.nominal_speed;
+            phone_distances(curve, speed);
+        }
+        Some(Update::CurveUpdated(index))
+    }
+
+    /// Turns an open curve's raw samples into a [`Curve`].
+    fn finalise(&mut self, o: OpenCurve) -> Curve {
+        let n = o.raw.len();
+        let mut s = Samples {
+            t: o.raw.iter().map(|r| r.t).collect(),
+            d: vec![0.0; n],
+            q: Vec::with_capacity(n),
+            flags: o.raw.iter().map(|r| r.flags).collect(),
+        };
+        let th = self.cfg.thresholds;
+        let phone = self.kind == Some(DeviceKind::Phone);
+        // Orientations and per-sample flags.
+        let field_ref = self.field.reference();
+        let mut last_q: Option<UnitQuaternion<f64>> = None;
+        let mut missing_before_first = 0;
+        for (i, r) in o.raw.iter().enumerate() {
+            if acc_motion(&r.acc, &th) {
+                s.flags[i] |= flags::ACC_MOTION;
+            }
+            if !phone && mag_disturbed(field_ref, &r.acc, &r.mag, &th) {
+                s.flags[i] |= flags::MAG_DISTURBED;
+            }
+            let q = if phone { r.q } else { triad(&r.acc, &r.mag) };
+            let q = match q {
+                Some(q) => {
+                    last_q = Some(q);
+                    q
+                }
+                None => {
+                    s.flags[i] |= flags::INVALID;
+                    match last_q {
+                        Some(q) => q,
+                        None => {
+                            missing_before_first += 1;
+                            UnitQuaternion::identity()
+                        }
+                    }
+                }
+            };
+            s.q.push(quat_array(&q));
+        }
+        // Leading invalid samples take the first valid orientation.
+        if missing_before_first > 0 && missing_before_first < n {
+            let first = s.q[missing_before_first];
+            for q in &mut s.q[..missing_before_first] {
+                *q = first;
+            }
+        }
+        // Stationary.
+        let w = self.cfg.stationary_window;
+        if phone {
+            let bias = self.ahrs.bias();
+            let gyro_still: Vec<bool> = o
+                .raw
+                .iter()
+                .map(|r| (r.gyro - bias).norm() < self.cfg.stationary_gyro)
+                .collect();
+            mark_stationary(&s.t, w, &mut s.flags, |a, b| {
+                gyro_still[a..=b].iter().all(|&x| x)
+            });
+        } else {
+            let tick = self
+                .model
+                .as_ref()
+                .and_then(|m| m.scales.wheel_m_per_tick)
+                .unwrap_or(0.0);
+            let wheel: Vec<f64> = o.raw.iter().map(|r| r.wheel).collect();
+            mark_stationary(&s.t, w, &mut s.flags, |a, b| {
+                let (lo, hi) = wheel[a..=b]
+                    .iter()
+                    .fold((f64::MAX, f64::MIN), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+                hi - lo < 1.5 * tick
+            });
+        }
+        let mut curve = Curve {
+            index: o.index,
+            boundary: o.boundary,
+            closed: o.tags.first().map(|t| t.0) == o.tags.last().map(|t| t.0),
+            tags: o
+                .tags
+                .iter()
+                .map(|&(node, t)| Tag { node, d: 0.0, t })
+                .collect(),
+            segment_lengths: vec![None; o.tags.len().saturating_sub(1)],
+            samples: s,
+        };
+        if n == 0 {
+            self.warn(format!(
+                "curve {}: no samples between its B/I and E (nodes {:?}); it carries no shape",
+                o.index,
+                curve.nodes()
+            ));
+        }
+        if phone {
+            let from_cfg = self.cfg.segment_lengths.get(&o.index);
+            for (k, len) in curve.segment_lengths.iter_mut().enumerate() {
+                *len = o
+                    .segment_lengths
+                    .get(&(k as u16))
+                    .copied()
+                    .or_else(|| from_cfg.and_then(|v| v.get(k).copied()));
+            }
+            phone_distances(&mut curve, self.cfg.nominal_speed);
+        } else if n > 0 {
+            let wheel: Vec<f64> = o.raw.iter().map(|r| r.wheel).collect();
+            let start = interp(&curve.samples.t, &wheel, curve.tags[0].t);
+            for (d, w) in curve.samples.d.iter_mut().zip(&wheel) {
+                *d = w - start;
+            }
+            for tag in &mut curve.tags {
+                tag.d = interp(&curve.samples.t, &wheel, tag.t) - start;
+            }
+            for (k, pair) in curve.tags.windows(2).enumerate() {
+                if pair[1].d < pair[0].d {
+                    let msg = format!(
+                        "curve {}, node {}, t = {:.3} s: the wheel went back {:.3} m over segment {k} (from node {}); backwards scanning?",
+                        o.index, pair[1].node, pair[1].t, pair[0].d - pair[1].d, pair[0].node
+                    );
+                    self.warn(msg);
+                }
+            }
+        }
+        let c = &mut self.scan.counts;
+        c.in_curves += n as u64;
+        for &f in &curve.samples.flags {
+            c.stationary += (f & flags::STATIONARY != 0) as u64;
+            c.mag_disturbed += (f & flags::MAG_DISTURBED != 0) as u64;
+            c.acc_motion += (f & flags::ACC_MOTION != 0) as u64;
+            c.saturated += (f & flags::SATURATED != 0) as u64;
+            c.invalid += (f & flags::INVALID != 0) as u64;
+        }
+        self.scan.field_reference = self.field.reference().map(|(n, d)| [n, d]);
+        tracing::info!(
+            curve = curve.index,
+            boundary = curve.boundary,
+            nodes = ?curve.nodes(),
+            samples = n,
+            length_m = format!("{:.3}", curve.length()),
+            "curve ended"
+        );
+        curve
+    }
+
+    fn array_sample(
+        &mut self,
+        t: f64,
+        sensor: u16,
+        acc: Vector3<f64>,
+        mag: Vector3<f64>,
+        sat: bool,
+    ) {
+        let window = self.cfg.array_window;
+        let th = self.cfg.thresholds;
+        let st = self.array.entry(sensor).or_insert_with(|| ArraySensor {
+            start: t,
+            ..Default::default()
+        });
+        if t - st.start >= window && st.n > 0 {
+            let q = triad(&(st.acc / st.n as f64), &(st.mag / st.n as f64));
+            let mut f = st.flags;
+            let q = match q {
+                Some(q) => q,
+                None => {
+                    f |= flags::INVALID;
+                    UnitQuaternion::identity()
+                }
+            };
+            self.scan.array.push(ArrayEpoch {
+                t,
+                sensor,
+                q: quat_array(&q),
+                samples: st.n,
+                flags: f,
+            });
+            *st = ArraySensor {
+                start: t,
+                ..Default::default()
+            };
+        }
+        if sat {
+            st.flags |= flags::SATURATED;
+            return;
+        }
+        if acc_motion(&acc, &th) {
+            st.flags |= flags::ACC_MOTION;
+        }
+        st.acc += acc;
+        st.mag += mag;
+        st.n += 1;
+    }
+
+    /// Ends acquisition: an open curve is reported and dropped (it was never ended).
+    pub fn finish(mut self) -> Scan {
+        if let Some(o) = self.open.take() {
+            let nodes: Vec<u32> = o.tags.iter().map(|t| t.0).collect();
+            self.warn(format!(
+                "curve {}: the session ended before its E (nodes {nodes:?}, {} samples); not used",
+                o.index,
+                o.raw.len()
+            ));
+            self.scan.counts.curves_discarded += 1;
+        }
+        self.scan.field_reference = self.field.reference().map(|(n, d)| [n, d]);
+        self.scan
+    }
+}
+
+fn quat_array(q: &UnitQuaternion<f64>) -> [f64; 4] {
+    [q.w, q.i, q.j, q.k]
+}
+
+/// Linear interpolation of `y(x)` at `x0` (`x` non-decreasing), clamped at the ends.
+fn interp(x: &[f64], y: &[f64], x0: f64) -> f64 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    let i = x.partition_point(|&v| v <= x0);
+    if i == 0 {
+        return y[0];
+    }
+    if i == x.len() {
+        return y[x.len() - 1];
+    }
+    let (x1, x2) = (x[i - 1], x[i]);
+    if x2 > x1 {
+        y[i - 1] + (y[i] - y[i - 1]) * (x0 - x1) / (x2 - x1)
+    } else {
+        y[i]
+    }
+}
+
+/// Sets STATIONARY on samples whose window `[t − w, t + w]` satisfies `still(first, last)`.
+fn mark_stationary(t: &[f64], w: f64, fl: &mut [u8], still: impl Fn(usize, usize) -> bool) {
+    let n = t.len();
+    let (mut a, mut b) = (0, 0);
+    for i in 0..n {
+        while t[a] < t[i] - w {
+            a += 1;
+        }
+        while b + 1 < n && t[b + 1] <= t[i] + w {
+            b += 1;
+        }
+        if still(a, b) {
+            fl[i] |= flags::STATIONARY;
+        }
+    }
+}
+
+/// Phone distances: within each segment (between consecutive tags), distance grows with the
+/// time spent moving (stationary samples add none), scaled to the segment's measured length,
+/// else to `nominal_speed` × moving time.
+fn phone_distances(c: &mut Curve, nominal_speed: f64) {
+    let s = &mut c.samples;
+    let n = s.t.len();
+    if n == 0 || c.tags.len() < 2 {
+        return;
+    }
+    // Moving time at each sample.
+    let mut tau = vec![0.0; n];
+    for i in 1..n {
+        let moving = s.flags[i] & flags::STATIONARY == 0;
+        tau[i] = tau[i - 1] + if moving { s.t[i] - s.t[i - 1] } else { 0.0 };
+    }
+    let tag_tau: Vec<f64> = c.tags.iter().map(|g| interp(&s.t, &tau, g.t)).collect();
+    let mut start_d = vec![0.0; c.tags.len()];
+    for k in 0..c.tags.len() - 1 {
+        let dt = tag_tau[k + 1] - tag_tau[k];
+        let len = c
+            .segment_lengths
+            .get(k)
+            .copied()
+            .flatten()
+            .unwrap_or(nominal_speed * dt);
+        start_d[k + 1] = start_d[k] + len;
+    }
+    let d_of = |x: f64| -> f64 {
+        let k = tag_tau.partition_point(|&v| v <= x);
+        if k == 0 {
+            return 0.0;
+        }
+        if k >= tag_tau.len() {
+            return start_d[tag_tau.len() - 1];
+        }
+        let (a, b) = (tag_tau[k - 1], tag_tau[k]);
+        if b > a {
+            start_d[k - 1] + (start_d[k] - start_d[k - 1]) * (x - a) / (b - a)
+        } else {
+            start_d[k - 1]
+        }
+    };
+    for (d, &x) in s.d.iter_mut().zip(&tau) {
+        *d = d_of(x);
+    }
+    for (tag, d) in c.tags.iter_mut().zip(start_d) {
+        tag.d = d;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn interp_clamps_and_interpolates() {
+        let x = [0.0, 1.0, 2.0];
+        let y = [10.0, 20.0, 40.0];
+        assert_eq!(interp(&x, &y, -1.0), 10.0);
+        assert_eq!(interp(&x, &y, 1.5), 30.0);
+        assert_eq!(interp(&x, &y, 3.0), 40.0);
+    }
+
+    #[test]
+    fn clock_is_monotonic_across_wraps_and_restarts() {
+        let mut c = Clock::default();
+        assert_eq!(c.advance(u32::MAX - 999), 0.0);
+        assert!((c.advance(1000) - 0.002).abs() < 1e-9); // wrapped: +2000 µs
+        c.restart = true;
+        assert!((c.advance(5) - 0.002).abs() < 1e-9); // reboot adds nothing
+        assert!((c.advance(10_005) - 0.012).abs() < 1e-9);
+    }
+}
