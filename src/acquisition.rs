@@ -19,7 +19,7 @@ use crate::orientation::disturbance::{acc_motion, mag_disturbed, FieldReference,
 use crate::orientation::flags;
 use crate::orientation::triad::triad;
 use crate::scan::{ArrayEpoch, Curve, DeviceInfo, Samples, Scan, Tag};
-use crate::sensor::{saturated, Calibration, Scales, SensorModel};
+use crate::sensor::{saturated, CalibrationSpec, Scales, SensorModel};
 use device_protocol::{DeviceKind, Event, Hello, Packet};
 use nalgebra::{UnitQuaternion, Vector3};
 use std::collections::BTreeMap;
@@ -28,8 +28,8 @@ use std::collections::BTreeMap;
 /// configuration).
 #[derive(Debug, Clone, PartialEq)]
 pub struct AcquisitionConfig {
-    /// Device calibration; `None`: no correction, the wire format's axes for the HELLO's kind.
-    pub calibration: Option<Calibration>,
+    /// Device calibration (default: no correction, the wire format's axes for the HELLO's kind).
+    pub calibration: CalibrationSpec,
     pub thresholds: Thresholds,
     /// Half-width of the window that decides whether the device stands still, s. Default 0.25.
     pub stationary_window: f64,
@@ -47,7 +47,7 @@ pub struct AcquisitionConfig {
 impl Default for AcquisitionConfig {
     fn default() -> Self {
         AcquisitionConfig {
-            calibration: None,
+            calibration: CalibrationSpec::default(),
             thresholds: Thresholds::default(),
             stationary_window: 0.25,
             stationary_gyro: 3f64.to_radians(),
@@ -224,10 +224,7 @@ impl Acquisition {
                 h.kind
             ));
         }
-        let cal = match &self.cfg.calibration {
-            Some(c) => c.clone(),
-            None => Calibration::default_for(h.kind),
-        };
+        let cal = self.cfg.calibration.resolve(h.kind);
         self.model = Some(SensorModel::new(scales, cal));
         self.kind = Some(h.kind);
         self.scan.device = Some(DeviceInfo {

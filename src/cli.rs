@@ -46,6 +46,9 @@ pub struct ReplayArgs {
     /// Replay as fast as possible, or paced by the device timestamps.
     #[arg(long, default_value = "fast", value_parser = ["fast", "realtime"])]
     pub pace: String,
+    /// Configuration file for calibration and processing settings (its `[source]` is ignored).
+    #[arg(long, short)]
+    pub config: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]

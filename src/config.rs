@@ -11,9 +11,35 @@
 //! ```
 //!
 //! A relative `path` of a capture file is relative to the configuration file's directory.
+//!
+//! ```toml
+//! [calibration]                      # of the device; vectors in sensor axes
+//! acc_bias = [0.0, 0.0, 0.0]         # m/s², subtracted
+//! acc_scale = [1.0, 1.0, 1.0]        # per axis, after the bias
+//! mag_hard_iron = [0.0, 0.0, 0.0]    # µT, subtracted
+//! mag_soft_iron = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+//! gyro_bias = [0.0, 0.0, 0.0]        # rad/s
+//! axes = ["x", "y", "z"]             # sensor axes giving T, B, N (default: per device kind)
+//! mounting_deg = [0.0, 0.0, 0.0]     # rotation about T, B, N (roll, pitch, yaw), degrees
+//!
+//! [acquisition]
+//! acc_tolerance = 0.6                # m/s²: | |a| - g | above flags motion acceleration
+//! mag_norm_tolerance = 0.08          # relative: field norm off the session's median
+//! mag_dip_tolerance_deg = 4.0        # field dip off the session's median
+//! stationary_window_s = 0.25         # half-width of the standing-still test
+//! stationary_gyro_deg_s = 3.0        # phone: still below this rotation rate
+//! nominal_speed = 0.05               # phone: m/s where no segment length is known
+//! array_window_s = 1.0               # sensor arrays: averaging window
+//! [acquisition.segment_lengths]      # phone: measured segment lengths (m) per curve index
+//! "0" = [0.30, 0.25]
+//! ```
 
+use crate::acquisition::AcquisitionConfig;
+use crate::sensor::{AxisMap, CalibrationSpec};
 use crate::source::{Pace, SerialSpec, SourceSpec};
+use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde::Deserialize;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -38,6 +64,83 @@ pub struct ConfigError {
 pub struct Config {
     #[serde(default)]
     pub source: SourceConfig,
+    #[serde(default)]
+    pub calibration: CalibrationConfig,
+    #[serde(default)]
+    pub acquisition: AcquisitionToml,
+}
+
+/// `[calibration]`, as written (see the module documentation).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrationConfig {
+    #[serde(default = "zero3")]
+    pub acc_bias: [f64; 3],
+    #[serde(default = "one3")]
+    pub acc_scale: [f64; 3],
+    #[serde(default = "zero3")]
+    pub mag_hard_iron: [f64; 3],
+    #[serde(default = "eye3")]
+    pub mag_soft_iron: [[f64; 3]; 3],
+    #[serde(default = "zero3")]
+    pub gyro_bias: [f64; 3],
+    pub axes: Option<Vec<String>>,
+    #[serde(default = "zero3")]
+    pub mounting_deg: [f64; 3],
+}
+
+impl Default for CalibrationConfig {
+    fn default() -> Self {
+        CalibrationConfig {
+            acc_bias: zero3(),
+            acc_scale: one3(),
+            mag_hard_iron: zero3(),
+            mag_soft_iron: eye3(),
+            gyro_bias: zero3(),
+            axes: None,
+            mounting_deg: zero3(),
+        }
+    }
+}
+
+fn zero3() -> [f64; 3] {
+    [0.0; 3]
+}
+fn one3() -> [f64; 3] {
+    [1.0; 3]
+}
+fn eye3() -> [[f64; 3]; 3] {
+    [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+}
+
+/// `[acquisition]`, as written (see the module documentation).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AcquisitionToml {
+    pub acc_tolerance: Option<f64>,
+    pub mag_norm_tolerance: Option<f64>,
+    pub mag_dip_tolerance_deg: Option<f64>,
+    pub stationary_window_s: Option<f64>,
+    pub stationary_gyro_deg_s: Option<f64>,
+    pub nominal_speed: Option<f64>,
+    pub array_window_s: Option<f64>,
+    #[serde(default)]
+    pub segment_lengths: BTreeMap<String, Vec<f64>>,
+}
+
+impl Default for AcquisitionToml {
+    fn default() -> Self {
+        AcquisitionToml {
+            acc_tolerance: None,
+            mag_norm_tolerance: None,
+            mag_dip_tolerance_deg: None,
+            stationary_window_s: None,
+            stationary_gyro_deg_s: None,
+            nominal_speed: None,
+            array_window_s: None,
+            segment_lengths: BTreeMap::new(),
+        }
+    }
 }
 
 /// `[source]`.
@@ -110,7 +213,125 @@ impl Config {
             reason: e.message().trim().to_owned(),
         })?;
         cfg.source_spec(file)?;
+        cfg.acquisition_config(file)?;
         Ok(cfg)
+    }
+
+    /// The acquisition settings (calibration included) this configuration describes.
+    pub fn acquisition_config(&self, file: &Path) -> Result<AcquisitionConfig, ConfigError> {
+        let err = |key: &str, reason: String| ConfigError {
+            file: file.to_owned(),
+            key: key.to_owned(),
+            reason,
+        };
+        let c = &self.calibration;
+        let finite = |key: &str, v: &[f64]| -> Result<(), ConfigError> {
+            match v.iter().find(|x| !x.is_finite()) {
+                Some(x) => Err(err(key, format!("{x} is not a finite number"))),
+                None => Ok(()),
+            }
+        };
+        finite("calibration.acc_bias", &c.acc_bias)?;
+        finite("calibration.acc_scale", &c.acc_scale)?;
+        finite("calibration.mag_hard_iron", &c.mag_hard_iron)?;
+        finite("calibration.mag_soft_iron", c.mag_soft_iron.as_flattened())?;
+        finite("calibration.gyro_bias", &c.gyro_bias)?;
+        finite("calibration.mounting_deg", &c.mounting_deg)?;
+        if let Some(x) = c.acc_scale.iter().find(|&&x| x <= 0.0) {
+            return Err(err(
+                "calibration.acc_scale",
+                format!("{x} is not a positive scale"),
+            ));
+        }
+        let soft = Matrix3::from_row_slice(c.mag_soft_iron.as_flattened());
+        if soft.determinant().abs() < 1e-6 {
+            return Err(err(
+                "calibration.mag_soft_iron",
+                "the matrix is singular".into(),
+            ));
+        }
+        if let Some(x) = c.mounting_deg.iter().find(|x| x.abs() > 45.0) {
+            return Err(err(
+                "calibration.mounting_deg",
+                format!("{x}° is not a small mounting offset (at most 45°); fix `axes` instead"),
+            ));
+        }
+        let axes = match &c.axes {
+            Some(names) => Some(AxisMap::parse(names).map_err(|e| err("calibration.axes", e))?),
+            None => None,
+        };
+        let [r, p, y] = c.mounting_deg.map(f64::to_radians);
+        let calibration = CalibrationSpec {
+            acc_bias: Vector3::from(c.acc_bias),
+            acc_scale: Vector3::from(c.acc_scale),
+            mag_hard_iron: Vector3::from(c.mag_hard_iron),
+            mag_soft_iron: soft,
+            gyro_bias: Vector3::from(c.gyro_bias),
+            axes,
+            mounting: Rotation3::from_euler_angles(r, p, y),
+        };
+
+        let a = &self.acquisition;
+        let mut out = AcquisitionConfig {
+            calibration,
+            ..AcquisitionConfig::default()
+        };
+        let positive = |key: &str, v: Option<f64>, max: f64| -> Result<Option<f64>, ConfigError> {
+            match v {
+                Some(x) if !(x.is_finite() && x > 0.0 && x <= max) => {
+                    Err(err(key, format!("{x} is out of range (0, {max}]")))
+                }
+                v => Ok(v),
+            }
+        };
+        let th = &mut out.thresholds;
+        if let Some(x) = positive("acquisition.acc_tolerance", a.acc_tolerance, 20.0)? {
+            th.acc_tol = x;
+        }
+        if let Some(x) = positive("acquisition.mag_norm_tolerance", a.mag_norm_tolerance, 1.0)? {
+            th.mag_norm_rel = x;
+        }
+        if let Some(x) = positive(
+            "acquisition.mag_dip_tolerance_deg",
+            a.mag_dip_tolerance_deg,
+            90.0,
+        )? {
+            th.mag_dip_deg = x;
+        }
+        if let Some(x) = positive(
+            "acquisition.stationary_window_s",
+            a.stationary_window_s,
+            10.0,
+        )? {
+            out.stationary_window = x;
+        }
+        if let Some(x) = positive(
+            "acquisition.stationary_gyro_deg_s",
+            a.stationary_gyro_deg_s,
+            90.0,
+        )? {
+            out.stationary_gyro = x.to_radians();
+        }
+        if let Some(x) = positive("acquisition.nominal_speed", a.nominal_speed, 10.0)? {
+            out.nominal_speed = x;
+        }
+        if let Some(x) = positive("acquisition.array_window_s", a.array_window_s, 3600.0)? {
+            out.array_window = x;
+        }
+        for (k, v) in &a.segment_lengths {
+            let key = format!("acquisition.segment_lengths.{k}");
+            let idx: usize = k
+                .parse()
+                .map_err(|_| err(&key, format!("{k:?} is not a curve index (0, 1, 2, …)")))?;
+            if let Some(x) = v.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+                return Err(err(
+                    &key,
+                    format!("length {x} is not a positive number of metres"),
+                ));
+            }
+            out.segment_lengths.insert(idx, v.clone());
+        }
+        Ok(out)
     }
 
     /// The source this configuration describes.
@@ -226,5 +447,41 @@ mod tests {
         let e =
             parse("[source]\nkind = \"replay\"\npath = \"a.bin\"\npace = \"slow\"\n").unwrap_err();
         assert_eq!(e.key, "source.pace", "{e}");
+    }
+
+    #[test]
+    fn calibration_and_acquisition_errors_name_the_key() {
+        let base = "[source]\nkind = \"stdin\"\n";
+        let cases = [
+            ("[calibration]\naxes = [\"y\", \"x\", \"z\"]\n", "calibration.axes", "reflection"),
+            ("[calibration]\nacc_scale = [1.0, 0.0, 1.0]\n", "calibration.acc_scale", "positive"),
+            (
+                "[calibration]\nmag_soft_iron = [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]\n",
+                "calibration.mag_soft_iron",
+                "singular",
+            ),
+            ("[calibration]\nmounting_deg = [0.0, 90.0, 0.0]\n", "calibration.mounting_deg", "45"),
+            ("[calibration]\nacc_bias = [0.0, 0.0]\n", "calibration.acc_bias", ""),
+            ("[acquisition]\nnominal_speed = -1.0\n", "acquisition.nominal_speed", "out of range"),
+            (
+                "[acquisition.segment_lengths]\nfirst = [0.3]\n",
+                "acquisition.segment_lengths.first",
+                "curve index",
+            ),
+            ("[acquisition]\nspeed = 1.0\n", "acquisition.speed", "unknown field"),
+        ];
+        for (text, key, reason) in cases {
+            let e = parse(&format!("{base}{text}")).unwrap_err();
+            assert_eq!(e.key, key, "{text}: {e}");
+            assert!(e.reason.contains(reason), "{text}: {e}");
+        }
+        let ok = parse(&format!(
+            "{base}[calibration]\naxes = [\"y\", \"-x\", \"z\"]\nmounting_deg = [0.0, 0.0, 2.0]\n\
+             [acquisition.segment_lengths]\n\"0\" = [0.3, 0.2]\n"
+        ))
+        .unwrap();
+        let a = ok.acquisition_config(Path::new("x")).unwrap();
+        assert_eq!(a.segment_lengths[&0], vec![0.3, 0.2]);
+        assert!((a.calibration.mounting.angle() - 2f64.to_radians()).abs() < 1e-12);
     }
 }

@@ -61,22 +61,39 @@ fn replay(a: ReplayArgs) -> i32 {
         path: a.capture,
         pace,
     };
-    run_session(spec, &a.out)
+    let options = match &a.config {
+        Some(f) => match Config::load(f).and_then(|c| options(&c, f)) {
+            Ok(o) => o,
+            Err(e) => {
+                eprintln!("sfs: {e}");
+                return exit::USAGE;
+            }
+        },
+        None => session::Options::default(),
+    };
+    run_session(spec, &a.out, &options)
+}
+
+/// Session options from a configuration file.
+fn options(cfg: &Config, file: &Path) -> Result<session::Options, ConfigError> {
+    Ok(session::Options {
+        acquisition: cfg.acquisition_config(file)?,
+    })
 }
 
 fn run(a: RunArgs) -> i32 {
-    let spec = match resolve_run(&a) {
+    let (spec, options) = match resolve_run(&a) {
         Ok(s) => s,
         Err(e) => {
             eprintln!("sfs: {e}");
             return exit::USAGE;
         }
     };
-    run_session(spec, &a.session)
+    run_session(spec, &a.session, &options)
 }
 
 /// Flags over the configuration file over the defaults.
-fn resolve_run(a: &RunArgs) -> Result<SourceSpec, ConfigError> {
+fn resolve_run(a: &RunArgs) -> Result<(SourceSpec, session::Options), ConfigError> {
     let cli_err = |key: &str, reason: &str| ConfigError {
         file: "command line".into(),
         key: key.into(),
@@ -115,7 +132,7 @@ fn resolve_run(a: &RunArgs) -> Result<SourceSpec, ConfigError> {
             s.watchdog = Duration::from_millis(w);
         }
     }
-    Ok(spec)
+    Ok((spec, options(&cfg, &file)?))
 }
 
 fn config_check(file: &Path) -> i32 {
@@ -131,7 +148,7 @@ fn config_check(file: &Path) -> i32 {
     }
 }
 
-fn run_session(spec: SourceSpec, out: &Path) -> i32 {
+fn run_session(spec: SourceSpec, out: &Path, options: &session::Options) -> i32 {
     let rt = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -146,7 +163,7 @@ fn run_session(spec: SourceSpec, out: &Path) -> i32 {
     rt.block_on(async {
         let shutdown = Shutdown::new();
         tokio::spawn(signals(shutdown.clone()));
-        match session::run(spec, out, &session::Options::default(), shutdown).await {
+        match session::run(spec, out, options, shutdown).await {
             Ok(o) => {
                 print_summary(&o);
                 exit::OK

@@ -125,6 +125,49 @@ impl Calibration {
     }
 }
 
+/// Calibration as configured: like [`Calibration`] with the axis mapping optional (default:
+/// the wire format's axes of the device kind announced in HELLO).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrationSpec {
+    pub acc_bias: Vector3<f64>,
+    pub acc_scale: Vector3<f64>,
+    pub mag_hard_iron: Vector3<f64>,
+    pub mag_soft_iron: Matrix3<f64>,
+    pub gyro_bias: Vector3<f64>,
+    pub axes: Option<AxisMap>,
+    pub mounting: Rotation3<f64>,
+}
+
+impl Default for CalibrationSpec {
+    fn default() -> Self {
+        let c = Calibration::default_for(DeviceKind::Morphorider);
+        CalibrationSpec {
+            acc_bias: c.acc_bias,
+            acc_scale: c.acc_scale,
+            mag_hard_iron: c.mag_hard_iron,
+            mag_soft_iron: c.mag_soft_iron,
+            gyro_bias: c.gyro_bias,
+            axes: None,
+            mounting: c.mounting,
+        }
+    }
+}
+
+impl CalibrationSpec {
+    /// The calibration for a device of `kind`.
+    pub fn resolve(&self, kind: DeviceKind) -> Calibration {
+        Calibration {
+            acc_bias: self.acc_bias,
+            acc_scale: self.acc_scale,
+            mag_hard_iron: self.mag_hard_iron,
+            mag_soft_iron: self.mag_soft_iron,
+            gyro_bias: self.gyro_bias,
+            axes: self.axes.unwrap_or(Calibration::default_for(kind).axes),
+            mounting: self.mounting,
+        }
+    }
+}
+
 /// Scales of a device, from its HELLO.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Scales {
