@@ -33,6 +33,9 @@ pub struct AcquisitionConfig {
     pub thresholds: Thresholds,
     /// Half-width of the window that decides whether the device stands still, s. Default 0.25.
     pub stationary_window: f64,
+    /// Morphorider: the wheel moving less than this (m) over the window counts as still (the
+    /// operator's hand is never perfectly still). Default 2 mm.
+    pub stationary_distance: f64,
     /// Phone: gyroscope below this (rad/s) over the window counts as still. Default 3°/s.
     pub stationary_gyro: f64,
     /// Phone: speed assumed where no segment length is known, m/s. Default 0.05.
@@ -50,6 +53,7 @@ impl Default for AcquisitionConfig {
             calibration: CalibrationSpec::default(),
             thresholds: Thresholds::default(),
             stationary_window: 0.25,
+            stationary_distance: 0.002,
             stationary_gyro: 3f64.to_radians(),
             nominal_speed: 0.05,
             segment_lengths: BTreeMap::new(),
@@ -86,6 +90,10 @@ struct OpenCurve {
     index: usize,
     boundary: bool,
     tags: Vec<(u32, f64)>,
+    /// `(first digit, Enter)` times of every node tag: the operator stands while typing.
+    typing: Vec<(f64, f64)>,
+    /// Time of the first digit of the index being typed.
+    first_digit: Option<f64>,
     raw: Vec<Raw>,
     segment_lengths: BTreeMap<u16, f64>,
 }
@@ -354,6 +362,13 @@ impl Acquisition {
     }
 
     fn key(&mut self, t: f64, key: u8) -> Option<Update> {
+        if let Some(o) = &mut self.open {
+            if key.is_ascii_digit() {
+                o.first_digit.get_or_insert(t);
+            } else if key != b'\n' && key != b'\r' {
+                o.first_digit = None;
+            }
+        }
         let mut events = std::mem::take(&mut self.key_events);
         events.clear();
         self.keypad.key(t, key, &mut events);
@@ -365,6 +380,8 @@ impl Acquisition {
                         index: curve,
                         boundary,
                         tags: Vec::new(),
+                        typing: Vec::new(),
+                        first_digit: None,
                         raw: Vec::new(),
                         segment_lengths: BTreeMap::new(),
                     });
@@ -372,6 +389,7 @@ impl Acquisition {
                 KeyEvent::Tagged { node, t, .. } => {
                     if let Some(o) = &mut self.open {
                         o.tags.push((node, t));
+                        o.typing.push((o.first_digit.take().unwrap_or(t), t));
                     }
                 }
                 KeyEvent::Untagged { .. } => {
@@ -497,22 +515,34 @@ impl Acquisition {
                 .iter()
                 .map(|r| (r.gyro - bias).norm() < self.cfg.stationary_gyro)
                 .collect();
-            mark_stationary(&s.t, w, &mut s.flags, |a, b| {
-                gyro_still[a..=b].iter().all(|&x| x)
-            });
+            let mut still = stationary_mask(&s.t, w, |a, b| gyro_still[a..=b].iter().all(|&x| x));
+            // A phone moving straight on a flat part does not rotate either: only still runs
+            // that contain the typing of a node index count (the operator stands to type).
+            keep_runs_touching(&s.t, &mut still, &o.typing);
+            for (f, st) in s.flags.iter_mut().zip(still) {
+                if st {
+                    *f |= flags::STATIONARY;
+                }
+            }
         } else {
             let tick = self
                 .model
                 .as_ref()
                 .and_then(|m| m.scales.wheel_m_per_tick)
                 .unwrap_or(0.0);
+            let still_range = self.cfg.stationary_distance.max(1.5 * tick);
             let wheel: Vec<f64> = o.raw.iter().map(|r| r.wheel).collect();
-            mark_stationary(&s.t, w, &mut s.flags, |a, b| {
+            let still = stationary_mask(&s.t, w, |a, b| {
                 let (lo, hi) = wheel[a..=b]
                     .iter()
                     .fold((f64::MAX, f64::MIN), |(lo, hi), &x| (lo.min(x), hi.max(x)));
-                hi - lo < 1.5 * tick
+                hi - lo < still_range
             });
+            for (f, st) in s.flags.iter_mut().zip(still) {
+                if st {
+                    *f |= flags::STATIONARY;
+                }
+            }
         }
         let mut curve = Curve {
             index: o.index,
@@ -671,9 +701,12 @@ fn interp(x: &[f64], y: &[f64], x0: f64) -> f64 {
     }
 }
 
-/// Sets STATIONARY on samples whose window `[t − w, t + w]` satisfies `still(first, last)`.
-fn mark_stationary(t: &[f64], w: f64, fl: &mut [u8], still: impl Fn(usize, usize) -> bool) {
+/// Samples within `w` seconds of a sample whose whole window `[t − w, t + w]` satisfies
+/// `still(first, last)`: a morphological opening in time, so that the edges of a still period
+/// are not lost to the window.
+fn stationary_mask(t: &[f64], w: f64, still: impl Fn(usize, usize) -> bool) -> Vec<bool> {
     let n = t.len();
+    let mut centre = vec![false; n];
     let (mut a, mut b) = (0, 0);
     for i in 0..n {
         while t[a] < t[i] - w {
@@ -682,8 +715,49 @@ fn mark_stationary(t: &[f64], w: f64, fl: &mut [u8], still: impl Fn(usize, usize
         while b + 1 < n && t[b + 1] <= t[i] + w {
             b += 1;
         }
-        if still(a, b) {
-            fl[i] |= flags::STATIONARY;
+        centre[i] = still(a, b);
+    }
+    // Dilation: within w of a still centre (two sweeps, forward and backward).
+    let mut out = centre.clone();
+    let mut last = f64::NEG_INFINITY;
+    for i in 0..n {
+        if centre[i] {
+            last = t[i];
+        }
+        if t[i] - last <= w {
+            out[i] = true;
+        }
+    }
+    let mut next = f64::INFINITY;
+    for i in (0..n).rev() {
+        if centre[i] {
+            next = t[i];
+        }
+        if next - t[i] <= w {
+            out[i] = true;
+        }
+    }
+    out
+}
+
+/// Keeps the runs of `mask` that overlap one of the `intervals` (times), and sets the samples
+/// inside the intervals.
+fn keep_runs_touching(t: &[f64], mask: &mut [bool], intervals: &[(f64, f64)]) {
+    let inside = |x: f64| intervals.iter().any(|&(a, b)| x >= a && x <= b);
+    let n = t.len();
+    let mut i = 0;
+    while i < n {
+        if !mask[i] {
+            mask[i] = inside(t[i]);
+            i += 1;
+            continue;
+        }
+        let start = i;
+        while i < n && mask[i] {
+            i += 1;
+        }
+        if !(start..i).any(|k| inside(t[k])) {
+            mask[start..i].iter_mut().for_each(|m| *m = false);
         }
     }
 }

@@ -27,6 +27,7 @@
 //! mag_norm_tolerance = 0.08          # relative: field norm off the session's median
 //! mag_dip_tolerance_deg = 4.0        # field dip off the session's median
 //! stationary_window_s = 0.25         # half-width of the standing-still test
+//! stationary_distance = 0.002        # Morphorider: still if the wheel moves less (m)
 //! stationary_gyro_deg_s = 3.0        # phone: still below this rotation rate
 //! nominal_speed = 0.05               # phone: m/s where no segment length is known
 //! array_window_s = 1.0               # sensor arrays: averaging window
@@ -114,33 +115,19 @@ fn eye3() -> [[f64; 3]; 3] {
 }
 
 /// `[acquisition]`, as written (see the module documentation).
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AcquisitionToml {
     pub acc_tolerance: Option<f64>,
     pub mag_norm_tolerance: Option<f64>,
     pub mag_dip_tolerance_deg: Option<f64>,
     pub stationary_window_s: Option<f64>,
+    pub stationary_distance: Option<f64>,
     pub stationary_gyro_deg_s: Option<f64>,
     pub nominal_speed: Option<f64>,
     pub array_window_s: Option<f64>,
     #[serde(default)]
     pub segment_lengths: BTreeMap<String, Vec<f64>>,
-}
-
-impl Default for AcquisitionToml {
-    fn default() -> Self {
-        AcquisitionToml {
-            acc_tolerance: None,
-            mag_norm_tolerance: None,
-            mag_dip_tolerance_deg: None,
-            stationary_window_s: None,
-            stationary_gyro_deg_s: None,
-            nominal_speed: None,
-            array_window_s: None,
-            segment_lengths: BTreeMap::new(),
-        }
-    }
 }
 
 /// `[source]`.

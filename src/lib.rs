@@ -29,6 +29,7 @@ pub mod scan;
 pub mod sensor;
 pub mod session;
 pub mod shutdown;
+pub mod simulate;
 pub mod source;
 
 /// Exit codes of the `sfs` binary (a stated policy, also in the README).

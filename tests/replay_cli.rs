@@ -62,8 +62,24 @@ fn replay_of_shipped_demo_log_is_clean() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let link = &read_report(&dir)["link"];
+    let report = read_report(&dir);
+    let link = &report["link"];
     assert_eq!(link["bytes"], std::fs::metadata(log).unwrap().len());
+    // The dome network: equator 1-2-3-4-1 and two meridians over the pole, no warnings.
+    let nodes: Vec<String> = report["curves"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["nodes"].to_string())
+        .collect();
+    assert_eq!(nodes, ["[1,2,3,4,1]", "[1,0,3]", "[2,0,4]"]);
+    assert_eq!(
+        report["warnings"].as_array().unwrap().len(),
+        0,
+        "{}",
+        report["warnings"]
+    );
+    assert!(dir.join("scan.json").exists());
     assert!(link["packets"]["RIDER_SAMPLE"].as_u64().unwrap() > 1000);
     assert!(link["packets"]["KEY"].as_u64().unwrap() > 10);
     assert_eq!(link["rejected"]["cobs"], 0);

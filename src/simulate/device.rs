@@ -1,0 +1,386 @@
+//! Device models: true states → the exact packets a device would send, with seeded sensor
+//! noise, quantisation, wheel slip, a mounting offset, periodic HELLO and STATUS, and link
+//! faults.
+
+use super::operator::{Script, State};
+use super::rng::Rng;
+use crate::sensor::{Calibration, G};
+use device_protocol::{
+    DeviceKind, Hello, Key, Packet, PhoneSample, RiderSample, SegmentLength, Status,
+};
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+
+/// The Earth's field: magnitude and inclination; world x east, y magnetic north, z up.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Earth {
+    pub field_ut: f64,
+    pub inclination_deg: f64,
+}
+
+impl Default for Earth {
+    /// Central Europe: 48 µT, inclination 64°.
+    fn default() -> Self {
+        Earth {
+            field_ut: 48.0,
+            inclination_deg: 64.0,
+        }
+    }
+}
+
+impl Earth {
+    pub fn field(&self) -> Vector3<f64> {
+        let i = self.inclination_deg.to_radians();
+        Vector3::new(0.0, self.field_ut * i.cos(), -self.field_ut * i.sin())
+    }
+}
+
+/// A ferromagnetic object near part of the surface: an extra field, constant within
+/// `radius` of `center`, fading over one more radius.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Disturbance {
+    pub center: Vector3<f64>,
+    pub radius: f64,
+    pub field_ut: Vector3<f64>,
+}
+
+impl Disturbance {
+    fn at(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        let d = (p - self.center).norm();
+        let w = if d <= self.radius {
+            1.0
+        } else {
+            (2.0 - d / self.radius).max(0.0)
+        };
+        self.field_ut * w
+    }
+}
+
+/// Link faults (probabilities per packet).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LinkFaults {
+    /// One byte of the frame changed.
+    pub corrupt: f64,
+    /// The packet never arrives.
+    pub lose: f64,
+}
+
+/// Noise and hardware of the simulated device (documented defaults per kind).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DeviceParams {
+    pub kind: DeviceKind,
+    pub rate_hz: f64,
+    /// Relative jitter of sample instants (recorded by the timestamps).
+    pub jitter: f64,
+    /// Accelerometer white noise, m/s². Morphorider 0.02, phone 0.03.
+    pub acc_sigma: f64,
+    /// Magnetometer white noise, µT. Morphorider 0.3, phone 0.4.
+    pub mag_sigma: f64,
+    /// Gyroscope white noise, rad/s (phone). Default 0.003.
+    pub gyro_sigma: f64,
+    /// Gyroscope constant bias per axis, standard deviation, rad/s (phone). Default 0.005.
+    pub gyro_bias_sigma: f64,
+    /// LSB sizes announced in HELLO.
+    pub acc_lsb: f64,
+    pub mag_lsb: f64,
+    pub gyro_lsb: f64,
+    pub ticks_per_rev: u32,
+    pub wheel_circumference_um: u32,
+    /// Per-curve wheel slip, standard deviation (relative). Default 0.005.
+    pub slip_sigma: f64,
+    /// Rotation from the mapped sensor axes to the rolling frame (the calibration's
+    /// `mounting`). Default identity.
+    pub mounting: Rotation3<f64>,
+    /// Phone: standard deviation of the measured segment lengths, m (0: none sent). Default 0.003.
+    pub segment_length_sigma: f64,
+    pub earth: Earth,
+    pub disturbance: Option<Disturbance>,
+    pub faults: LinkFaults,
+    /// Device clock at the session's start, µs (to put a clock wrap mid-session).
+    pub clock_start_us: u32,
+    pub device_id: u32,
+}
+
+impl DeviceParams {
+    pub fn morphorider() -> Self {
+        DeviceParams {
+            kind: DeviceKind::Morphorider,
+            rate_hz: 100.0,
+            jitter: 0.02,
+            acc_sigma: 0.02,
+            mag_sigma: 0.3,
+            gyro_sigma: 0.0,
+            gyro_bias_sigma: 0.0,
+            acc_lsb: 16.0 * G / 65536.0,
+            mag_lsb: 0.15,
+            gyro_lsb: 0.0,
+            ticks_per_rev: 1024,
+            wheel_circumference_um: 100_000,
+            slip_sigma: 0.005,
+            mounting: Rotation3::identity(),
+            segment_length_sigma: 0.0,
+            earth: Earth::default(),
+            disturbance: None,
+            faults: LinkFaults::default(),
+            clock_start_us: 1_000_000,
+            device_id: 0x5F5_0001,
+        }
+    }
+
+    pub fn phone() -> Self {
+        DeviceParams {
+            kind: DeviceKind::Phone,
+            rate_hz: 200.0,
+            jitter: 0.1,
+            acc_sigma: 0.03,
+            mag_sigma: 0.4,
+            gyro_sigma: 0.003,
+            gyro_bias_sigma: 0.005,
+            acc_lsb: 16.0 * G / 65536.0,
+            mag_lsb: 0.15,
+            gyro_lsb: 2000f64.to_radians() / 32768.0,
+            ticks_per_rev: 0,
+            wheel_circumference_um: 0,
+            slip_sigma: 0.0,
+            mounting: Rotation3::identity(),
+            segment_length_sigma: 0.003,
+            earth: Earth::default(),
+            disturbance: None,
+            faults: LinkFaults::default(),
+            clock_start_us: 2_000_000,
+            device_id: 0x5F5_0002,
+        }
+    }
+
+    fn hello(&self) -> Hello {
+        Hello {
+            proto: device_protocol::PROTOCOL_VERSION,
+            kind: self.kind,
+            device_id: self.device_id,
+            firmware: 0x0100,
+            rate_hz: self.rate_hz as u16,
+            acc_scale: self.acc_lsb as f32,
+            gyro_scale: self.gyro_lsb as f32,
+            mag_scale: self.mag_lsb as f32,
+            ticks_per_rev: self.ticks_per_rev,
+            wheel_circumference_um: self.wheel_circumference_um,
+            sensors: 1,
+        }
+    }
+}
+
+/// What the simulated device really measured, per sample packet sent (in order).
+#[derive(Debug, Clone, Default)]
+pub struct SampleTruth {
+    /// Session time, s (as acquisition computes it from the timestamps, up to 1 µs).
+    pub t: Vec<f64>,
+    /// True frame → world.
+    pub q: Vec<UnitQuaternion<f64>>,
+    pub curve: Vec<Option<usize>>,
+    pub s: Vec<f64>,
+    pub standing: Vec<bool>,
+    /// Wheel reading in metres (after slip and before quantisation).
+    pub wheel: Vec<f64>,
+}
+
+/// Writes packets with sequence numbers, periodic HELLO and STATUS, and link faults.
+struct Emitter {
+    out: Vec<u8>,
+    seq: u8,
+    rng: Rng,
+    faults: LinkFaults,
+    next_hello: f64,
+    next_status: f64,
+    hello: Hello,
+    clock_start_us: u32,
+}
+
+impl Emitter {
+    fn t_us(&self, t: f64) -> u32 {
+        self.clock_start_us.wrapping_add((t * 1e6).round() as u32)
+    }
+
+    fn emit(&mut self, t: f64, p: Packet) {
+        if t >= self.next_hello {
+            self.next_hello = t + 5.0;
+            self.raw(Packet::Hello(self.hello));
+        }
+        if t >= self.next_status {
+            self.next_status = t + 2.0;
+            let t_us = self.t_us(t);
+            self.raw(Packet::Status(Status {
+                t_us,
+                battery_mv: 3900u16.saturating_sub((t / 60.0) as u16),
+                flags: 0,
+                dropped: 0,
+            }));
+        }
+        self.raw(p);
+    }
+
+    fn raw(&mut self, p: Packet) {
+        let seq = self.seq;
+        self.seq = self.seq.wrapping_add(1);
+        if self.faults.lose > 0.0 && self.rng.uniform() < self.faults.lose {
+            return;
+        }
+        let start = self.out.len();
+        p.encode(seq, &mut self.out);
+        if self.faults.corrupt > 0.0 && self.rng.uniform() < self.faults.corrupt {
+            let len = self.out.len() - start - 1; // not the delimiter
+            let i = start + (self.rng.next_u64() as usize % len);
+            self.out[i] ^= 1 + (self.rng.next_u64() % 255) as u8;
+        }
+    }
+}
+
+fn counts(v: &Vector3<f64>, lsb: f64) -> [i16; 3] {
+    [0, 1, 2].map(|i| (v[i] / lsb).round().clamp(i16::MIN as f64, i16::MAX as f64) as i16)
+}
+
+/// Renders `script` as the bytes the device would send, with the truth of every sample.
+pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, SampleTruth) {
+    let mut em = Emitter {
+        out: Vec::new(),
+        seq: (rng.next_u64() % 256) as u8,
+        rng: rng.fork(),
+        faults: p.faults,
+        next_hello: 0.0,
+        next_status: 0.0,
+        hello: p.hello(),
+        clock_start_us: p.clock_start_us,
+    };
+    let mut truth = SampleTruth::default();
+    let field = p.earth.field();
+    let g = Vector3::new(0.0, 0.0, G);
+    // Sensor axes → frame axes: frame = mounting · axes · sensor.
+    let frame_from_sensor = p.mounting.matrix() * Calibration::default_for(p.kind).axes.m;
+    let gyro_bias = rng.vec3(p.gyro_bias_sigma);
+    let m_per_tick = if p.ticks_per_rev > 0 {
+        p.wheel_circumference_um as f64 * 1e-6 / p.ticks_per_rev as f64
+    } else {
+        0.0
+    };
+    let n_curves = script.curves.len();
+    let slips: Vec<f64> = (0..n_curves)
+        .map(|_| 1.0 + p.slip_sigma * rng.gauss())
+        .collect();
+    let mut wheel_dev = 0.0;
+    let mut last_wheel = 0.0;
+    let mut keys = script.keys.iter().peekable();
+    let mut seg_lengths: Vec<(f64, u16, f64)> = Vec::new(); // (time, segment, length)
+    if p.kind == DeviceKind::Phone && p.segment_length_sigma > 0.0 {
+        // The app sends each segment's measured length right after the Enter that ends it.
+        for c in &script.curves {
+            for (k, w) in c.tags.windows(2).enumerate() {
+                let len = (w[1].1 - w[0].1) + p.segment_length_sigma * rng.gauss();
+                seg_lengths.push((w[1].2 + 1e-4, k as u16, len.max(1e-3)));
+            }
+        }
+    }
+    let mut segs = seg_lengths.iter().peekable();
+    for st in &script.states {
+        while let Some(&&(tk, k)) = keys.peek() {
+            if tk > st.t {
+                break;
+            }
+            let t_us = em.t_us(tk);
+            em.emit(tk, Packet::Key(Key { t_us, key: k }));
+            keys.next();
+        }
+        while let Some(&&(ts, seg, len)) = segs.peek() {
+            if ts > st.t {
+                break;
+            }
+            let t_us = em.t_us(ts);
+            em.emit(
+                ts,
+                Packet::SegmentLength(SegmentLength {
+                    t_us,
+                    segment: seg,
+                    length_um: (len * 1e6).round() as u32,
+                }),
+            );
+            segs.next();
+        }
+        let slip = st.curve.map_or(1.0, |c| slips[c]);
+        wheel_dev += (st.wheel - last_wheel) * slip;
+        last_wheel = st.wheel;
+        let sample = sensor_sample(
+            st,
+            p,
+            &field,
+            &g,
+            &frame_from_sensor,
+            &gyro_bias,
+            wheel_dev,
+            m_per_tick,
+            rng,
+        );
+        let t_us = em.t_us(st.t);
+        let packet = match (p.kind, sample) {
+            (DeviceKind::Phone, (acc, mag, gyro, _)) => Packet::PhoneSample(PhoneSample {
+                t_us,
+                acc,
+                gyro,
+                mag,
+            }),
+            (_, (acc, mag, _, wheel)) => Packet::RiderSample(RiderSample {
+                t_us,
+                acc,
+                mag,
+                wheel,
+            }),
+        };
+        em.emit(st.t, packet);
+        truth.t.push(st.t);
+        truth.q.push(st.q);
+        truth.curve.push(st.curve);
+        truth.s.push(st.s);
+        truth.standing.push(st.standing);
+        truth.wheel.push(wheel_dev);
+    }
+    for &(tk, k) in keys {
+        let t_us = em.t_us(tk);
+        em.emit(tk, Packet::Key(Key { t_us, key: k }));
+    }
+    (em.out, truth)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn sensor_sample(
+    st: &State,
+    p: &DeviceParams,
+    field: &Vector3<f64>,
+    g: &Vector3<f64>,
+    frame_from_sensor: &nalgebra::Matrix3<f64>,
+    gyro_bias: &Vector3<f64>,
+    wheel_dev: f64,
+    m_per_tick: f64,
+    rng: &mut Rng,
+) -> ([i16; 3], [i16; 3], [i16; 3], i32) {
+    // world = R · frame = R · F · sensor  ⇒  sensor = (R F)ᵀ · world.
+    let r = st.q.to_rotation_matrix();
+    let sensor_from_world = (r.matrix() * frame_from_sensor).transpose();
+    let mut b = *field;
+    if let Some(d) = &p.disturbance {
+        b += d.at(&st.pos);
+    }
+    let acc = sensor_from_world * (st.acc + g) + rng.vec3(p.acc_sigma);
+    let mag = sensor_from_world * b + rng.vec3(p.mag_sigma);
+    let gyro = frame_from_sensor.transpose() * st.omega + gyro_bias + rng.vec3(p.gyro_sigma);
+    let wheel = if m_per_tick > 0.0 {
+        (wheel_dev / m_per_tick).round() as i32
+    } else {
+        0
+    };
+    (
+        counts(&acc, p.acc_lsb),
+        counts(&mag, p.mag_lsb),
+        if p.gyro_lsb > 0.0 {
+            counts(&gyro, p.gyro_lsb)
+        } else {
+            [0; 3]
+        },
+        wheel,
+    )
+}

@@ -1,0 +1,314 @@
+//! The operator: turns curves on a surface into a timeline of true device states and key
+//! presses, as a person scanning them would: start key, stand at the node while typing its
+//! index, Enter, roll to the next node with slowly varying speed, …, `E`, then carry the
+//! device to the next curve.
+
+use super::rng::Rng;
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+
+/// A curve to scan: a dense polyline on the surface with outward normals, and its node tags.
+#[derive(Debug, Clone)]
+pub struct CurveSpec {
+    /// Points along the curve in order of travel, m.
+    pub points: Vec<Vector3<f64>>,
+    /// Outward unit surface normals at the points.
+    pub normals: Vec<Vector3<f64>>,
+    /// `(point index, node index)` in order of travel; the first at point 0, the last at the
+    /// last point.
+    pub tags: Vec<(usize, u32)>,
+    pub boundary: bool,
+}
+
+/// How the operator moves (documented defaults).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OperatorParams {
+    /// Mean rolling speed, m/s. Default 0.05.
+    pub speed: f64,
+    /// Relative amplitude of the slow speed changes. Default 0.3.
+    pub speed_variation: f64,
+    /// Standing at a node before typing its index, s. Default 0.6.
+    pub pause_before_typing: f64,
+    /// Between key presses, s. Default 0.25.
+    pub key_interval: f64,
+    /// Standing after Enter before rolling on, s. Default 0.4.
+    pub pause_after_enter: f64,
+    /// Carrying the device from one curve's end to the next curve's start, s. Default 3.
+    pub carry_time: f64,
+    /// Amplitude of the hand's back-and-forth along the curve while standing, m. Default 0.3 mm.
+    pub stand_wobble: f64,
+}
+
+impl Default for OperatorParams {
+    fn default() -> Self {
+        OperatorParams {
+            speed: 0.05,
+            speed_variation: 0.3,
+            pause_before_typing: 0.6,
+            key_interval: 0.25,
+            pause_after_enter: 0.4,
+            carry_time: 3.0,
+            stand_wobble: 0.0003,
+        }
+    }
+}
+
+/// The true state of the device at one sample.
+#[derive(Debug, Clone)]
+pub struct State {
+    /// Session time, s.
+    pub t: f64,
+    /// Frame `[T B N]` → world.
+    pub q: UnitQuaternion<f64>,
+    pub pos: Vector3<f64>,
+    /// Kinematic acceleration, world, m/s² (from the positions).
+    pub acc: Vector3<f64>,
+    /// Angular velocity in frame axes, rad/s (from the orientations).
+    pub omega: Vector3<f64>,
+    /// Signed distance the wheel has rolled since the session started, m.
+    pub wheel: f64,
+    /// The curve being scanned (between its start key and its `E`).
+    pub curve: Option<usize>,
+    /// True distance along that curve, m.
+    pub s: f64,
+    /// Whether the operator is standing (at a node).
+    pub standing: bool,
+}
+
+/// The truth of one scanned curve.
+#[derive(Debug, Clone)]
+pub struct CurveTruth {
+    pub boundary: bool,
+    /// `(node, true distance s, time of Enter, wheel reading then)`.
+    pub tags: Vec<(u32, f64, f64, f64)>,
+    pub length: f64,
+}
+
+/// The timeline.
+#[derive(Debug, Clone, Default)]
+pub struct Script {
+    pub states: Vec<State>,
+    /// `(time, key)` in time order.
+    pub keys: Vec<(f64, u8)>,
+    pub curves: Vec<CurveTruth>,
+}
+
+/// Arc-length parametrised curve with smooth frames.
+struct Param<'a> {
+    spec: &'a CurveSpec,
+    cum: Vec<f64>,
+    t: Vec<Vector3<f64>>,
+    n: Vec<Vector3<f64>>,
+}
+
+impl<'a> Param<'a> {
+    fn new(spec: &'a CurveSpec) -> Self {
+        let p = &spec.points;
+        let m = p.len();
+        let mut cum = vec![0.0; m];
+        for i in 1..m {
+            cum[i] = cum[i - 1] + (p[i] - p[i - 1]).norm();
+        }
+        let t: Vec<Vector3<f64>> = (0..m)
+            .map(|i| {
+                let a = p[i.saturating_sub(1)];
+                let b = p[(i + 1).min(m - 1)];
+                (b - a).normalize()
+            })
+            .collect();
+        let n = (0..m)
+            .map(|i| {
+                let n = spec.normals[i];
+                (n - t[i] * n.dot(&t[i])).normalize()
+            })
+            .collect();
+        Param { spec, cum, t, n }
+    }
+
+    fn length(&self) -> f64 {
+        *self.cum.last().unwrap_or(&0.0)
+    }
+
+    fn locate(&self, s: f64) -> (usize, f64) {
+        let s = s.clamp(0.0, self.length());
+        let i = self
+            .cum
+            .partition_point(|&c| c <= s)
+            .clamp(1, self.cum.len() - 1);
+        let (a, b) = (self.cum[i - 1], self.cum[i]);
+        let u = if b > a { (s - a) / (b - a) } else { 0.0 };
+        (i, u)
+    }
+
+    fn pos(&self, s: f64) -> Vector3<f64> {
+        let (i, u) = self.locate(s);
+        let p = &self.spec.points;
+        p[i - 1] * (1.0 - u) + p[i] * u
+    }
+
+    fn frame(&self, s: f64) -> UnitQuaternion<f64> {
+        let (i, u) = self.locate(s);
+        let t = (self.t[i - 1] * (1.0 - u) + self.t[i] * u).normalize();
+        let n = self.n[i - 1] * (1.0 - u) + self.n[i] * u;
+        let n = (n - t * n.dot(&t)).normalize();
+        let b = n.cross(&t);
+        let m = Matrix3::from_columns(&[t, b, n]);
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m))
+    }
+}
+
+struct Timeline<'r> {
+    script: Script,
+    t: f64,
+    dt: f64,
+    jitter: f64,
+    wheel: f64,
+    rng: &'r mut Rng,
+}
+
+impl Timeline<'_> {
+    fn next_t(&mut self) -> f64 {
+        // Sample instants are regular up to a small jitter, which the timestamps record.
+        self.t += self.dt * (1.0 + self.jitter * (self.rng.uniform() - 0.5));
+        self.t
+    }
+
+    fn push(
+        &mut self,
+        q: UnitQuaternion<f64>,
+        pos: Vector3<f64>,
+        curve: Option<usize>,
+        s: f64,
+        standing: bool,
+    ) {
+        let t = self.next_t();
+        self.script.states.push(State {
+            t,
+            q,
+            pos,
+            acc: Vector3::zeros(),
+            omega: Vector3::zeros(),
+            wheel: self.wheel,
+            curve,
+            s,
+            standing,
+        });
+    }
+
+    /// Stands at distance `s` of curve `c` for `d` seconds, with a small back-and-forth (one
+    /// smooth oscillation that starts and ends at rest).
+    fn stand(&mut self, p: &Param, c: Option<usize>, s: f64, d: f64, wobble: f64) {
+        let start = self.t;
+        let end = self.t + d;
+        let base_wheel = self.wheel;
+        let sign = if self.rng.uniform() < 0.5 { -1.0 } else { 1.0 };
+        while self.t + self.dt <= end {
+            let u = (self.t - start) / d;
+            let w = sign
+                * wobble
+                * (std::f64::consts::TAU * u).sin()
+                * (std::f64::consts::PI * u).sin();
+            let sw = (s + w).clamp(0.0, p.length());
+            self.wheel = base_wheel + (sw - s);
+            self.push(p.frame(sw), p.pos(sw), c, sw, true);
+        }
+        self.wheel = base_wheel;
+    }
+
+    fn key(&mut self, k: u8) {
+        self.script.keys.push((self.t, k));
+    }
+}
+
+/// Performs the scan of `curves` in order; `rate_hz` is the device's sample rate, `jitter` the
+/// relative jitter of its sample instants.
+pub fn perform(
+    curves: &[CurveSpec],
+    op: &OperatorParams,
+    rate_hz: f64,
+    jitter: f64,
+    rng: &mut Rng,
+) -> Script {
+    let mut tl = Timeline {
+        script: Script::default(),
+        t: 0.5,
+        dt: 1.0 / rate_hz,
+        jitter,
+        wheel: 0.0,
+        rng,
+    };
+    let mut prev_end: Option<UnitQuaternion<f64>> = None;
+    for (ci, spec) in curves.iter().enumerate() {
+        let p = Param::new(spec);
+        let start_q = p.frame(0.0);
+        // Carry the device to the start (orientation slerps; the wheel does not turn).
+        if let Some(q0) = prev_end {
+            let n = (op.carry_time / tl.dt) as usize;
+            for k in 1..=n {
+                let u = k as f64 / n as f64;
+                let u = u * u * (3.0 - 2.0 * u);
+                let q = q0.slerp(&start_q, u);
+                tl.push(q, p.pos(0.0), None, 0.0, false);
+            }
+        } else {
+            tl.stand(&p, None, 0.0, 1.0, 0.0);
+        }
+        tl.key(if spec.boundary { b'B' } else { b'I' });
+        let mut truth = CurveTruth {
+            boundary: spec.boundary,
+            tags: Vec::new(),
+            length: p.length(),
+        };
+        let phase = tl.rng.range(0.0, std::f64::consts::TAU);
+        let period = tl.rng.range(3.0, 6.0);
+        let mut s = 0.0;
+        for (k, &(pi, node)) in spec.tags.iter().enumerate() {
+            let target = p.cum[pi];
+            // Roll to the node.
+            while s < target {
+                let v = op.speed
+                    * (1.0
+                        + op.speed_variation
+                            * (std::f64::consts::TAU * tl.t / period + phase).sin());
+                let step = v.max(0.2 * op.speed) * tl.dt;
+                let ns = (s + step).min(target);
+                tl.wheel += ns - s;
+                s = ns;
+                tl.push(p.frame(s), p.pos(s), Some(ci), s, false);
+            }
+            // Stand, type the index, Enter.
+            tl.stand(&p, Some(ci), s, op.pause_before_typing, op.stand_wobble);
+            for d in node.to_string().bytes() {
+                tl.key(d);
+                tl.stand(&p, Some(ci), s, op.key_interval, op.stand_wobble);
+            }
+            tl.key(b'\n');
+            truth.tags.push((node, s, tl.t, tl.wheel));
+            let last = k + 1 == spec.tags.len();
+            tl.stand(&p, Some(ci), s, op.pause_after_enter, op.stand_wobble);
+            if last {
+                tl.key(b'E');
+                tl.stand(&p, None, s, 0.3, 0.0);
+            }
+        }
+        prev_end = Some(p.frame(p.length()));
+        tl.script.curves.push(truth);
+    }
+    let mut script = tl.script;
+    differentiate(&mut script.states);
+    script
+}
+
+/// Fills accelerations and angular velocities by finite differences (uneven spacing).
+fn differentiate(st: &mut [State]) {
+    let n = st.len();
+    for i in 1..n.saturating_sub(1) {
+        let (h1, h2) = (st[i].t - st[i - 1].t, st[i + 1].t - st[i].t);
+        let (p0, p1, p2) = (st[i - 1].pos, st[i].pos, st[i + 1].pos);
+        st[i].acc = 2.0 * (h1 * (p2 - p1) - h2 * (p1 - p0)) / (h1 * h2 * (h1 + h2));
+    }
+    for i in 0..n.saturating_sub(1) {
+        let h = st[i + 1].t - st[i].t;
+        let d = st[i].q.inverse() * st[i + 1].q;
+        st[i].omega = d.scaled_axis() / h;
+    }
+}
