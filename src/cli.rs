@@ -31,9 +31,22 @@ pub enum Command {
     /// Read a live device (serial port or standard input), capture every byte to
     /// SESSION/capture.bin, and write SESSION/report.json when it ends (Ctrl-C).
     Run(RunArgs),
+    /// Fit the magnetometer (hard/soft iron), accelerometer (bias/scale) and gyroscope bias from
+    /// a capture of the device turned through many orientations with static rests; prints the
+    /// fit quality and a [calibration] snippet for the configuration.
+    Calibrate(CalibrateArgs),
     /// Configuration files.
     #[command(subcommand)]
     Config(ConfigCommand),
+}
+
+#[derive(Debug, Args)]
+pub struct CalibrateArgs {
+    /// The capture file.
+    pub capture: PathBuf,
+    /// Sensor arrays: the sensor to calibrate.
+    #[arg(long, default_value_t = 0)]
+    pub sensor: u16,
 }
 
 #[derive(Debug, Args)]

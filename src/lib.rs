@@ -18,6 +18,7 @@
 
 pub mod acquisition;
 pub mod atomic;
+pub mod calibrate;
 pub mod capture;
 pub mod cli;
 pub mod config;
@@ -44,6 +45,8 @@ pub mod exit {
     pub const INPUT: i32 = 3;
     /// An output (session directory, capture, report) cannot be written.
     pub const OUTPUT: i32 = 4;
+    /// The input was read but cannot give the result asked for (e.g. no calibration fit).
+    pub const UNUSABLE: i32 = 5;
     /// A second interrupt signal: exit at once (files are left consistent, not finished).
     pub const INTERRUPTED: i32 = 130;
 }

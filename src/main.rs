@@ -2,7 +2,7 @@
 //! configuration, installs logging and signal handling, runs, maps errors to exit codes.
 
 use clap::Parser;
-use sfs::cli::{Cli, Command, ConfigCommand, LogFormat, ReplayArgs, RunArgs};
+use sfs::cli::{CalibrateArgs, Cli, Command, ConfigCommand, LogFormat, ReplayArgs, RunArgs};
 use sfs::config::{Config, ConfigError};
 use sfs::exit;
 use sfs::session::{self, Outcome, SessionError};
@@ -28,6 +28,7 @@ fn main() {
     std::process::exit(match cli.command {
         Command::Replay(a) => replay(a),
         Command::Run(a) => run(a),
+        Command::Calibrate(a) => calibrate(a),
         Command::Config(ConfigCommand::Check { file }) => config_check(&file),
     });
 }
@@ -133,6 +134,27 @@ fn resolve_run(a: &RunArgs) -> Result<(SourceSpec, session::Options), ConfigErro
         }
     }
     Ok((spec, options(&cfg, &file)?))
+}
+
+fn calibrate(a: CalibrateArgs) -> i32 {
+    match sfs::calibrate::calibrate_file(&a.capture, a.sensor) {
+        Ok(c) => {
+            print!("{}", c.render());
+            if c.any() {
+                exit::OK
+            } else {
+                eprintln!(
+                    "sfs: {}: no calibration could be fitted",
+                    a.capture.display()
+                );
+                exit::UNUSABLE
+            }
+        }
+        Err(e) => {
+            eprintln!("sfs: {e}");
+            exit::INPUT
+        }
+    }
 }
 
 fn config_check(file: &Path) -> i32 {
