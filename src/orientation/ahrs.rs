@@ -33,7 +33,8 @@ use nalgebra::{UnitQuaternion, Vector3};
 pub struct AhrsParams {
     /// Time constant of the tilt correction, s. Default 3 s (VQF's).
     pub tau_acc: f64,
-    /// Time constant of the heading correction, s. Default 9 s (VQF's).
+    /// Time constant of the heading correction, s. Default 25 s: chosen by measurement on the
+    /// BROAD recordings (BENCHMARKS.md), where it beat VQF's 9 s on every trial.
     pub tau_mag: f64,
     /// Relative deviation of the field norm that counts as a magnetic disturbance. Default 0.1.
     pub mag_norm_tol: f64,
@@ -45,7 +46,8 @@ pub struct AhrsParams {
     pub rest_gyro: f64,
     /// Rest: accelerometer within this of its recent mean, m/s². Default 0.5 m/s².
     pub rest_acc: f64,
-    /// Rest must last this long before the gyroscope bias is learned, s. Default 1.5 s.
+    /// Rest must last this long before the gyroscope bias is learned, s. Default 1 s (an
+    /// operator stands about that long at a node; VQF uses 1.5 s).
     pub rest_min: f64,
     /// Time constant of the bias estimate at rest, s. Default 3 s.
     pub tau_bias: f64,
@@ -59,13 +61,13 @@ impl Default for AhrsParams {
     fn default() -> Self {
         AhrsParams {
             tau_acc: 3.0,
-            tau_mag: 9.0,
+            tau_mag: 25.0,
             mag_norm_tol: 0.1,
             mag_dip_tol_deg: 10.0,
             mag_new_reference_after: 60.0,
             rest_gyro: 2f64.to_radians(),
             rest_acc: 0.5,
-            rest_min: 1.5,
+            rest_min: 1.0,
             tau_bias: 3.0,
             max_bias: 2f64.to_radians(),
             max_dt: 0.5,
@@ -84,9 +86,8 @@ pub struct Ahrs {
     q_acc: UnitQuaternion<f64>,
     /// Heading offset E6 → world, radians about z.
     delta: f64,
-    /// Low-passed accelerometer in I, and the time it has been filtered.
-    acc_lp: Vector3<f64>,
-    acc_t: f64,
+    /// Low-passed accelerometer in I.
+    acc_lp: LowPass2,
     /// Heading filter: time it has run.
     mag_t: f64,
     /// Field reference (norm µT, dip rad), its age, and the disturbance timer.
@@ -117,6 +118,74 @@ fn wrap_pi(a: f64) -> f64 {
     a
 }
 
+/// Second-order Butterworth low-pass of a vector with cut-off `√2 / (2π τ)` (VQF's choice),
+/// discretised by the bilinear transform for each measured interval. For its first `τ`
+/// seconds it returns the running mean instead, and then starts from that mean in steady
+/// state, so that it neither lags nor rings at the start.
+#[derive(Debug, Clone)]
+struct LowPass2 {
+    /// Transposed direct form II states.
+    s1: Vector3<f64>,
+    s2: Vector3<f64>,
+    mean: Vector3<f64>,
+    t: f64,
+    n: u32,
+    running: bool,
+    last: Vector3<f64>,
+}
+
+impl LowPass2 {
+    fn new() -> Self {
+        LowPass2 {
+            s1: Vector3::zeros(),
+            s2: Vector3::zeros(),
+            mean: Vector3::zeros(),
+            t: 0.0,
+            n: 0,
+            running: false,
+            last: Vector3::zeros(),
+        }
+    }
+
+    fn coefficients(dt: f64, tau: f64) -> ([f64; 3], [f64; 2]) {
+        let fc = std::f64::consts::SQRT_2 / (std::f64::consts::TAU * tau);
+        let c = (std::f64::consts::PI * fc * dt).tan();
+        let d = c * c + std::f64::consts::SQRT_2 * c + 1.0;
+        let b0 = c * c / d;
+        let a1 = 2.0 * (c * c - 1.0) / d;
+        let a2 = (1.0 - std::f64::consts::SQRT_2 * c + c * c) / d;
+        ([b0, 2.0 * b0, b0], [a1, a2])
+    }
+
+    fn update(&mut self, x: &Vector3<f64>, dt: f64, tau: f64) -> Vector3<f64> {
+        if !self.running {
+            self.n += 1;
+            self.mean += (x - self.mean) / self.n as f64;
+            self.t += dt;
+            self.last = self.mean;
+            if self.t < tau || dt <= 0.0 {
+                return self.mean;
+            }
+            // Steady state for a constant input equal to the mean.
+            let (b, a) = Self::coefficients(dt, tau);
+            let y = self.mean;
+            self.s2 = y * b[2] - y * a[1];
+            self.s1 = self.s2 + y * b[1] - y * a[0];
+            self.running = true;
+            return y;
+        }
+        if dt <= 0.0 {
+            return self.last; // no time passed: nothing to filter
+        }
+        let (b, a) = Self::coefficients(dt, tau);
+        let y = x * b[0] + self.s1;
+        self.s1 = x * b[1] - y * a[0] + self.s2;
+        self.s2 = x * b[2] - y * a[1];
+        self.last = y;
+        y
+    }
+}
+
 /// Gain of a first-order low-pass with time constant `tau` over `dt`, or of the running mean
 /// while the filter has run for less than `tau` (fast, unbiased start).
 fn gain(dt: f64, tau: f64, t_run: f64) -> f64 {
@@ -136,8 +205,7 @@ impl Ahrs {
             q_gyr: UnitQuaternion::identity(),
             q_acc: UnitQuaternion::identity(),
             delta: 0.0,
-            acc_lp: Vector3::zeros(),
-            acc_t: 0.0,
+            acc_lp: LowPass2::new(),
             mag_t: 0.0,
             mag_ref: None,
             mag_ref_t: 0.0,
@@ -186,8 +254,8 @@ impl Ahrs {
         self.q_gyr = q;
         self.q_acc = UnitQuaternion::identity();
         self.delta = 0.0;
-        self.acc_lp = q * acc;
-        self.acc_t = 0.0;
+        self.acc_lp = LowPass2::new();
+        self.acc_lp.update(&(q * acc), 0.0, self.p.tau_acc);
         self.mag_t = 0.0;
         self.gyr_mean = Vector3::zeros();
         self.acc_mean = *acc;
@@ -231,10 +299,8 @@ impl Ahrs {
         // 2. Tilt: low-pass the accelerometer in I, rotate E6 so that it points up.
         if acc_ok && dt > 0.0 {
             let a_i = self.q_gyr * acc;
-            let k = gain(dt, self.p.tau_acc, self.acc_t);
-            self.acc_t += dt;
-            self.acc_lp += (a_i - self.acc_lp) * k;
-            let a_e = self.q_acc * self.acc_lp;
+            let lp = self.acc_lp.update(&a_i, dt, self.p.tau_acc);
+            let a_e = self.q_acc * lp;
             if let Some(c) = UnitQuaternion::rotation_between(&a_e, &Vector3::z()) {
                 self.q_acc = c * self.q_acc;
             }
