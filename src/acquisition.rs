@@ -466,6 +466,7 @@ impl Acquisition {
             d: vec![0.0; n],
             q: Vec::with_capacity(n),
             flags: o.raw.iter().map(|r| r.flags).collect(),
+            w: Vec::new(),
         };
         let th = self.cfg.thresholds;
         let phone = self.kind == Some(DeviceKind::Phone);
@@ -544,6 +545,7 @@ impl Acquisition {
                 }
             }
         }
+        s.w = s.flags.iter().map(|&f| flags::weight(f)).collect();
         let mut curve = Curve {
             index: o.index,
             boundary: o.boundary,

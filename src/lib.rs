@@ -8,13 +8,19 @@
 //!   thread behind one channel of [`source::SourceEvent`]s.
 //! - [`capture`]: lossless capture of live bytes, written before anything decodes them.
 //! - [`link`]: statistics of the decoded link (packets, rejects, gaps, reboots, STATUS).
-//! - [`session`]: one run of the pipeline, source → decoder → statistics → outputs.
+//! - [`sensor`]: packets → calibrated samples (HELLO scales, calibration, axis mapping).
+//! - [`orientation`]: samples → orientations of the frame [T B N] (TRIAD, the phone's
+//!   filter, the q-method mean, disturbance tests).
+//! - [`keypad`], [`acquisition`], [`scan`]: orientations and key presses → tagged curves.
+//! - [`session`]: one run of the pipeline, source → decoder → acquisition → outputs.
 //! - [`report`]: `report.json`; [`atomic`]: atomic replacement of output files.
+//! - [`calibrate`]: `sfs calibrate` (ellipsoid and static-pose fits).
+//! - [`simulate`]: captures of known shapes (operator timeline, device models).
 //! - [`config`]: the resolved configuration (`config/*.toml`); [`cli`]: raw flags.
 //! - [`shutdown`]: the stop signal passed into every long-running part.
 //!
-//! Later stages (samples → orientations → tagged curves → filtered frames → network →
-//! surface → glTF) are added as modules in that order.
+//! Later stages (filtered frames → network → surface → glTF) are added as modules in that
+//! order.
 
 pub mod acquisition;
 pub mod atomic;

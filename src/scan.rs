@@ -30,6 +30,9 @@ pub struct Samples {
     pub q: Vec<[f64; 4]>,
     /// [`crate::orientation::flags`] bits.
     pub flags: Vec<u8>,
+    /// Weight of each orientation in averaging, from the flags
+    /// ([`crate::orientation::flags::weight`]).
+    pub w: Vec<f64>,
 }
 
 impl Samples {

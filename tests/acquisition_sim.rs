@@ -351,3 +351,90 @@ fn undo_cancel_and_reboot_cost_no_curve() {
     );
     assert_eq!(scan.counts.curves_discarded, 1);
 }
+
+#[test]
+fn phone_segment_lengths_from_configuration() {
+    let mut p = DeviceParams::phone();
+    p.segment_length_sigma = 0.0; // no SEGMENT_LENGTH packets
+    let (script, bytes, _) = simulate(&dome(), &p, 19);
+    let mut cfg = AcquisitionConfig::default();
+    let truth1: Vec<f64> = script.curves[1]
+        .tags
+        .windows(2)
+        .map(|w| w[1].1 - w[0].1)
+        .collect();
+    cfg.segment_lengths.insert(1, truth1.clone());
+    let scan = acquire(&bytes, cfg);
+    let c = &scan.curves[1];
+    assert_eq!(
+        c.segment_lengths,
+        truth1.iter().map(|&l| Some(l)).collect::<Vec<_>>()
+    );
+    for (k, w) in c.tags.windows(2).enumerate() {
+        assert!((w[1].d - w[0].d - truth1[k]).abs() < 1e-12);
+    }
+    // The other curves keep the nominal speed.
+    assert!(scan.curves[0].segment_lengths.iter().all(|l| l.is_none()));
+}
+
+#[test]
+fn sensor_array_orientations_are_averaged_per_window() {
+    use device_protocol::{ArraySample, DeviceKind, Hello, Packet};
+    let mut rng = Rng::new(21);
+    let (acc_lsb, mag_lsb) = (16.0 * sfs::sensor::G / 65536.0, 0.15);
+    let field = sfs::simulate::device::Earth::default().field();
+    let truths: Vec<UnitQuaternion<f64>> = (0..4)
+        .map(|i| {
+            UnitQuaternion::from_euler_angles(0.1 * i as f64, -0.2 + 0.1 * i as f64, 0.5 * i as f64)
+        })
+        .collect();
+    let mut bytes = Vec::new();
+    let mut seq = 0u8;
+    let mut put = |p: Packet, b: &mut Vec<u8>| {
+        p.encode(seq, b);
+        seq = seq.wrapping_add(1);
+    };
+    put(
+        Packet::Hello(Hello {
+            proto: 1,
+            kind: DeviceKind::SensorArray,
+            device_id: 3,
+            firmware: 1,
+            rate_hz: 50,
+            acc_scale: acc_lsb as f32,
+            gyro_scale: 0.0,
+            mag_scale: mag_lsb as f32,
+            ticks_per_rev: 0,
+            wheel_circumference_um: 0,
+            sensors: 4,
+        }),
+        &mut bytes,
+    );
+    let counts = |v: Vector3<f64>, lsb: f64| [0, 1, 2].map(|i| (v[i] / lsb).round() as i16);
+    for k in 0..250 {
+        for (s, q) in truths.iter().enumerate() {
+            let acc = q.inverse() * Vector3::new(0.0, 0.0, sfs::sensor::G) + rng.vec3(0.05);
+            let mag = q.inverse() * field + rng.vec3(0.4);
+            put(
+                Packet::ArraySample(ArraySample {
+                    t_us: 1_000 + k * 20_000 + s as u32 * 100,
+                    sensor: s as u16,
+                    acc: counts(acc, acc_lsb),
+                    mag: counts(mag, mag_lsb),
+                }),
+                &mut bytes,
+            );
+        }
+    }
+    let scan = acquire(&bytes, AcquisitionConfig::default());
+    assert!(scan.array.len() >= 4 * 4, "{} epochs", scan.array.len());
+    for e in &scan.array {
+        let err = quat(&e.q).angle_to(&truths[e.sensor as usize]).to_degrees();
+        assert!(err < 0.6, "sensor {} at {:.1} s: {err:.2}°", e.sensor, e.t);
+        assert!(
+            (45..=55).contains(&e.samples),
+            "{} samples in a 1 s window at 50 Hz",
+            e.samples
+        );
+    }
+}

@@ -28,4 +28,25 @@ pub mod flags {
     /// The orientation could not be computed from this sample (degenerate vectors); it is
     /// the previous one, with zero weight.
     pub const INVALID: u8 = 1 << 5;
+
+    /// The weight a sample's orientation gets in averaging (the reconstruction's pre-filter):
+    /// 1 for a clean sample, less for each doubt: a magnetic disturbance (the heading is wrong)
+    /// × 0.05, motion acceleration (the tilt is off) × 0.2, after a gap × 0.5; a saturated or
+    /// invalid sample 0. Stationary samples are clean measurements: weight unchanged.
+    pub fn weight(f: u8) -> f64 {
+        if f & (SATURATED | INVALID) != 0 {
+            return 0.0;
+        }
+        let mut w = 1.0;
+        if f & MAG_DISTURBED != 0 {
+            w *= 0.05;
+        }
+        if f & ACC_MOTION != 0 {
+            w *= 0.2;
+        }
+        if f & AFTER_GAP != 0 {
+            w *= 0.5;
+        }
+        w
+    }
 }
