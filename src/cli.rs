@@ -33,7 +33,7 @@ pub enum Command {
     Run(RunArgs),
     /// Fit the magnetometer (hard/soft iron), accelerometer (bias/scale) and gyroscope bias from
     /// a capture of the device turned through many orientations with static rests; prints the
-    /// fit quality and a [calibration] snippet for the configuration.
+    /// fit quality and a `[calibration]` snippet for the configuration.
     Calibrate(CalibrateArgs),
     /// Configuration files.
     #[command(subcommand)]
