@@ -15,6 +15,9 @@
 //! ```
 
 pub mod device;
+pub mod mesh;
 pub mod operator;
 pub mod rng;
+pub mod scene;
 pub mod shapes;
+pub mod surface;

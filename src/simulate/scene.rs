@@ -1,0 +1,818 @@
+//! Scenes as data (`config/scenes/*.toml`): a surface and curves that are plane sections of it,
+//! crossing at nodes that are found, not declared.
+//!
+//! ```toml
+//! name = "sphere-octa"
+//! description = "Unit sphere, three orthogonal great circles: 6 nodes, 12 arcs, 8 triangles."
+//! spacing = 0.002                      # m between the truth polyline's points
+//!
+//! [surface]
+//! kind = "sphere"                      # sphere | torus | frustum | paraboloid | mesh
+//! center = [0.0, 0.0, 0.0]
+//! radius = 1.0
+//!
+//! [[curve]]
+//! normal = [0.0, 0.0, 1.0]             # the section plane: normal · x = offset …
+//! offset = 0.0
+//! # through = [[1,1,1], [1,1,-1], [0,0,0]]   # … or through three points
+//! near = [1.0, 0.0, 0.0]               # which piece of the section, if several
+//! closed = true                        # the whole loop; else an arc `from` → `to`
+//! boundary = true                      # lies on the surface's boundary
+//! ```
+//!
+//! Surfaces: `sphere` (`center`, `radius`), `torus` (`center`, `major`, `minor`, axis z),
+//! `frustum` (`z0`, `r0`, `z1`, `r1`, axis z), `paraboloid` (`a`, `rim`: z = ρ²/2a, normal up),
+//! `mesh` (`path` relative to the scene file, `fit_xy` = [width, depth] in metres or `scale`,
+//! `base_z`, `flip_normals`). A curve may also be `kind = "mesh-boundary"`: the mesh's boundary
+//! loop. Open arcs run `from` → `to` (the points are snapped onto the section; with two ways
+//! round a loop, the one through `via`, else the shorter); open pieces without `from`/`to`
+//! run end to end. Nodes: every crossing of two curves and every end of an open curve.
+
+use super::mesh::{Section, TriMesh};
+use super::operator::CurveSpec;
+use super::surface::Surface;
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// A scene error: the file, where, and why.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {key}: {reason}", file.display())]
+pub struct SceneError {
+    pub file: PathBuf,
+    pub key: String,
+    pub reason: String,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneToml {
+    name: String,
+    #[serde(default)]
+    description: String,
+    spacing: Option<f64>,
+    surface: SurfaceToml,
+    #[serde(rename = "curve")]
+    curves: Vec<CurveToml>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SurfaceToml {
+    kind: String,
+    center: Option<[f64; 3]>,
+    radius: Option<f64>,
+    major: Option<f64>,
+    minor: Option<f64>,
+    z0: Option<f64>,
+    r0: Option<f64>,
+    z1: Option<f64>,
+    r1: Option<f64>,
+    a: Option<f64>,
+    rim: Option<f64>,
+    path: Option<PathBuf>,
+    fit_xy: Option<[f64; 2]>,
+    scale: Option<f64>,
+    base_z: Option<f64>,
+    #[serde(default)]
+    flip_normals: bool,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CurveToml {
+    #[serde(default = "section_kind")]
+    kind: String,
+    normal: Option<[f64; 3]>,
+    offset: Option<f64>,
+    through: Option<[[f64; 3]; 3]>,
+    near: Option<[f64; 3]>,
+    from: Option<[f64; 3]>,
+    to: Option<[f64; 3]>,
+    via: Option<[f64; 3]>,
+    #[serde(default)]
+    closed: bool,
+    #[serde(default)]
+    boundary: bool,
+}
+
+fn section_kind() -> String {
+    "section".into()
+}
+
+/// How the truth file refers to the surface, so that `sfs eval` can rebuild it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum SurfaceRef {
+    Sphere {
+        center: [f64; 3],
+        radius: f64,
+    },
+    Torus {
+        center: [f64; 3],
+        major: f64,
+        minor: f64,
+    },
+    Frustum {
+        z0: f64,
+        r0: f64,
+        z1: f64,
+        r1: f64,
+    },
+    Paraboloid {
+        a: f64,
+        rim: f64,
+    },
+    /// `x ↦ scale · x + translate` applied to the file's vertices.
+    Mesh {
+        path: PathBuf,
+        scale: f64,
+        translate: [f64; 3],
+        flip_normals: bool,
+    },
+}
+
+impl SurfaceRef {
+    /// Rebuilds the surface.
+    pub fn build(&self) -> Result<Surface, String> {
+        Ok(match self {
+            SurfaceRef::Sphere { center, radius } => Surface::Sphere {
+                center: Vector3::from(*center),
+                radius: *radius,
+            },
+            SurfaceRef::Torus {
+                center,
+                major,
+                minor,
+            } => Surface::Torus {
+                center: Vector3::from(*center),
+                major: *major,
+                minor: *minor,
+            },
+            SurfaceRef::Frustum { z0, r0, z1, r1 } => Surface::Frustum {
+                z0: *z0,
+                r0: *r0,
+                z1: *z1,
+                r1: *r1,
+            },
+            SurfaceRef::Paraboloid { a, rim } => Surface::Paraboloid { a: *a, rim: *rim },
+            SurfaceRef::Mesh {
+                path,
+                scale,
+                translate,
+                flip_normals,
+            } => {
+                let mut m = TriMesh::load_obj(path).map_err(|e| e.to_string())?;
+                m.transform(*scale, Vector3::from(*translate));
+                if *flip_normals {
+                    m.flip();
+                }
+                Surface::Mesh(Box::new(m))
+            }
+        })
+    }
+}
+
+/// One curve of a built scene: a dense polyline with exact normals, and its node tags.
+#[derive(Debug, Clone)]
+pub struct SceneCurve {
+    pub points: Vec<Vector3<f64>>,
+    pub normals: Vec<Vector3<f64>>,
+    pub boundary: bool,
+    pub closed: bool,
+    /// `(point index, node index)` in order of travel.
+    pub tags: Vec<(usize, u32)>,
+}
+
+impl SceneCurve {
+    pub fn spec(&self) -> CurveSpec {
+        CurveSpec {
+            points: self.points.clone(),
+            normals: self.normals.clone(),
+            tags: self.tags.clone(),
+            boundary: self.boundary,
+        }
+    }
+
+    pub fn nodes(&self) -> Vec<u32> {
+        self.tags.iter().map(|t| t.1).collect()
+    }
+}
+
+/// A scene ready to be scanned.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    pub name: String,
+    pub description: String,
+    pub surface: Surface,
+    pub surface_ref: SurfaceRef,
+    pub curves: Vec<SceneCurve>,
+    /// Node positions by index.
+    pub nodes: Vec<Vector3<f64>>,
+    pub spacing: f64,
+}
+
+impl Scene {
+    /// Diagonal of the bounding box of the curve network, m.
+    pub fn bbox_diagonal(&self) -> f64 {
+        let mut lo = Vector3::repeat(f64::MAX);
+        let mut hi = Vector3::repeat(f64::MIN);
+        for c in &self.curves {
+            for p in &c.points {
+                lo = lo.inf(p);
+                hi = hi.sup(p);
+            }
+        }
+        (hi - lo).norm()
+    }
+
+    /// The operator's curves.
+    pub fn specs(&self) -> Vec<CurveSpec> {
+        self.curves.iter().map(SceneCurve::spec).collect()
+    }
+}
+
+/// Finds a scene: a path to a `.toml` file, or a name in `dir`.
+pub fn find(name_or_path: &str, dir: &Path) -> PathBuf {
+    let p = Path::new(name_or_path);
+    if p.extension().is_some_and(|e| e == "toml") || p.components().count() > 1 {
+        p.to_owned()
+    } else {
+        dir.join(format!("{name_or_path}.toml"))
+    }
+}
+
+/// Loads and builds a scene file.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let err = |key: &str, reason: String| SceneError {
+        file: path.to_owned(),
+        key: key.to_owned(),
+        reason,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| err("-", format!("cannot read: {e}")))?;
+    let t: SceneToml =
+        toml::from_str(&text).map_err(|e| err("-", e.message().trim().to_owned()))?;
+    let base = path.parent().unwrap_or(Path::new(""));
+    let (surface, surface_ref) =
+        build_surface(&t.surface, base).map_err(|(k, r)| err(&format!("surface.{k}"), r))?;
+    let spacing = t.spacing.unwrap_or(0.002);
+    if !(spacing.is_finite() && spacing > 0.0) {
+        return Err(err(
+            "spacing",
+            format!("{spacing} is not a positive length"),
+        ));
+    }
+    if t.curves.is_empty() {
+        return Err(err("curve", "a scene needs curves".into()));
+    }
+    let tess = surface.tessellate();
+    let mut raw = Vec::new();
+    for (i, c) in t.curves.iter().enumerate() {
+        let key = format!("curve[{i}]");
+        let pl = piece(&surface, &tess, c, spacing).map_err(|r| err(&key, r))?;
+        raw.push(pl);
+    }
+    let (curves, nodes) =
+        network(&surface, raw, spacing).map_err(|(i, r)| err(&format!("curve[{i}]"), r))?;
+    Ok(Scene {
+        name: t.name,
+        description: t.description,
+        surface,
+        surface_ref,
+        curves,
+        nodes,
+        spacing,
+    })
+}
+
+fn need(v: Option<f64>, k: &str) -> Result<f64, (String, String)> {
+    match v {
+        Some(x) if x.is_finite() => Ok(x),
+        Some(x) => Err((k.into(), format!("{x} is not finite"))),
+        None => Err((k.into(), "required for this kind".into())),
+    }
+}
+
+fn build_surface(s: &SurfaceToml, base: &Path) -> Result<(Surface, SurfaceRef), (String, String)> {
+    let positive = |v: Option<f64>, k: &str| -> Result<f64, (String, String)> {
+        let x = need(v, k)?;
+        if x > 0.0 {
+            Ok(x)
+        } else {
+            Err((k.into(), format!("{x} must be positive")))
+        }
+    };
+    let center = s.center.unwrap_or([0.0; 3]);
+    let r = match s.kind.as_str() {
+        "sphere" => SurfaceRef::Sphere {
+            center,
+            radius: positive(s.radius, "radius")?,
+        },
+        "torus" => {
+            let (major, minor) = (positive(s.major, "major")?, positive(s.minor, "minor")?);
+            if minor >= major {
+                return Err((
+                    "minor".into(),
+                    "must be smaller than major (a ring torus)".into(),
+                ));
+            }
+            SurfaceRef::Torus {
+                center,
+                major,
+                minor,
+            }
+        }
+        "frustum" => {
+            let (z0, z1) = (need(s.z0, "z0")?, need(s.z1, "z1")?);
+            if z1 <= z0 {
+                return Err(("z1".into(), "must be above z0".into()));
+            }
+            SurfaceRef::Frustum {
+                z0,
+                r0: positive(s.r0, "r0")?,
+                z1,
+                r1: positive(s.r1, "r1")?,
+            }
+        }
+        "paraboloid" => SurfaceRef::Paraboloid {
+            a: positive(s.a, "a")?,
+            rim: positive(s.rim, "rim")?,
+        },
+        "mesh" => {
+            let rel = s
+                .path
+                .clone()
+                .ok_or(("path".to_string(), "required for a mesh".to_string()))?;
+            let path = base.join(rel);
+            let mut m =
+                TriMesh::load_obj(&path).map_err(|e| ("path".to_string(), e.to_string()))?;
+            let (lo, hi) = m.bounds();
+            let scale = match (s.fit_xy, s.scale) {
+                (Some(_), Some(_)) => {
+                    return Err(("scale".into(), "give fit_xy or scale, not both".into()))
+                }
+                (Some([w, d]), None) => (w / (hi.x - lo.x)).min(d / (hi.y - lo.y)),
+                (None, Some(k)) => k,
+                (None, None) => 1.0,
+            };
+            if !(scale.is_finite() && scale > 0.0) {
+                return Err(("scale".into(), format!("{scale} is not a positive factor")));
+            }
+            // Centre in xy; the lowest point at base_z (default: centred in z too).
+            let c = (lo + hi) / 2.0 * scale;
+            let tz = match s.base_z {
+                Some(b) => b - lo.z * scale,
+                None => -c.z,
+            };
+            let translate = [-c.x, -c.y, tz];
+            m.transform(scale, Vector3::from(translate));
+            if s.flip_normals {
+                m.flip();
+            }
+            let path = std::fs::canonicalize(&path).unwrap_or(path);
+            return Ok((
+                Surface::Mesh(Box::new(m)),
+                SurfaceRef::Mesh {
+                    path,
+                    scale,
+                    translate,
+                    flip_normals: s.flip_normals,
+                },
+            ));
+        }
+        other => {
+            return Err((
+                "kind".into(),
+                format!("unknown surface {other:?}: sphere, torus, frustum, paraboloid or mesh"),
+            ))
+        }
+    };
+    Ok((r.build().map_err(|e| ("path".to_string(), e))?, r))
+}
+
+/// A polyline with normals (and the plane it lies in, for exact snapping).
+#[derive(Debug, Clone)]
+struct Piece {
+    points: Vec<Vector3<f64>>,
+    normals: Vec<Vector3<f64>>,
+    closed: bool,
+    plane: Option<(Vector3<f64>, f64)>,
+    boundary: bool,
+}
+
+fn v3(a: [f64; 3]) -> Vector3<f64> {
+    Vector3::from(a)
+}
+
+/// Cumulative arc lengths.
+fn arclen(p: &[Vector3<f64>]) -> Vec<f64> {
+    let mut c = vec![0.0; p.len()];
+    for i in 1..p.len() {
+        c[i] = c[i - 1] + (p[i] - p[i - 1]).norm();
+    }
+    c
+}
+
+/// The closest point of a polyline to `x`: (segment index, parameter in it, distance).
+fn closest(p: &[Vector3<f64>], x: &Vector3<f64>) -> (usize, f64, f64) {
+    let mut best = (0, 0.0, f64::INFINITY);
+    for i in 0..p.len().saturating_sub(1) {
+        let (a, b) = (p[i], p[i + 1]);
+        let ab = b - a;
+        let l2 = ab.norm_squared();
+        let t = if l2 > 0.0 {
+            ((x - a).dot(&ab) / l2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d = (a + ab * t - x).norm();
+        if d < best.2 {
+            best = (i, t, d);
+        }
+    }
+    if p.len() == 1 {
+        best = (0, 0.0, (p[0] - x).norm());
+    }
+    best
+}
+
+/// Resamples a polyline at about `h` (both ends kept), interpolating normals, and snaps the
+/// points onto an analytic surface.
+fn resample(
+    points: &[Vector3<f64>],
+    normals: &[Vector3<f64>],
+    h: f64,
+    s: &Surface,
+    plane: Option<&Vector3<f64>>,
+) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
+    let c = arclen(points);
+    let total = *c.last().unwrap_or(&0.0);
+    let n = ((total / h).ceil() as usize).max(1);
+    let mut out_p = Vec::with_capacity(n + 1);
+    let mut out_n = Vec::with_capacity(n + 1);
+    let mut seg = 0;
+    for k in 0..=n {
+        let target = total * k as f64 / n as f64;
+        while seg + 2 < c.len() && c[seg + 1] < target {
+            seg += 1;
+        }
+        let len = c[seg + 1] - c[seg];
+        let t = if len > 0.0 {
+            ((target - c[seg]) / len).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let p = points[seg] + (points[seg + 1] - points[seg]) * t;
+        let nn = (normals[seg] + (normals[seg + 1] - normals[seg]) * t).normalize();
+        let (p, nn) = match plane {
+            Some(pl) => s.snap_in_plane(p, nn, pl),
+            None => (p, nn),
+        };
+        out_p.push(p);
+        out_n.push(nn);
+    }
+    (out_p, out_n)
+}
+
+fn piece(s: &Surface, tess: &TriMesh, c: &CurveToml, h: f64) -> Result<Piece, String> {
+    if c.kind == "mesh-boundary" {
+        let Surface::Mesh(m) = s else {
+            return Err("kind = \"mesh-boundary\" needs a mesh surface".into());
+        };
+        let loops = m.boundary_loops();
+        let lp = loops
+            .iter()
+            .max_by_key(|l| l.len())
+            .ok_or("the mesh has no boundary")?;
+        let mut points: Vec<Vector3<f64>> = lp.iter().map(|&i| m.v[i as usize]).collect();
+        let mut normals: Vec<Vector3<f64>> = lp.iter().map(|&i| m.n[i as usize]).collect();
+        points.push(points[0]);
+        normals.push(normals[0]);
+        let (points, normals) = resample(&points, &normals, h, s, None);
+        return Ok(Piece {
+            points,
+            normals,
+            closed: true,
+            plane: None,
+            boundary: c.boundary,
+        });
+    }
+    if c.kind != "section" {
+        return Err(format!(
+            "unknown curve kind {:?}: section or mesh-boundary",
+            c.kind
+        ));
+    }
+    let (normal, offset) = match (c.normal, c.through) {
+        (Some(n), None) => {
+            let n = v3(n);
+            let l = n.norm();
+            if !(l > 0.0 && l.is_finite()) {
+                return Err("normal must be a non-zero vector".into());
+            }
+            (n / l, c.offset.unwrap_or(0.0) / l)
+        }
+        (None, Some([a, b, q])) => {
+            let (a, b, q) = (v3(a), v3(b), v3(q));
+            let n = (b - a).cross(&(q - a));
+            let l = n.norm();
+            if l.is_nan() || l < 1e-12 {
+                return Err("the three `through` points are collinear".into());
+            }
+            (n / l, (n / l).dot(&a))
+        }
+        _ => return Err("give either normal (+ offset) or through".into()),
+    };
+    let pieces: Vec<Section> = tess.slice(&normal, offset);
+    if pieces.is_empty() {
+        return Err("the plane does not cut the surface".into());
+    }
+    let hint = c.near.or(c.from).map(v3).unwrap_or_else(Vector3::zeros);
+    let sec = pieces
+        .into_iter()
+        .min_by(|a, b| {
+            closest(&a.points, &hint)
+                .2
+                .total_cmp(&closest(&b.points, &hint).2)
+        })
+        .expect("non-empty");
+    let mut pts = sec.points;
+    let mut nrm = sec.normals;
+    if sec.closed {
+        pts.push(pts[0]);
+        nrm.push(nrm[0]);
+    }
+    let (pts, nrm) = match (c.from, c.to) {
+        (Some(f), Some(t)) => arc(
+            &pts,
+            &nrm,
+            sec.closed,
+            &v3(f),
+            &v3(t),
+            c.via.map(v3).as_ref(),
+        )?,
+        (None, None) => {
+            if c.closed && !sec.closed {
+                return Err("closed = true, but this section is not a loop".into());
+            }
+            (pts, nrm)
+        }
+        _ => return Err("give both from and to, or neither".into()),
+    };
+    let closed = c.closed && c.from.is_none();
+    let (points, normals) = resample(&pts, &nrm, h, s, Some(&normal));
+    Ok(Piece {
+        points,
+        normals,
+        closed,
+        plane: Some((normal, offset)),
+        boundary: c.boundary,
+    })
+}
+
+/// The arc from the point nearest `f` to the point nearest `t` (through `via`, else the
+/// shorter way round a loop).
+type Polyline = (Vec<Vector3<f64>>, Vec<Vector3<f64>>);
+fn arc(
+    p: &[Vector3<f64>],
+    n: &[Vector3<f64>],
+    closed: bool,
+    f: &Vector3<f64>,
+    t: &Vector3<f64>,
+    via: Option<&Vector3<f64>>,
+) -> Result<Polyline, String> {
+    // Insert the exact closest points, then walk between them.
+    let split = |p: &[Vector3<f64>],
+                 n: &[Vector3<f64>],
+                 x: &Vector3<f64>|
+     -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>, usize) {
+        let (i, u, _) = closest(p, x);
+        let q = p[i] + (p[i + 1] - p[i]) * u;
+        let m = (n[i] + (n[i + 1] - n[i]) * u).normalize();
+        let mut pp = p.to_vec();
+        let mut nn = n.to_vec();
+        pp.insert(i + 1, q);
+        nn.insert(i + 1, m);
+        (pp, nn, i + 1)
+    };
+    let (p1, n1, _) = split(p, n, f);
+    let (p2, n2, _) = split(&p1, &n1, t);
+    let fi = p2
+        .iter()
+        .position(|q| (q - closest_point(&p2, f)).norm() < 1e-12)
+        .unwrap_or(0);
+    let ti = p2
+        .iter()
+        .position(|q| (q - closest_point(&p2, t)).norm() < 1e-12)
+        .unwrap_or(p2.len() - 1);
+    if fi == ti {
+        return Err("from and to are the same point of the section".into());
+    }
+    let forward = |a: usize, b: usize| -> Polyline {
+        let m = p2.len() - 1; // closed: last == first
+        let mut pp = Vec::new();
+        let mut nn = Vec::new();
+        let mut i = a;
+        loop {
+            pp.push(p2[i]);
+            nn.push(n2[i]);
+            if i == b {
+                break;
+            }
+            i = if closed { (i + 1) % m } else { i + 1 };
+        }
+        (pp, nn)
+    };
+    if !closed {
+        let (a, b) = (fi.min(ti), fi.max(ti));
+        let (mut pp, mut nn) = forward(a, b);
+        if fi > ti {
+            pp.reverse();
+            nn.reverse();
+        }
+        return Ok((pp, nn));
+    }
+    let m = p2.len() - 1;
+    let (fi, ti) = (fi % m, ti % m);
+    let one = forward(fi, ti);
+    let (mut other_p, mut other_n) = forward(ti, fi);
+    other_p.reverse();
+    other_n.reverse();
+    let len = |x: &[Vector3<f64>]| *arclen(x).last().unwrap_or(&0.0);
+    let pick_one = match via {
+        Some(v) => closest(&one.0, v).2 <= closest(&other_p, v).2,
+        None => len(&one.0) <= len(&other_p),
+    };
+    Ok(if pick_one { one } else { (other_p, other_n) })
+}
+
+fn closest_point(p: &[Vector3<f64>], x: &Vector3<f64>) -> Vector3<f64> {
+    let (i, u, _) = closest(p, x);
+    p[i] + (p[i + 1] - p[i]) * u
+}
+
+/// Finds the nodes (crossings and open ends), inserts them exactly into the polylines, and
+/// tags every curve.
+type Network = (Vec<SceneCurve>, Vec<Vector3<f64>>);
+fn network(s: &Surface, pieces: Vec<Piece>, h: f64) -> Result<Network, (usize, String)> {
+    let tol = h;
+    let mut cand: Vec<Vector3<f64>> = Vec::new();
+    for (i, a) in pieces.iter().enumerate() {
+        if !a.closed {
+            cand.push(a.points[0]);
+            cand.push(*a.points.last().expect("non-empty"));
+        }
+        for b in pieces.iter().skip(i + 1) {
+            cand.extend(crossings(s, a, b, tol));
+        }
+    }
+    // Merge candidates closer than 2 h; keep the first.
+    let mut nodes: Vec<Vector3<f64>> = Vec::new();
+    for c in cand {
+        if nodes.iter().all(|n| (n - c).norm() > 2.0 * tol) {
+            nodes.push(c);
+        }
+    }
+    // Tag each curve; order nodes by first appearance along the curves in scene order.
+    let mut order: Vec<Option<u32>> = vec![None; nodes.len()];
+    let mut next = 0u32;
+    let mut curves = Vec::new();
+    for (ci, pc) in pieces.into_iter().enumerate() {
+        let mut pts = pc.points;
+        let mut nrm = pc.normals;
+        let c = arclen(&pts);
+        let mut on: Vec<(f64, usize)> = Vec::new();
+        for (k, nd) in nodes.iter().enumerate() {
+            let (i, u, d) = closest(&pts, nd);
+            if d <= tol {
+                on.push((c[i] + (c[i + 1] - c[i]) * u, k));
+            }
+        }
+        on.sort_by(|a, b| a.0.total_cmp(&b.0));
+        if on.len() < if pc.closed { 1 } else { 2 } {
+            return Err((
+                ci,
+                format!(
+                    "crosses {} node(s); a curve needs two ends (or a node on its loop)",
+                    on.len()
+                ),
+            ));
+        }
+        // Insert the node positions exactly (from the end, so earlier indices stay valid).
+        let mut tag_pos: Vec<(f64, usize)> = Vec::new();
+        for &(sv, k) in on.iter().rev() {
+            let cc = arclen(&pts);
+            let i = cc.partition_point(|&x| x <= sv).clamp(1, pts.len() - 1);
+            let (a, b) = (cc[i - 1], cc[i]);
+            let u = if b > a { (sv - a) / (b - a) } else { 0.0 };
+            let nn = (nrm[i - 1] + (nrm[i] - nrm[i - 1]) * u).normalize();
+            let near_prev = (nodes[k] - pts[i - 1]).norm() < h * 0.25;
+            let near_next = (nodes[k] - pts[i]).norm() < h * 0.25;
+            if near_prev {
+                pts[i - 1] = nodes[k];
+            } else if near_next {
+                pts[i] = nodes[k];
+            } else {
+                pts.insert(i, nodes[k]);
+                nrm.insert(i, nn);
+            }
+            tag_pos.push((sv, k));
+        }
+        tag_pos.reverse();
+        // Point index of each tag.
+        let mut tags: Vec<(usize, u32)> = Vec::new();
+        for &(_, k) in &tag_pos {
+            let idx = pts
+                .iter()
+                .enumerate()
+                .min_by(|a, b| (a.1 - nodes[k]).norm().total_cmp(&(b.1 - nodes[k]).norm()))
+                .map(|x| x.0)
+                .expect("non-empty");
+            let id = *order[k].get_or_insert_with(|| {
+                next += 1;
+                next - 1
+            });
+            tags.push((idx, id));
+        }
+        if pc.closed {
+            // Start the loop at its first node; end there again.
+            let first = tags[0].0;
+            let m = pts.len() - 1; // last == first
+            let mut p2: Vec<Vector3<f64>> = (0..m).map(|j| pts[(first + j) % m]).collect();
+            let mut n2: Vec<Vector3<f64>> = (0..m).map(|j| nrm[(first + j) % m]).collect();
+            p2.push(p2[0]);
+            n2.push(n2[0]);
+            let mut t2: Vec<(usize, u32)> = tags
+                .iter()
+                .map(|&(i, id)| ((i + m - first) % m, id))
+                .collect();
+            t2.sort_by_key(|t| t.0);
+            t2.push((m, t2[0].1));
+            pts = p2;
+            nrm = n2;
+            tags = t2;
+        } else {
+            // Trim to the first and last node.
+            let (a, b) = (tags[0].0, tags.last().expect("two").0);
+            pts = pts[a..=b].to_vec();
+            nrm = nrm[a..=b].to_vec();
+            for t in &mut tags {
+                t.0 -= a;
+            }
+        }
+        curves.push(SceneCurve {
+            points: pts,
+            normals: nrm,
+            boundary: pc.boundary,
+            closed: pc.closed,
+            tags,
+        });
+    }
+    // Node positions by their index.
+    let mut by_index = vec![Vector3::zeros(); next as usize];
+    for (k, o) in order.iter().enumerate() {
+        if let Some(id) = o {
+            by_index[*id as usize] = nodes[k];
+        }
+    }
+    Ok((curves, by_index))
+}
+
+/// Where curve `b`'s plane cuts curve `a` at a point of `b`.
+fn crossings(s: &Surface, a: &Piece, b: &Piece, tol: f64) -> Vec<Vector3<f64>> {
+    let mut out = Vec::new();
+    let Some((nb, db)) = b.plane else {
+        // A non-planar curve (mesh boundary): crossings are ends of other curves, found as ends.
+        return out;
+    };
+    for w in a.points.windows(2) {
+        let (s0, s1) = (nb.dot(&w[0]) - db, nb.dot(&w[1]) - db);
+        if (s0 < 0.0) == (s1 < 0.0) || s0 == s1 {
+            continue;
+        }
+        let t = s0 / (s0 - s1);
+        let mut p = w[0] + (w[1] - w[0]) * t;
+        // On an analytic surface, snap onto the line where both planes meet.
+        if let (Some((na, _)), Some(_)) = (a.plane, s.implicit(&p)) {
+            let u = na.cross(&nb);
+            if u.norm() > 1e-9 {
+                let u = u.normalize();
+                for _ in 0..30 {
+                    let Some((f, g)) = s.implicit(&p) else { break };
+                    let gu = g.dot(&u);
+                    if gu.abs() < 1e-12 {
+                        break;
+                    }
+                    p -= u * (f / gu);
+                    if f.abs() < 1e-13 {
+                        break;
+                    }
+                }
+            }
+        }
+        if closest(&b.points, &p).2 <= tol {
+            out.push(p);
+        }
+    }
+    out
+}
