@@ -204,6 +204,7 @@ impl Acquisition {
             }
             Event::SequenceGap { .. } => {
                 self.gap = true;
+                self.keypad.link_gap();
                 None
             }
             _ => None,

@@ -35,9 +35,34 @@ pub enum Command {
     /// a capture of the device turned through many orientations with static rests; prints the
     /// fit quality and a `[calibration]` snippet for the configuration.
     Calibrate(CalibrateArgs),
+    /// Simulate a scan of a known scene: writes PREFIX.bin (the exact bytes a device would
+    /// send) and PREFIX.truth.json (nodes, curves with normals, surface, bounding-box diagonal).
+    Simulate(SimulateArgs),
     /// Configuration files.
     #[command(subcommand)]
     Config(ConfigCommand),
+}
+
+#[derive(Debug, Args)]
+pub struct SimulateArgs {
+    /// Scene name (a file NAME.toml in --scenes) or the path of a scene file.
+    #[arg(long)]
+    pub scene: String,
+    /// The device scanning it.
+    #[arg(long, default_value = "morphorider", value_parser = ["morphorider", "phone", "array"])]
+    pub device: String,
+    /// Seed of every random choice: the same seed gives the same bytes.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output prefix: PREFIX.bin and PREFIX.truth.json.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// `default` (documented noise, rare link faults) or `field` (what real sessions bring).
+    #[arg(long, default_value = "default", value_parser = ["default", "field"])]
+    pub profile: String,
+    /// Directory of the scene files.
+    #[arg(long, default_value = "config/scenes")]
+    pub scenes: PathBuf,
 }
 
 #[derive(Debug, Args)]

@@ -96,7 +96,13 @@ pub struct Keypad {
     open: Option<Open>,
     digits: String,
     accepted: CurveIndex,
+    /// Time of the last digit typed, and whether packets were lost since.
+    last_digit: f64,
+    gap_since_digit: bool,
 }
+
+/// Digits not confirmed within this many seconds are stale (the operator moved on).
+pub const DIGIT_TIMEOUT: f64 = 2.0;
 
 impl Keypad {
     pub fn new() -> Self {
@@ -168,8 +174,65 @@ impl Keypad {
         }
     }
 
+    /// Tells the keypad that packets were lost on the link (a sequence gap): a key may be
+    /// missing.
+    pub fn link_gap(&mut self) {
+        if !self.digits.is_empty() {
+            self.gap_since_digit = true;
+        }
+    }
+
+    /// Digits still waiting for their Enter when a key arrives that cannot continue them: a
+    /// digit more than [`DIGIT_TIMEOUT`] later, or any other key but Enter. If packets were lost
+    /// since the digits, the Enter is presumed lost and the node tagged at the time of its last
+    /// digit (the operator stood there typing); otherwise a late digit drops them (other keys
+    /// drop them in [`key`](Self::key)).
+    fn stale_digits(&mut self, t: f64, key: u8, out: &mut Vec<KeyEvent>) {
+        if self.digits.is_empty() || key == b'\n' || key == b'\r' {
+            return;
+        }
+        let late_digit = key.is_ascii_digit() && t - self.last_digit > DIGIT_TIMEOUT;
+        let other_key = !key.is_ascii_digit();
+        if !(late_digit || (other_key && self.gap_since_digit)) {
+            return;
+        }
+        let digits = std::mem::take(&mut self.digits);
+        let node: u32 = digits.parse().expect("only digits, at most 6");
+        let t_tag = self.last_digit;
+        if self.gap_since_digit {
+            self.gap_since_digit = false;
+            let open = self.open.as_mut().expect("digits only with a curve open");
+            if open.tags.last() != Some(&node) {
+                open.tags.push(node);
+                let curve = open.curve;
+                self.warn(out, t_tag, Some(node), "packets were lost after these digits and no Enter came: Enter presumed lost, node tagged at its last digit".into());
+                out.push(KeyEvent::Tagged {
+                    curve,
+                    node,
+                    t: t_tag,
+                });
+            }
+        } else {
+            self.warn(
+                out,
+                t_tag,
+                Some(node),
+                format!(
+                    "digits {digits:?} not confirmed with Enter within {DIGIT_TIMEOUT} s; ignored"
+                ),
+            );
+        }
+    }
+
     /// Processes one key pressed at session time `t`, appending what happened to `out`.
     pub fn key(&mut self, t: f64, key: u8, out: &mut Vec<KeyEvent>) {
+        self.stale_digits(t, key, out);
+        if key.is_ascii_digit() && self.open.is_some() {
+            if self.digits.is_empty() {
+                self.gap_since_digit = false;
+            }
+            self.last_digit = t;
+        }
         match key {
             b'0'..=b'9' => {
                 if self.open.is_none() {
@@ -194,6 +257,7 @@ impl Keypad {
                 }
             }
             b'\n' | b'\r' => {
+                self.gap_since_digit = false;
                 let digits = std::mem::take(&mut self.digits);
                 if self.open.is_none() {
                     self.warn(
@@ -391,6 +455,75 @@ mod tests {
                 "{keys:?}: time of the offending key"
             );
         }
+    }
+
+    #[test]
+    fn lost_enter_is_presumed_after_a_gap_and_stale_digits_dropped() {
+        let mut k = Keypad::new();
+        let mut out = Vec::new();
+        for (t, c) in [
+            (0.0, b'B'),
+            (1.0, b'1'),
+            (1.2, b'\n'),
+            (5.0, b'1'),
+            (5.2, b'6'),
+        ] {
+            k.key(t, c, &mut out);
+        }
+        k.link_gap(); // the Enter after "16" was lost
+        for (t, c) in [(9.0, b'8'), (9.2, b'\n'), (9.5, b'E')] {
+            k.key(t, c, &mut out);
+        }
+        let tags: Vec<(u32, f64)> = out
+            .iter()
+            .filter_map(|e| match e {
+                KeyEvent::Tagged { node, t, .. } => Some((*node, *t)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(tags, [(1, 1.2), (16, 5.2), (8, 9.2)]);
+        assert!(warnings(&out)[0].message.contains("Enter presumed lost"));
+        // Without a gap, digits left for more than the timeout are dropped with a warning.
+        let mut k = Keypad::new();
+        let mut out = Vec::new();
+        for (t, c) in [
+            (0.0, b'B'),
+            (1.0, b'1'),
+            (1.1, b'\n'),
+            (2.0, b'7'),
+            (6.0, b'2'),
+            (6.1, b'\n'),
+            (7.0, b'E'),
+        ] {
+            k.key(t, c, &mut out);
+        }
+        let w = warnings(&out);
+        assert_eq!(w.len(), 1, "{out:?}");
+        assert!(w[0].message.contains("not confirmed") && w[0].node == Some(7));
+        assert!(out.contains(&KeyEvent::Tagged {
+            curve: 0,
+            node: 2,
+            t: 6.1
+        }));
+        // A loss between two digits of one index (a sample packet) does not split the index.
+        let mut k = Keypad::new();
+        let mut out = Vec::new();
+        for (t, c) in [(0.0, b'I'), (1.0, b'2')] {
+            k.key(t, c, &mut out);
+        }
+        k.link_gap();
+        for (t, c) in [(1.25, b'9'), (1.5, b'\n')] {
+            k.key(t, c, &mut out);
+        }
+        assert!(
+            out.contains(&KeyEvent::Tagged {
+                curve: 0,
+                node: 29,
+                t: 1.5
+            }),
+            "{out:?}"
+        );
+        assert!(warnings(&out).is_empty());
     }
 
     #[test]

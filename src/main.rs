@@ -2,7 +2,9 @@
 //! configuration, installs logging and signal handling, runs, maps errors to exit codes.
 
 use clap::Parser;
-use sfs::cli::{CalibrateArgs, Cli, Command, ConfigCommand, LogFormat, ReplayArgs, RunArgs};
+use sfs::cli::{
+    CalibrateArgs, Cli, Command, ConfigCommand, LogFormat, ReplayArgs, RunArgs, SimulateArgs,
+};
 use sfs::config::{Config, ConfigError};
 use sfs::exit;
 use sfs::session::{self, Outcome, SessionError};
@@ -29,6 +31,7 @@ fn main() {
         Command::Replay(a) => replay(a),
         Command::Run(a) => run(a),
         Command::Calibrate(a) => calibrate(a),
+        Command::Simulate(a) => simulate(a),
         Command::Config(ConfigCommand::Check { file }) => config_check(&file),
     });
 }
@@ -43,18 +46,48 @@ fn init_logging(format: LogFormat, filter: Option<&str>) {
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_ansi(std::io::stderr().is_terminal())
-        .with_writer(std::io::stderr);
+        .with_writer(|| QuietStderr);
     match format {
         LogFormat::Human => builder.init(),
         LogFormat::Json => builder.json().init(),
     }
 }
 
+/// Standard error for the logs, ignoring write errors: a closed log pipe must not stop (or
+/// panic) the daemon.
+struct QuietStderr;
+
+impl std::io::Write for QuietStderr {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let _ = std::io::stderr().write_all(buf);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// Prints to standard output, ignoring a closed pipe (`sfs … | head` must not panic).
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout().lock(), $($arg)*);
+    }};
+}
+
+/// Prints an error line to standard error, ignoring a closed pipe.
+macro_rules! complain {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr().lock(), $($arg)*);
+    }};
+}
+
 fn replay(a: ReplayArgs) -> i32 {
     let pace = match a.pace.parse() {
         Ok(p) => p,
         Err(e) => {
-            eprintln!("sfs: --pace: {e}");
+            complain!("sfs: --pace: {e}");
             return exit::USAGE;
         }
     };
@@ -66,7 +99,7 @@ fn replay(a: ReplayArgs) -> i32 {
         Some(f) => match Config::load(f).and_then(|c| options(&c, f)) {
             Ok(o) => o,
             Err(e) => {
-                eprintln!("sfs: {e}");
+                complain!("sfs: {e}");
                 return exit::USAGE;
             }
         },
@@ -86,7 +119,7 @@ fn run(a: RunArgs) -> i32 {
     let (spec, options) = match resolve_run(&a) {
         Ok(s) => s,
         Err(e) => {
-            eprintln!("sfs: {e}");
+            complain!("sfs: {e}");
             return exit::USAGE;
         }
     };
@@ -139,11 +172,14 @@ fn resolve_run(a: &RunArgs) -> Result<(SourceSpec, session::Options), ConfigErro
 fn calibrate(a: CalibrateArgs) -> i32 {
     match sfs::calibrate::calibrate_file(&a.capture, a.sensor) {
         Ok(c) => {
-            print!("{}", c.render());
+            {
+                use std::io::Write as _;
+                let _ = std::io::stdout().lock().write_all(c.render().as_bytes());
+            }
             if c.any() {
                 exit::OK
             } else {
-                eprintln!(
+                complain!(
                     "sfs: {}: no calibration could be fitted",
                     a.capture.display()
                 );
@@ -151,20 +187,81 @@ fn calibrate(a: CalibrateArgs) -> i32 {
             }
         }
         Err(e) => {
-            eprintln!("sfs: {e}");
+            complain!("sfs: {e}");
             exit::INPUT
         }
     }
 }
 
+fn simulate(a: SimulateArgs) -> i32 {
+    use sfs::simulate::{self, scene};
+    let path = scene::find(&a.scene, &a.scenes);
+    let sc = match scene::load(&path) {
+        Ok(s) => s,
+        Err(e) => {
+            complain!("sfs: {e}");
+            return if path.exists() {
+                exit::USAGE
+            } else {
+                exit::INPUT
+            };
+        }
+    };
+    let device = match a.device.as_str() {
+        "phone" => device_protocol::DeviceKind::Phone,
+        "array" => device_protocol::DeviceKind::SensorArray,
+        _ => device_protocol::DeviceKind::Morphorider,
+    };
+    let profile = a.profile.parse().unwrap_or(simulate::Profile::Default);
+    let sim = simulate::run(&sc, device, profile, a.seed);
+    let with_ext = |ext: &str| {
+        let mut s = a.out.clone().into_os_string();
+        s.push(ext);
+        std::path::PathBuf::from(s)
+    };
+    let (bin, truth) = (with_ext(".bin"), with_ext(".truth.json"));
+    if let Some(dir) = bin.parent().filter(|d| !d.as_os_str().is_empty()) {
+        if let Err(e) = std::fs::create_dir_all(dir) {
+            complain!("sfs: cannot create {}: {e}", dir.display());
+            return exit::OUTPUT;
+        }
+    }
+    let json = match serde_json::to_vec(&sim.truth) {
+        Ok(j) => j,
+        Err(e) => {
+            complain!("sfs: cannot serialise the truth: {e}");
+            return exit::INTERNAL;
+        }
+    };
+    for (p, b) in [(&bin, &sim.bytes), (&truth, &json)] {
+        if let Err(e) = sfs::atomic::write_atomic(p, b) {
+            complain!("sfs: cannot write {}: {e}", p.display());
+            return exit::OUTPUT;
+        }
+    }
+    say!(
+        "{} ({}, {} profile, seed {}): {} nodes, {} curves, {} bytes, {:.0} s of scanning",
+        sc.name,
+        a.device,
+        a.profile,
+        a.seed,
+        sc.nodes.len(),
+        sc.curves.len(),
+        sim.bytes.len(),
+        sim.samples.t.last().copied().unwrap_or(0.0)
+    );
+    say!("capture: {}\ntruth:   {}", bin.display(), truth.display());
+    exit::OK
+}
+
 fn config_check(file: &Path) -> i32 {
     match Config::load(file) {
         Ok(_) => {
-            println!("{}: ok", file.display());
+            say!("{}: ok", file.display());
             exit::OK
         }
         Err(e) => {
-            eprintln!("sfs: {e}");
+            complain!("sfs: {e}");
             exit::USAGE
         }
     }
@@ -178,7 +275,7 @@ fn run_session(spec: SourceSpec, out: &Path, options: &session::Options) -> i32 
     {
         Ok(rt) => rt,
         Err(e) => {
-            eprintln!("sfs: cannot start the runtime: {e}");
+            complain!("sfs: cannot start the runtime: {e}");
             return exit::INTERNAL;
         }
     };
@@ -191,7 +288,7 @@ fn run_session(spec: SourceSpec, out: &Path, options: &session::Options) -> i32 
                 exit::OK
             }
             Err(e) => {
-                eprintln!("sfs: {e}");
+                complain!("sfs: {e}");
                 match e {
                     SessionError::Source(SourceError::Thread(_)) => exit::INTERNAL,
                     SessionError::Source(_) => exit::INPUT,
@@ -222,7 +319,7 @@ async fn signals(shutdown: Shutdown) {
             tracing::info!("signal received: finishing (send again to exit at once)");
             shutdown.trigger();
         } else {
-            eprintln!("sfs: second signal, exiting now");
+            complain!("sfs: second signal, exiting now");
             std::process::exit(exit::INTERRUPTED);
         }
     }
@@ -230,7 +327,7 @@ async fn signals(shutdown: Shutdown) {
 
 fn print_summary(o: &Outcome) {
     let l = &o.report.link;
-    println!(
+    say!(
         "{}: {} bytes, {} packets, {} rejected (crc {}, cobs {}, length {}), {} unknown, {} lost, {} reboots, {} clock wraps ({}, {:.2} s)",
         o.report.source,
         l.bytes,
@@ -247,7 +344,7 @@ fn print_summary(o: &Outcome) {
         o.report.wall_time_s,
     );
     if let Some(c) = &o.capture_path {
-        println!("capture: {}", c.display());
+        say!("capture: {}", c.display());
     }
-    println!("report:  {}", o.report_path.display());
+    say!("report:  {}", o.report_path.display());
 }

@@ -176,3 +176,26 @@ fn realtime_pace_follows_device_clock() {
     let link = &read_report(&dir.join("out"))["link"];
     assert_eq!(link["packets"]["RIDER_SAMPLE"], 60);
 }
+
+/// Regression: `sfs replay … | head` closed the pipes and the binary panicked (tracing and
+/// println! on a broken pipe) before writing its report.
+#[test]
+fn closed_output_pipes_neither_panic_nor_lose_the_report() {
+    let dir = tmpdir("replay-closed-pipes");
+    let cap = dir.join("c.bin");
+    std::fs::write(&cap, fault_stream(500).0).unwrap();
+    let mut child = sfs()
+        .args(["replay"])
+        .arg(&cap)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    drop(child.stderr.take());
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(0));
+    assert!(dir.join("out/report.json").exists());
+}

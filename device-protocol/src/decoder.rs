@@ -302,9 +302,11 @@ impl Link {
             let lost = seq.wrapping_sub(last).wrapping_sub(1);
             if lost != 0 {
                 if hello {
+                    // An earlier HELLO's gap still unresolved is taken as a loss.
+                    self.flush_gap();
                     self.pending_gap = Some(lost);
                 } else {
-                    self.flush_gap();
+                    // A pending HELLO gap stays pending: the clock of this packet decides it.
                     self.queue.push(Event::SequenceGap { lost });
                 }
             }

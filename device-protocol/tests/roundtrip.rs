@@ -339,6 +339,19 @@ fn hello_then_clock_back_is_a_reboot_and_the_seq_restart_is_no_loss() {
     assert_eq!(ev, [Event::DeviceReboot]);
 }
 
+/// Regression: a packet lost right after the reboot's HELLO flushed the HELLO's sequence
+/// restart as 35 lost packets before the clock showed the reboot.
+#[test]
+fn loss_right_after_a_reboot_hello_does_not_count_the_restart() {
+    let ev = link_events(&[
+        (219, rider(50_800_000)),
+        (220, rider(50_810_000)),
+        (0, hello()),
+        (2, rider(150_000)), // seq 1 lost
+    ]);
+    assert_eq!(ev, [Event::SequenceGap { lost: 1 }, Event::DeviceReboot]);
+}
+
 #[test]
 fn gap_before_a_periodic_hello_is_counted() {
     let ev = link_events(&[(0, rider(1_000)), (5, hello()), (6, rider(2_000))]);

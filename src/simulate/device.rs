@@ -98,6 +98,11 @@ pub struct DeviceParams {
     /// Device clock at the session's start, µs (to put a clock wrap mid-session).
     pub clock_start_us: u32,
     pub device_id: u32,
+    /// The device restarts at this session time: it is silent for half a second, then sends a
+    /// HELLO with its sequence, clock and wheel counter restarted.
+    pub reboot_at: Option<f64>,
+    /// Wheel skids `(start s, duration s, factor)`: the wheel turns only `factor` of the motion.
+    pub skids: Vec<(f64, f64, f64)>,
 }
 
 impl DeviceParams {
@@ -123,6 +128,8 @@ impl DeviceParams {
             faults: LinkFaults::default(),
             clock_start_us: 1_000_000,
             device_id: 0x5F5_0001,
+            reboot_at: None,
+            skids: Vec::new(),
         }
     }
 
@@ -148,6 +155,8 @@ impl DeviceParams {
             faults: LinkFaults::default(),
             clock_start_us: 2_000_000,
             device_id: 0x5F5_0002,
+            reboot_at: None,
+            skids: Vec::new(),
         }
     }
 
@@ -180,6 +189,10 @@ pub struct SampleTruth {
     pub standing: Vec<bool>,
     /// Wheel reading in metres (after slip and before quantisation).
     pub wheel: Vec<f64>,
+    /// Packets the device sent, of which corrupted on the line and lost.
+    pub packets_sent: u64,
+    pub packets_corrupted: u64,
+    pub packets_lost: u64,
 }
 
 /// Writes packets with sequence numbers, periodic HELLO and STATUS, and link faults.
@@ -191,12 +204,27 @@ struct Emitter {
     next_hello: f64,
     next_status: f64,
     hello: Hello,
-    clock_start_us: u32,
+    /// The device clock reads `clock_base_us` at session time `clock_base_t`.
+    clock_base_us: u32,
+    clock_base_t: f64,
+    sent: u64,
+    corrupted: u64,
+    lost: u64,
 }
 
 impl Emitter {
     fn t_us(&self, t: f64) -> u32 {
-        self.clock_start_us.wrapping_add((t * 1e6).round() as u32)
+        self.clock_base_us
+            .wrapping_add(((t - self.clock_base_t) * 1e6).round() as u32)
+    }
+
+    /// Power cycle at session time `t`: sequence, clock and HELLO start over.
+    fn reboot(&mut self, t: f64) {
+        self.seq = 0;
+        self.clock_base_us = 150_000;
+        self.clock_base_t = t;
+        self.next_hello = t;
+        self.next_status = t;
     }
 
     fn emit(&mut self, t: f64, p: Packet) {
@@ -220,7 +248,9 @@ impl Emitter {
     fn raw(&mut self, p: Packet) {
         let seq = self.seq;
         self.seq = self.seq.wrapping_add(1);
+        self.sent += 1;
         if self.faults.lose > 0.0 && self.rng.uniform() < self.faults.lose {
+            self.lost += 1;
             return;
         }
         let start = self.out.len();
@@ -229,6 +259,7 @@ impl Emitter {
             let len = self.out.len() - start - 1; // not the delimiter
             let i = start + (self.rng.next_u64() as usize % len);
             self.out[i] ^= 1 + (self.rng.next_u64() % 255) as u8;
+            self.corrupted += 1;
         }
     }
 }
@@ -247,8 +278,13 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
         next_hello: 0.0,
         next_status: 0.0,
         hello: p.hello(),
-        clock_start_us: p.clock_start_us,
+        clock_base_us: p.clock_start_us,
+        clock_base_t: 0.0,
+        sent: 0,
+        corrupted: 0,
+        lost: 0,
     };
+    let mut rebooted = false;
     let mut truth = SampleTruth::default();
     let field = p.earth.field();
     let g = Vector3::new(0.0, 0.0, G);
@@ -279,6 +315,18 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
     }
     let mut segs = seg_lengths.iter().peekable();
     for st in &script.states {
+        if let Some(tr) = p.reboot_at {
+            if st.t >= tr && !rebooted {
+                rebooted = true;
+                // The wheel counter restarts with the firmware; the boot takes half a second.
+                wheel_dev = 0.0;
+                em.reboot(tr + 0.5);
+            }
+            if st.t >= tr && st.t < tr + 0.5 {
+                last_wheel = st.wheel;
+                continue;
+            }
+        }
         while let Some(&&(tk, k)) = keys.peek() {
             if tk > st.t {
                 break;
@@ -302,7 +350,12 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
             );
             segs.next();
         }
-        let slip = st.curve.map_or(1.0, |c| slips[c]);
+        let mut slip = st.curve.map_or(1.0, |c| slips[c]);
+        for &(a, d, f) in &p.skids {
+            if st.t >= a && st.t < a + d {
+                slip *= f;
+            }
+        }
         wheel_dev += (st.wheel - last_wheel) * slip;
         last_wheel = st.wheel;
         let sample = sensor_sample(
@@ -343,6 +396,9 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
         let t_us = em.t_us(tk);
         em.emit(tk, Packet::Key(Key { t_us, key: k }));
     }
+    truth.packets_sent = em.sent;
+    truth.packets_corrupted = em.corrupted;
+    truth.packets_lost = em.lost;
     (em.out, truth)
 }
 

@@ -21,3 +21,303 @@ pub mod rng;
 pub mod scene;
 pub mod shapes;
 pub mod surface;
+pub mod truth;
+
+use device::{render, DeviceParams, Disturbance, LinkFaults, SampleTruth};
+use device_protocol::DeviceKind;
+use nalgebra::{Rotation3, Vector3};
+use operator::{perform, OperatorParams};
+use rng::Rng;
+use scene::Scene;
+use truth::{um, Truth, TruthCurve, TruthSensor};
+
+/// What `sfs simulate` adds on top of the device's own noise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Profile {
+    /// Documented default noise, link faults at 0.05 % of packets each (corrupted, lost).
+    Default,
+    /// What real sessions bring: 3× the noise, a 2° mounting offset, a ferromagnetic object
+    /// near part of the surface, wheel skids, a wrong node index undone with U, a curve
+    /// cancelled with C and rescanned, a device reboot between curves, the clock wrapping
+    /// mid-session, twice the link faults, and a capture that starts mid-packet.
+    Field,
+}
+
+impl std::str::FromStr for Profile {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "default" => Ok(Profile::Default),
+            "field" => Ok(Profile::Field),
+            _ => Err(format!("unknown profile {s:?}: default or field")),
+        }
+    }
+}
+
+/// The simulated bytes and their truth.
+#[derive(Debug, Clone)]
+pub struct Simulation {
+    pub bytes: Vec<u8>,
+    pub truth: Truth,
+    /// Per sample sent: true orientation, curve, distance.
+    pub samples: SampleTruth,
+}
+
+/// Simulates a scan of `scene` by `device` (Morphorider, phone or sensor array).
+pub fn run(scene: &Scene, device: DeviceKind, profile: Profile, seed: u64) -> Simulation {
+    let mut rng = Rng::new(seed);
+    let mut p = match device {
+        DeviceKind::Phone => DeviceParams::phone(),
+        _ => DeviceParams::morphorider(),
+    };
+    let mut op = OperatorParams::default();
+    let mut events = Vec::new();
+    let n = scene.curves.len();
+    p.faults = LinkFaults {
+        corrupt: 0.0005,
+        lose: 0.0005,
+    };
+    if device == DeviceKind::SensorArray {
+        return run_array(scene, profile, seed, &mut rng);
+    }
+    if profile == Profile::Field {
+        p.acc_sigma *= 3.0;
+        p.mag_sigma *= 3.0;
+        p.gyro_sigma *= 3.0;
+        p.gyro_bias_sigma *= 3.0;
+        p.mounting = Rotation3::from_axis_angle(
+            &nalgebra::Unit::new_normalize(Vector3::new(0.2, 0.3, 1.0)),
+            2f64.to_radians(),
+        );
+        p.faults = LinkFaults {
+            corrupt: 0.001,
+            lose: 0.001,
+        };
+        let c = &scene.curves[n.min(2) - 1];
+        let center = c.points[c.points.len() / 2];
+        let radius = 0.05 * scene.bbox_diagonal();
+        p.disturbance = Some(Disturbance {
+            center,
+            radius,
+            field_ut: Vector3::new(15.0, 0.0, 5.0),
+        });
+        events.push(format!(
+            "magnetic disturbance of 15.8 µT within {radius:.3} m of ({:.3}, {:.3}, {:.3})",
+            center.x, center.y, center.z
+        ));
+        if scene.curves[0].tags.len() > 2 {
+            op.mistakes.wrong_index = Some((0, 1));
+            events.push("curve 0: a wrong index typed at its second node, undone with U".into());
+        }
+        let cancel = n.min(2) - 1;
+        op.mistakes.cancel_and_rescan = Some(cancel);
+        events.push(format!(
+            "curve {cancel}: started, cancelled with C, rescanned"
+        ));
+    }
+    let script = perform(&scene.specs(), &op, p.rate_hz, p.jitter, &mut rng);
+    let duration = script.states.last().map_or(0.0, |s| s.t);
+    if profile == Profile::Field {
+        // Reboot while carrying the device to the middle curve.
+        if n >= 2 {
+            let target = n / 2;
+            let start = script
+                .states
+                .iter()
+                .position(|s| s.curve == Some(target))
+                .unwrap_or(0);
+            let carry_mid = script.states[..start]
+                .iter()
+                .rposition(|s| s.curve.is_some())
+                .map_or(0.5, |i| (script.states[i].t + script.states[start].t) / 2.0);
+            p.reboot_at = Some(carry_mid - 0.5);
+            events.push(format!(
+                "device reboots at t = {:.1} s, before curve {target}",
+                carry_mid - 0.5
+            ));
+        }
+        // The clock wraps mid-way (before the reboot, which restarts it).
+        let t_wrap = p.reboot_at.map_or(duration / 2.0, |r| r / 2.0);
+        p.clock_start_us = u32::MAX - (t_wrap * 1e6) as u32;
+        events.push(format!("device clock wraps at t = {t_wrap:.1} s"));
+        // Three wheel skids while rolling.
+        let rolling: Vec<f64> = script
+            .states
+            .iter()
+            .filter(|s| s.curve.is_some() && !s.standing)
+            .map(|s| s.t)
+            .collect();
+        for k in 0..3 {
+            if let Some(&t) = rolling.get(rolling.len() * (2 * k + 1) / 6) {
+                p.skids.push((t, 0.3, 0.3));
+                events.push(format!("wheel skid at t = {t:.1} s (0.3 s at 30 %)"));
+            }
+        }
+    }
+    let (mut bytes, samples) = render(&script, &p, &mut rng);
+    if profile == Profile::Field {
+        // The capture starts in the middle of the first packet.
+        let first = bytes.iter().position(|&b| b == 0).unwrap_or(0);
+        bytes.drain(..first / 2 + 1);
+        events.push(format!(
+            "capture starts {} bytes into the first packet",
+            first / 2 + 1
+        ));
+    }
+    let truth = truth_of(scene, device, profile, seed, Vec::new(), events);
+    Simulation {
+        bytes,
+        truth,
+        samples,
+    }
+}
+
+fn device_name(d: DeviceKind) -> &'static str {
+    match d {
+        DeviceKind::Morphorider => "morphorider",
+        DeviceKind::Phone => "phone",
+        DeviceKind::SensorArray => "array",
+        DeviceKind::Other(_) => "unknown",
+    }
+}
+
+fn truth_of(
+    scene: &Scene,
+    device: DeviceKind,
+    profile: Profile,
+    seed: u64,
+    sensors: Vec<TruthSensor>,
+    events: Vec<String>,
+) -> Truth {
+    let v = |p: &Vector3<f64>| [um(p.x), um(p.y), um(p.z)];
+    Truth {
+        scene: scene.name.clone(),
+        description: scene.description.clone(),
+        device: device_name(device).into(),
+        profile: match profile {
+            Profile::Default => "default".into(),
+            Profile::Field => "field".into(),
+        },
+        seed,
+        nodes: scene
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (i.to_string(), v(p)))
+            .collect(),
+        curves: scene
+            .curves
+            .iter()
+            .enumerate()
+            .map(|(i, c)| TruthCurve {
+                index: i,
+                nodes: c.nodes(),
+                boundary: c.boundary,
+                closed: c.closed,
+                points: c.points.iter().map(v).collect(),
+                normals: c
+                    .normals
+                    .iter()
+                    .map(|n| [n.x, n.y, n.z].map(|x| (x * 1e9).round() / 1e9))
+                    .collect(),
+            })
+            .collect(),
+        surface: scene.surface_ref.clone(),
+        bbox_diagonal: scene.bbox_diagonal(),
+        sensors,
+        events,
+    }
+}
+
+/// A sensor array fixed on the scene's curves: a sensor every 5 cm along every curve, all
+/// streaming for 10 s at 20 Hz each (static structure).
+fn run_array(scene: &Scene, profile: Profile, seed: u64, rng: &mut Rng) -> Simulation {
+    use device_protocol::{ArraySample, Hello, Packet};
+    let noise = if profile == Profile::Field { 3.0 } else { 1.0 };
+    let field = device::Earth::default().field();
+    let (acc_lsb, mag_lsb) = (16.0 * crate::sensor::G / 65536.0, 0.15);
+    let mut sensors = Vec::new();
+    for (ci, c) in scene.curves.iter().enumerate() {
+        let mut acc_len = 0.0;
+        let mut next = 0.0;
+        for i in 0..c.points.len() {
+            if i > 0 {
+                acc_len += (c.points[i] - c.points[i - 1]).norm();
+            }
+            if acc_len + 1e-12 >= next && i + 1 < c.points.len() {
+                let t = (c.points[i + 1] - c.points[i]).normalize();
+                let nn = c.normals[i];
+                let n = (nn - t * nn.dot(&t)).normalize();
+                let m = nalgebra::Matrix3::from_columns(&[t, n.cross(&t), n]);
+                let q = nalgebra::UnitQuaternion::from_rotation_matrix(
+                    &Rotation3::from_matrix_unchecked(m),
+                );
+                sensors.push(TruthSensor {
+                    sensor: sensors.len() as u16,
+                    curve: ci,
+                    s: um(acc_len),
+                    position: [um(c.points[i].x), um(c.points[i].y), um(c.points[i].z)],
+                    q: [q.w, q.i, q.j, q.k],
+                });
+                next += 0.05;
+            }
+        }
+    }
+    let mut bytes = Vec::new();
+    let mut seq = 0u8;
+    let mut put = |p: Packet, b: &mut Vec<u8>| {
+        p.encode(seq, b);
+        seq = seq.wrapping_add(1);
+    };
+    let hello = Packet::Hello(Hello {
+        proto: 1,
+        kind: DeviceKind::SensorArray,
+        device_id: 0x5F5_0003,
+        firmware: 0x0100,
+        rate_hz: 20,
+        acc_scale: acc_lsb as f32,
+        gyro_scale: 0.0,
+        mag_scale: mag_lsb as f32,
+        ticks_per_rev: 0,
+        wheel_circumference_um: 0,
+        sensors: sensors.len() as u16,
+    });
+    let counts = |v: Vector3<f64>, lsb: f64| {
+        [0, 1, 2].map(|i| (v[i] / lsb).round().clamp(-32768.0, 32767.0) as i16)
+    };
+    for k in 0..200u32 {
+        if k % 100 == 0 {
+            put(hello, &mut bytes);
+        }
+        for s in &sensors {
+            let q = nalgebra::UnitQuaternion::new_normalize(nalgebra::Quaternion::new(
+                s.q[0], s.q[1], s.q[2], s.q[3],
+            ));
+            let acc =
+                q.inverse() * Vector3::new(0.0, 0.0, crate::sensor::G) + rng.vec3(0.02 * noise);
+            let mag = q.inverse() * field + rng.vec3(0.3 * noise);
+            put(
+                Packet::ArraySample(ArraySample {
+                    t_us: 1_000_000 + k * 50_000 + s.sensor as u32 * 10,
+                    sensor: s.sensor,
+                    acc: counts(acc, acc_lsb),
+                    mag: counts(mag, mag_lsb),
+                }),
+                &mut bytes,
+            );
+        }
+    }
+    let truth = truth_of(
+        scene,
+        DeviceKind::SensorArray,
+        profile,
+        seed,
+        sensors,
+        Vec::new(),
+    );
+    Simulation {
+        bytes,
+        truth,
+        samples: SampleTruth::default(),
+    }
+}

@@ -36,6 +36,18 @@ pub struct OperatorParams {
     pub carry_time: f64,
     /// Amplitude of the hand's back-and-forth along the curve while standing, m. Default 0.3 mm.
     pub stand_wobble: f64,
+    /// Operator mistakes to act out (none by default).
+    pub mistakes: Mistakes,
+}
+
+/// Mistakes a real operator makes, acted out so that acquisition must recover from them.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Mistakes {
+    /// `(curve, tag)`: type a wrong index there, Enter, notice, `U`, then the right one.
+    pub wrong_index: Option<(usize, usize)>,
+    /// Start this curve, tag its first node, roll 40 % of its first segment, press `C`, carry
+    /// the device back and scan the curve again.
+    pub cancel_and_rescan: Option<usize>,
 }
 
 impl Default for OperatorParams {
@@ -48,6 +60,7 @@ impl Default for OperatorParams {
             pause_after_enter: 0.4,
             carry_time: 3.0,
             stand_wobble: 0.0003,
+            mistakes: Mistakes::default(),
         }
     }
 }
@@ -217,6 +230,42 @@ impl Timeline<'_> {
     fn key(&mut self, k: u8) {
         self.script.keys.push((self.t, k));
     }
+
+    /// Rolls along curve `c` from `s` to `target` with slowly varying speed; returns the new s.
+    #[allow(clippy::too_many_arguments)]
+    fn roll(
+        &mut self,
+        p: &Param,
+        c: usize,
+        mut s: f64,
+        target: f64,
+        op: &OperatorParams,
+        period: f64,
+        phase: f64,
+    ) -> f64 {
+        while s < target {
+            let v = op.speed
+                * (1.0
+                    + op.speed_variation * (std::f64::consts::TAU * self.t / period + phase).sin());
+            let step = v.max(0.2 * op.speed) * self.dt;
+            let ns = (s + step).min(target);
+            self.wheel += ns - s;
+            s = ns;
+            self.push(p.frame(s), p.pos(s), Some(c), s, false);
+        }
+        s
+    }
+
+    /// Stands at the node, types its index and Enter, stands a moment.
+    fn type_index(&mut self, p: &Param, c: Option<usize>, s: f64, node: u32, op: &OperatorParams) {
+        self.stand(p, c, s, op.pause_before_typing, op.stand_wobble);
+        for d in node.to_string().bytes() {
+            self.key(d);
+            self.stand(p, c, s, op.key_interval, op.stand_wobble);
+        }
+        self.key(b'\n');
+        self.stand(p, c, s, op.pause_after_enter, op.stand_wobble);
+    }
 }
 
 /// Performs the scan of `curves` in order; `rate_hz` is the device's sample rate, `jitter` the
@@ -252,40 +301,55 @@ pub fn perform(
         } else {
             tl.stand(&p, None, 0.0, 1.0, 0.0);
         }
-        tl.key(if spec.boundary { b'B' } else { b'I' });
+        let phase = tl.rng.range(0.0, std::f64::consts::TAU);
+        let period = tl.rng.range(3.0, 6.0);
+        let start_key = if spec.boundary { b'B' } else { b'I' };
+        if op.mistakes.cancel_and_rescan == Some(ci) && spec.tags.len() >= 2 {
+            // A false start: first node, 40 % of the way, C, back to the start.
+            tl.key(start_key);
+            let node = spec.tags[0].1;
+            tl.type_index(&p, Some(ci), 0.0, node, op);
+            let target = 0.4 * p.cum[spec.tags[1].0];
+            let s = tl.roll(&p, ci, 0.0, target, op, period, phase);
+            tl.stand(&p, Some(ci), s, 0.5, op.stand_wobble);
+            tl.key(b'C');
+            tl.stand(&p, None, s, 0.3, 0.0);
+            let (q0, q1) = (p.frame(s), start_q);
+            let n = (op.carry_time / tl.dt) as usize;
+            for k in 1..=n {
+                let u = k as f64 / n as f64;
+                tl.push(
+                    q0.slerp(&q1, u * u * (3.0 - 2.0 * u)),
+                    p.pos(0.0),
+                    None,
+                    0.0,
+                    false,
+                );
+            }
+        }
+        tl.key(start_key);
         let mut truth = CurveTruth {
             boundary: spec.boundary,
             tags: Vec::new(),
             length: p.length(),
         };
-        let phase = tl.rng.range(0.0, std::f64::consts::TAU);
-        let period = tl.rng.range(3.0, 6.0);
         let mut s = 0.0;
         for (k, &(pi, node)) in spec.tags.iter().enumerate() {
-            let target = p.cum[pi];
-            // Roll to the node.
-            while s < target {
-                let v = op.speed
-                    * (1.0
-                        + op.speed_variation
-                            * (std::f64::consts::TAU * tl.t / period + phase).sin());
-                let step = v.max(0.2 * op.speed) * tl.dt;
-                let ns = (s + step).min(target);
-                tl.wheel += ns - s;
-                s = ns;
-                tl.push(p.frame(s), p.pos(s), Some(ci), s, false);
-            }
-            // Stand, type the index, Enter.
-            tl.stand(&p, Some(ci), s, op.pause_before_typing, op.stand_wobble);
-            for d in node.to_string().bytes() {
-                tl.key(d);
+            s = tl.roll(&p, ci, s, p.cum[pi], op, period, phase);
+            if op.mistakes.wrong_index == Some((ci, k)) {
+                // A wrong index confirmed, noticed, undone.
+                tl.type_index(&p, Some(ci), s, node + 1, op);
+                tl.key(b'U');
                 tl.stand(&p, Some(ci), s, op.key_interval, op.stand_wobble);
             }
-            tl.key(b'\n');
-            truth.tags.push((node, s, tl.t, tl.wheel));
-            let last = k + 1 == spec.tags.len();
-            tl.stand(&p, Some(ci), s, op.pause_after_enter, op.stand_wobble);
-            if last {
+            tl.type_index(&p, Some(ci), s, node, op);
+            truth.tags.push((
+                node,
+                s,
+                tl.script.keys.last().map_or(tl.t, |k| k.0),
+                tl.wheel,
+            ));
+            if k + 1 == spec.tags.len() {
                 tl.key(b'E');
                 tl.stand(&p, None, s, 0.3, 0.0);
             }

@@ -1,0 +1,67 @@
+//! `PREFIX.truth.json`: what the simulated device really scanned, for `sfs eval` and tests.
+
+use super::scene::SurfaceRef;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// One curve of the truth network.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TruthCurve {
+    /// Scan order (accepted curves).
+    pub index: usize,
+    /// Node sequence as scanned.
+    pub nodes: Vec<u32>,
+    pub boundary: bool,
+    pub closed: bool,
+    /// Dense polyline, m.
+    pub points: Vec<[f64; 3]>,
+    /// Unit outward surface normals at the points.
+    pub normals: Vec<[f64; 3]>,
+}
+
+/// A fixed sensor of an array.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TruthSensor {
+    pub sensor: u16,
+    pub curve: usize,
+    /// Arc length along the curve from its first node, m.
+    pub s: f64,
+    pub position: [f64; 3],
+    /// Sensor → world, `[w, x, y, z]`.
+    pub q: [f64; 4],
+}
+
+/// The whole truth file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Truth {
+    pub scene: String,
+    pub description: String,
+    pub device: String,
+    pub profile: String,
+    pub seed: u64,
+    /// Node positions by index (as strings, JSON object keys).
+    pub nodes: BTreeMap<String, [f64; 3]>,
+    pub curves: Vec<TruthCurve>,
+    pub surface: SurfaceRef,
+    /// Diagonal of the truth network's bounding box, m (the unit of the error metric's %).
+    pub bbox_diagonal: f64,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sensors: Vec<TruthSensor>,
+    /// What the simulation acted out (profile events), in words.
+    #[serde(default)]
+    pub events: Vec<String>,
+}
+
+impl Truth {
+    /// Reads a truth file.
+    pub fn load(path: &std::path::Path) -> Result<Truth, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+    }
+}
+
+/// Rounds to the micrometre (keeps truth files compact; far below every error measured).
+pub fn um(x: f64) -> f64 {
+    (x * 1e6).round() / 1e6
+}
