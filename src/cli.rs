@@ -38,9 +38,26 @@ pub enum Command {
     /// Simulate a scan of a known scene: writes PREFIX.bin (the exact bytes a device would
     /// send) and PREFIX.truth.json (nodes, curves with normals, surface, bounding-box diagonal).
     Simulate(SimulateArgs),
+    /// Score a reconstruction against a simulation's truth (the paper's metric: curve points to
+    /// the truth network and surface vertices to the truth surface after a rigid registration,
+    /// in % of the bounding-box diagonal). Prints one JSON object.
+    Eval(EvalArgs),
     /// Configuration files.
     #[command(subcommand)]
     Config(ConfigCommand),
+}
+
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// The truth file written by `sfs simulate`.
+    #[arg(long)]
+    pub truth: PathBuf,
+    /// The reconstruction (`network.glb`).
+    #[arg(long)]
+    pub glb: PathBuf,
+    /// Also write the JSON object to this file.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]

@@ -28,6 +28,8 @@ pub mod calibrate;
 pub mod capture;
 pub mod cli;
 pub mod config;
+pub mod eval;
+pub mod gltf_out;
 pub mod keypad;
 pub mod link;
 pub mod orientation;

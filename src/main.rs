@@ -3,7 +3,8 @@
 
 use clap::Parser;
 use sfs::cli::{
-    CalibrateArgs, Cli, Command, ConfigCommand, LogFormat, ReplayArgs, RunArgs, SimulateArgs,
+    CalibrateArgs, Cli, Command, ConfigCommand, EvalArgs, LogFormat, ReplayArgs, RunArgs,
+    SimulateArgs,
 };
 use sfs::config::{Config, ConfigError};
 use sfs::exit;
@@ -32,6 +33,7 @@ fn main() {
         Command::Run(a) => run(a),
         Command::Calibrate(a) => calibrate(a),
         Command::Simulate(a) => simulate(a),
+        Command::Eval(a) => eval(a),
         Command::Config(ConfigCommand::Check { file }) => config_check(&file),
     });
 }
@@ -251,6 +253,46 @@ fn simulate(a: SimulateArgs) -> i32 {
         sim.samples.t.last().copied().unwrap_or(0.0)
     );
     say!("capture: {}\ntruth:   {}", bin.display(), truth.display());
+    exit::OK
+}
+
+fn eval(a: EvalArgs) -> i32 {
+    let truth = match sfs::simulate::truth::Truth::load(&a.truth) {
+        Ok(t) => t,
+        Err(e) => {
+            complain!("sfs: {e}");
+            return exit::INPUT;
+        }
+    };
+    let bytes = match std::fs::read(&a.glb) {
+        Ok(b) => b,
+        Err(e) => {
+            complain!("sfs: cannot read {}: {e}", a.glb.display());
+            return exit::INPUT;
+        }
+    };
+    let rec = match sfs::gltf_out::read_glb(&bytes) {
+        Ok(r) => r,
+        Err(e) => {
+            complain!("sfs: {}: {e}", a.glb.display());
+            return exit::INPUT;
+        }
+    };
+    let ev = match sfs::eval::evaluate(&truth, &rec) {
+        Ok(e) => e,
+        Err(e) => {
+            complain!("sfs: {}: {e}", a.glb.display());
+            return exit::UNUSABLE;
+        }
+    };
+    let json = serde_json::to_string_pretty(&ev).unwrap_or_default();
+    say!("{json}");
+    if let Some(r) = &a.report {
+        if let Err(e) = sfs::atomic::write_atomic(r, format!("{json}\n").as_bytes()) {
+            complain!("sfs: cannot write {}: {e}", r.display());
+            return exit::OUTPUT;
+        }
+    }
     exit::OK
 }
 

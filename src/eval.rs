@@ -1,0 +1,360 @@
+//! `sfs eval`: the error metric of the shape-from-sensors paper. The reconstructed network is
+//! registered rigidly on the truth (Kabsch on the matching nodes, then ICP on all curve points;
+//! no scaling), then every reconstructed curve point is measured to the truth network, and
+//! every surface vertex to the truth surface; mean and max, in metres and in % of the truth
+//! network's bounding-box diagonal.
+
+use crate::gltf_out::ReadNetwork;
+use crate::simulate::surface::{point_triangle_distance, Surface};
+use crate::simulate::truth::Truth;
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use serde::Serialize;
+use std::collections::HashMap;
+
+/// Distances of one set of points.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Distances {
+    pub count: usize,
+    pub mean_m: f64,
+    pub max_m: f64,
+    pub rms_m: f64,
+    /// Mean and max in % of the truth bounding-box diagonal (the paper's unit).
+    pub mean_pct: f64,
+    pub max_pct: f64,
+}
+
+/// The rigid registration found.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Registration {
+    /// Nodes present in both and used for the initial alignment.
+    pub nodes_matched: usize,
+    pub rotation_deg: f64,
+    pub translation_m: [f64; 3],
+    pub icp_iterations: usize,
+}
+
+/// The JSON object `sfs eval` prints.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Evaluation {
+    pub scene: String,
+    pub bbox_diagonal_m: f64,
+    pub registration: Registration,
+    pub curves: Distances,
+    pub surface: Option<Distances>,
+    /// Node position errors after registration, m, by node index.
+    pub node_errors_m: std::collections::BTreeMap<String, f64>,
+}
+
+/// A uniform grid of segments for nearest-segment queries.
+struct SegmentGrid {
+    cell: f64,
+    segs: Vec<(Vector3<f64>, Vector3<f64>)>,
+    map: HashMap<[i64; 3], Vec<u32>>,
+}
+
+impl SegmentGrid {
+    fn new(segs: Vec<(Vector3<f64>, Vector3<f64>)>, cell: f64) -> Self {
+        let mut map: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+        for (i, (a, b)) in segs.iter().enumerate() {
+            let lo = a.inf(b);
+            let hi = a.sup(b);
+            let (l, h) = (key(&lo, cell), key(&hi, cell));
+            for x in l[0]..=h[0] {
+                for y in l[1]..=h[1] {
+                    for z in l[2]..=h[2] {
+                        map.entry([x, y, z]).or_default().push(i as u32);
+                    }
+                }
+            }
+        }
+        SegmentGrid { cell, segs, map }
+    }
+
+    /// Nearest point on any segment, and its distance.
+    fn nearest(&self, p: &Vector3<f64>) -> (Vector3<f64>, f64) {
+        let c = key(p, self.cell);
+        let mut best = (*p, f64::INFINITY);
+        for r in 0i64.. {
+            // Cells at Chebyshev ring r; once the ring is farther than the best, stop.
+            if best.1 < (r as f64 - 1.0) * self.cell {
+                break;
+            }
+            if r > 100_000 {
+                break;
+            }
+            let mut any = false;
+            for x in -r..=r {
+                for y in -r..=r {
+                    for z in -r..=r {
+                        if x.abs().max(y.abs()).max(z.abs()) != r {
+                            continue;
+                        }
+                        if let Some(ids) = self.map.get(&[c[0] + x, c[1] + y, c[2] + z]) {
+                            any = true;
+                            for &i in ids {
+                                let (a, b) = self.segs[i as usize];
+                                let q = closest_on_segment(p, &a, &b);
+                                let d = (q - p).norm();
+                                if d < best.1 {
+                                    best = (q, d);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            let _ = any;
+            if r > 4 && best.1.is_infinite() && self.map.is_empty() {
+                break;
+            }
+        }
+        best
+    }
+}
+
+fn key(p: &Vector3<f64>, cell: f64) -> [i64; 3] {
+    [
+        (p.x / cell).floor() as i64,
+        (p.y / cell).floor() as i64,
+        (p.z / cell).floor() as i64,
+    ]
+}
+
+fn closest_on_segment(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> Vector3<f64> {
+    let ab = b - a;
+    let l2 = ab.norm_squared();
+    if l2 <= 0.0 {
+        return *a;
+    }
+    a + ab * ((p - a).dot(&ab) / l2).clamp(0.0, 1.0)
+}
+
+/// Best rigid motion `(R, t)` with `R·a + t ≈ b` (Kabsch), `None` for fewer than 3 pairs or
+/// collinear points.
+pub fn kabsch(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Option<(Rotation3<f64>, Vector3<f64>)> {
+    if a.len() < 3 || a.len() != b.len() {
+        return None;
+    }
+    let ca = a.iter().sum::<Vector3<f64>>() / a.len() as f64;
+    let cb = b.iter().sum::<Vector3<f64>>() / b.len() as f64;
+    let mut h = Matrix3::zeros();
+    for (p, q) in a.iter().zip(b) {
+        h += (p - ca) * (q - cb).transpose();
+    }
+    let svd = h.svd(true, true);
+    let (u, vt) = (svd.u?, svd.v_t?);
+    // `SVD::new` sorts the singular values in descending order.
+    let s = svd.singular_values;
+    if s[1] < 1e-12 * s[0].max(1e-300) {
+        return None; // collinear: the rotation about the line is undetermined
+    }
+    let mut d = Matrix3::identity();
+    if (vt.transpose() * u.transpose()).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    let r = Rotation3::from_matrix_unchecked(vt.transpose() * d * u.transpose());
+    Some((r, cb - r * ca))
+}
+
+fn distances(d: &[f64], diag: f64) -> Distances {
+    let n = d.len().max(1) as f64;
+    let mean = d.iter().sum::<f64>() / n;
+    let max = d.iter().cloned().fold(0.0, f64::max);
+    let rms = (d.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
+    Distances {
+        count: d.len(),
+        mean_m: mean,
+        max_m: max,
+        rms_m: rms,
+        mean_pct: 100.0 * mean / diag,
+        max_pct: 100.0 * max / diag,
+    }
+}
+
+/// Why an evaluation is impossible.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EvalError {
+    #[error("the glb holds no curve point")]
+    NoPoints,
+    #[error("the truth holds no curve")]
+    NoTruth,
+    #[error("the truth surface cannot be rebuilt: {0}")]
+    Surface(String),
+}
+
+/// Evaluates a reconstruction against the truth.
+pub fn evaluate(truth: &Truth, rec: &ReadNetwork) -> Result<Evaluation, EvalError> {
+    let pts: Vec<Vector3<f64>> = rec
+        .curves
+        .iter()
+        .flat_map(|c| c.points.iter().copied())
+        .collect();
+    if pts.is_empty() {
+        return Err(EvalError::NoPoints);
+    }
+    let mut segs = Vec::new();
+    for c in &truth.curves {
+        for w in c.points.windows(2) {
+            segs.push((Vector3::from(w[0]), Vector3::from(w[1])));
+        }
+    }
+    if segs.is_empty() {
+        return Err(EvalError::NoTruth);
+    }
+    let diag = truth.bbox_diagonal.max(1e-12);
+    let grid = SegmentGrid::new(segs, (diag / 100.0).max(1e-6));
+
+    // Initial alignment: matching nodes, else centroids.
+    let mut a = Vec::new();
+    let mut b = Vec::new();
+    for (k, p) in &rec.nodes {
+        if let Some(q) = truth.nodes.get(&k.to_string()) {
+            a.push(*p);
+            b.push(Vector3::from(*q));
+        }
+    }
+    let nodes_matched = a.len();
+    let (mut r, mut t) = kabsch(&a, &b).unwrap_or_else(|| {
+        let ca = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
+        let tp: Vec<Vector3<f64>> = truth
+            .curves
+            .iter()
+            .flat_map(|c| c.points.iter().map(|p| Vector3::from(*p)))
+            .collect();
+        let cb = tp.iter().sum::<Vector3<f64>>() / tp.len() as f64;
+        (Rotation3::identity(), cb - ca)
+    });
+    // ICP (point to closest point on the truth polylines), subsampled for speed.
+    let step = (pts.len() / 20_000).max(1);
+    let sample: Vec<Vector3<f64>> = pts.iter().step_by(step).copied().collect();
+    let mut iterations = 0;
+    let mut last_rms = f64::INFINITY;
+    for it in 0..100 {
+        iterations = it + 1;
+        let moved: Vec<Vector3<f64>> = sample.iter().map(|p| r * p + t).collect();
+        let near: Vec<(Vector3<f64>, f64)> = moved.iter().map(|p| grid.nearest(p)).collect();
+        let rms = (near.iter().map(|n| n.1 * n.1).sum::<f64>() / near.len() as f64).sqrt();
+        let targets: Vec<Vector3<f64>> = near.iter().map(|n| n.0).collect();
+        let Some((dr, dt)) = kabsch(&moved, &targets) else {
+            break;
+        };
+        r = dr * r;
+        t = dr * t + dt;
+        if (last_rms - rms).abs() <= 1e-9 * diag {
+            break;
+        }
+        last_rms = rms;
+    }
+    let d: Vec<f64> = pts.iter().map(|p| grid.nearest(&(r * p + t)).1).collect();
+    let surface = match &rec.surface {
+        Some(s) if !s.positions.is_empty() => {
+            let surf = truth.surface.build().map_err(EvalError::Surface)?;
+            let ds = surface_distances(
+                &surf,
+                &s.positions.iter().map(|p| r * p + t).collect::<Vec<_>>(),
+                diag,
+            );
+            Some(distances(&ds, diag))
+        }
+        _ => None,
+    };
+    let node_errors_m = rec
+        .nodes
+        .iter()
+        .filter_map(|(k, p)| {
+            let q = truth.nodes.get(&k.to_string())?;
+            Some((k.to_string(), (r * p + t - Vector3::from(*q)).norm()))
+        })
+        .collect();
+    Ok(Evaluation {
+        scene: truth.scene.clone(),
+        bbox_diagonal_m: diag,
+        registration: Registration {
+            nodes_matched,
+            rotation_deg: UnitQuaternion::from_rotation_matrix(&r)
+                .angle()
+                .to_degrees(),
+            translation_m: [t.x, t.y, t.z],
+            icp_iterations: iterations,
+        },
+        curves: distances(&d, diag),
+        surface,
+        node_errors_m,
+    })
+}
+
+/// Distances of points to a surface; meshes through a triangle grid.
+fn surface_distances(s: &Surface, pts: &[Vector3<f64>], diag: f64) -> Vec<f64> {
+    let Surface::Mesh(m) = s else {
+        return pts.iter().map(|p| s.distance(p)).collect();
+    };
+    let cell = (diag / 60.0).max(1e-6);
+    let mut map: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+    for (i, f) in m.f.iter().enumerate() {
+        let v = f.map(|k| m.v[k as usize]);
+        let (l, h) = (
+            key(&v[0].inf(&v[1]).inf(&v[2]), cell),
+            key(&v[0].sup(&v[1]).sup(&v[2]), cell),
+        );
+        for x in l[0]..=h[0] {
+            for y in l[1]..=h[1] {
+                for z in l[2]..=h[2] {
+                    map.entry([x, y, z]).or_default().push(i as u32);
+                }
+            }
+        }
+    }
+    pts.iter()
+        .map(|p| {
+            let c = key(p, cell);
+            let mut best = f64::INFINITY;
+            for r in 0i64..10_000 {
+                if best < (r as f64 - 1.0) * cell {
+                    break;
+                }
+                for x in -r..=r {
+                    for y in -r..=r {
+                        for z in -r..=r {
+                            if x.abs().max(y.abs()).max(z.abs()) != r {
+                                continue;
+                            }
+                            for &i in map
+                                .get(&[c[0] + x, c[1] + y, c[2] + z])
+                                .into_iter()
+                                .flatten()
+                            {
+                                let f = m.f[i as usize];
+                                let d = point_triangle_distance(
+                                    p,
+                                    &m.v[f[0] as usize],
+                                    &m.v[f[1] as usize],
+                                    &m.v[f[2] as usize],
+                                );
+                                best = best.min(d);
+                            }
+                        }
+                    }
+                }
+            }
+            best
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kabsch_recovers_a_rigid_motion() {
+        let a: Vec<Vector3<f64>> = (0..10)
+            .map(|i| Vector3::new(i as f64, (i * i) as f64 * 0.1, (i as f64).sin()))
+            .collect();
+        let r = Rotation3::from_euler_angles(0.3, -0.2, 1.1);
+        let t = Vector3::new(1.0, -2.0, 0.5);
+        let b: Vec<Vector3<f64>> = a.iter().map(|p| r * p + t).collect();
+        let (rr, tt) = kabsch(&a, &b).unwrap();
+        assert!((rr.matrix() - r.matrix()).norm() < 1e-9 && (tt - t).norm() < 1e-9);
+        assert!(kabsch(&a[..2], &b[..2]).is_none());
+    }
+}

@@ -1,0 +1,534 @@
+//! `network.glb`: the output contract, written through `gltf::json`.
+//!
+//! glTF 2.0 binary, metres, +Y up: world `(x east, y north, z up)` ↦ glTF `(x, z, −y)`.
+//! - A node named `network` whose mesh has one primitive per curve in mode LINE_STRIP
+//!   (POSITION with exact min/max, NORMAL = unit surface normal at the sample; primitive extras
+//!   `{"curve": index, "boundary": bool, "nodes": [node sequence]}`); the node's extras hold
+//!   the node positions `{"nodes": {"<index>": [x, y, z]}}` in the glb's frame.
+//! - When a surface exists, a node named `surface`: a triangle mesh (POSITION, NORMAL, u32
+//!   indices).
+//!
+//! Nothing non-finite, no zero normal and no degenerate triangle is written: such input is an
+//! error naming the curve (or triangle) and the index.
+//!
+//! ```
+//! use nalgebra::Vector3;
+//! use sfs::gltf_out::{network_glb, NetworkCurve};
+//! let c = NetworkCurve { index: 0, boundary: false, nodes: vec![0, 1],
+//!     points: vec![Vector3::zeros(), Vector3::x()], normals: vec![Vector3::z(); 2] };
+//! let glb = network_glb(&[c], &Default::default(), None).unwrap();
+//! assert_eq!(&glb[..4], b"glTF");
+//! ```
+
+use gltf::json;
+use json::validation::{Checked, USize64};
+use nalgebra::Vector3;
+use std::collections::BTreeMap;
+
+/// A reconstructed curve, world frame (z up).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NetworkCurve {
+    pub index: usize,
+    pub boundary: bool,
+    pub nodes: Vec<u32>,
+    pub points: Vec<Vector3<f64>>,
+    /// Unit surface normals at the points.
+    pub normals: Vec<Vector3<f64>>,
+}
+
+/// A triangle mesh, world frame (z up).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SurfaceMesh {
+    /// #V positions.
+    pub positions: Vec<Vector3<f64>>,
+    /// #V unit normals.
+    pub normals: Vec<Vector3<f64>>,
+    /// #F triangles, counter-clockwise seen from the normals' side.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// What cannot be written.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GltfError {
+    #[error("curve {curve}: sample {index} is not finite")]
+    NonFinitePoint { curve: usize, index: usize },
+    #[error("curve {curve}: the normal at sample {index} is zero or not finite")]
+    BadNormal { curve: usize, index: usize },
+    #[error("curve {curve}: {points} points and {normals} normals")]
+    LengthMismatch {
+        curve: usize,
+        points: usize,
+        normals: usize,
+    },
+    #[error("surface: vertex {index} is not finite or has no normal")]
+    BadVertex { index: usize },
+    #[error("surface: triangle {index} refers to vertex {vertex}, of {count}")]
+    BadIndex {
+        index: usize,
+        vertex: u32,
+        count: usize,
+    },
+    #[error("surface: triangle {index} is degenerate (zero area)")]
+    DegenerateTriangle { index: usize },
+    #[error("glTF serialisation failed: {0}")]
+    Serialise(String),
+}
+
+/// World (z up) → glTF (y up).
+#[inline]
+pub fn to_gltf(v: &Vector3<f64>) -> [f32; 3] {
+    [v.x as f32, v.z as f32, -v.y as f32]
+}
+
+/// glTF (y up) → world (z up).
+#[inline]
+pub fn from_gltf(v: [f32; 3]) -> Vector3<f64> {
+    Vector3::new(v[0] as f64, -v[2] as f64, v[1] as f64)
+}
+
+struct Builder {
+    root: json::Root,
+    bin: Vec<u8>,
+}
+
+impl Builder {
+    fn view(
+        &mut self,
+        bytes: &[u8],
+        target: json::buffer::Target,
+    ) -> json::Index<json::buffer::View> {
+        while self.bin.len() % 4 != 0 {
+            self.bin.push(0);
+        }
+        let offset = self.bin.len();
+        self.bin.extend_from_slice(bytes);
+        self.root.push(json::buffer::View {
+            buffer: json::Index::new(0),
+            byte_length: USize64::from(bytes.len()),
+            byte_offset: Some(USize64::from(offset)),
+            byte_stride: None,
+            name: None,
+            target: Some(Checked::Valid(target)),
+            extensions: None,
+            extras: None,
+        })
+    }
+
+    fn vec3(&mut self, data: &[[f32; 3]], bounds: bool) -> json::Index<json::Accessor> {
+        let bytes: Vec<u8> = data
+            .iter()
+            .flat_map(|v| v.iter().flat_map(|x| x.to_le_bytes()))
+            .collect();
+        let view = self.view(&bytes, json::buffer::Target::ArrayBuffer);
+        let (min, max) = if bounds {
+            let mut lo = [f32::MAX; 3];
+            let mut hi = [f32::MIN; 3];
+            for v in data {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(v[k]);
+                    hi[k] = hi[k].max(v[k]);
+                }
+            }
+            (
+                Some(json::Value::from(lo.to_vec())),
+                Some(json::Value::from(hi.to_vec())),
+            )
+        } else {
+            (None, None)
+        };
+        self.root.push(json::Accessor {
+            buffer_view: Some(view),
+            byte_offset: None,
+            count: USize64::from(data.len()),
+            component_type: Checked::Valid(json::accessor::GenericComponentType(
+                json::accessor::ComponentType::F32,
+            )),
+            extensions: None,
+            extras: None,
+            type_: Checked::Valid(json::accessor::Type::Vec3),
+            min,
+            max,
+            name: None,
+            normalized: false,
+            sparse: None,
+        })
+    }
+
+    fn indices(&mut self, tris: &[[u32; 3]]) -> json::Index<json::Accessor> {
+        let bytes: Vec<u8> = tris
+            .iter()
+            .flat_map(|t| t.iter().flat_map(|x| x.to_le_bytes()))
+            .collect();
+        let view = self.view(&bytes, json::buffer::Target::ElementArrayBuffer);
+        self.root.push(json::Accessor {
+            buffer_view: Some(view),
+            byte_offset: None,
+            count: USize64::from(tris.len() * 3),
+            component_type: Checked::Valid(json::accessor::GenericComponentType(
+                json::accessor::ComponentType::U32,
+            )),
+            extensions: None,
+            extras: None,
+            type_: Checked::Valid(json::accessor::Type::Scalar),
+            min: None,
+            max: None,
+            name: None,
+            normalized: false,
+            sparse: None,
+        })
+    }
+}
+
+fn raw(v: serde_json::Value) -> json::extras::Extras {
+    json::extras::RawValue::from_string(v.to_string()).ok()
+}
+
+fn unit(n: &Vector3<f64>) -> Option<[f32; 3]> {
+    let l = n.norm();
+    if !(l.is_finite() && l > 1e-12) {
+        return None;
+    }
+    let u = to_gltf(&(n / l));
+    // Renormalise in f32 so that the validator's unit-length check holds.
+    let l32 = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
+    Some(u.map(|x| x / l32))
+}
+
+fn finite(p: &Vector3<f64>) -> bool {
+    p.iter().all(|x| x.is_finite() && x.abs() < 1e30)
+}
+
+/// The glb bytes of a network (and optional surface).
+pub fn network_glb(
+    curves: &[NetworkCurve],
+    nodes: &BTreeMap<u32, Vector3<f64>>,
+    surface: Option<&SurfaceMesh>,
+) -> Result<Vec<u8>, GltfError> {
+    let mut b = Builder {
+        root: json::Root::default(),
+        bin: Vec::new(),
+    };
+    b.root.asset.generator = Some(format!("sfs {}", env!("CARGO_PKG_VERSION")));
+    let mut prims = Vec::new();
+    for c in curves {
+        if c.points.len() != c.normals.len() {
+            return Err(GltfError::LengthMismatch {
+                curve: c.index,
+                points: c.points.len(),
+                normals: c.normals.len(),
+            });
+        }
+        if c.points.len() < 2 {
+            continue; // a line strip needs two points
+        }
+        let mut pos = Vec::with_capacity(c.points.len());
+        let mut nrm = Vec::with_capacity(c.points.len());
+        for (i, (p, n)) in c.points.iter().zip(&c.normals).enumerate() {
+            if !finite(p) {
+                return Err(GltfError::NonFinitePoint {
+                    curve: c.index,
+                    index: i,
+                });
+            }
+            pos.push(to_gltf(p));
+            nrm.push(unit(n).ok_or(GltfError::BadNormal {
+                curve: c.index,
+                index: i,
+            })?);
+        }
+        let pa = b.vec3(&pos, true);
+        let na = b.vec3(&nrm, false);
+        let mut attributes = BTreeMap::new();
+        attributes.insert(Checked::Valid(json::mesh::Semantic::Positions), pa);
+        attributes.insert(Checked::Valid(json::mesh::Semantic::Normals), na);
+        prims.push(json::mesh::Primitive {
+            attributes,
+            extensions: None,
+            extras: raw(
+                serde_json::json!({"curve": c.index, "boundary": c.boundary, "nodes": c.nodes}),
+            ),
+            indices: None,
+            material: None,
+            mode: Checked::Valid(json::mesh::Mode::LineStrip),
+            targets: None,
+        });
+    }
+    let mut scene_nodes = Vec::new();
+    let node_json: serde_json::Map<String, serde_json::Value> = nodes
+        .iter()
+        .filter(|(_, p)| finite(p))
+        .map(|(k, p)| (k.to_string(), serde_json::json!(to_gltf(p))))
+        .collect();
+    let mesh = (!prims.is_empty()).then(|| {
+        b.root.push(json::Mesh {
+            extensions: None,
+            extras: None,
+            name: Some("network".into()),
+            primitives: prims,
+            weights: None,
+        })
+    });
+    scene_nodes.push(b.root.push(json::Node {
+        mesh,
+        name: Some("network".into()),
+        extras: raw(serde_json::json!({ "nodes": node_json })),
+        ..Default::default()
+    }));
+    if let Some(s) = surface.filter(|s| !s.triangles.is_empty()) {
+        let n = s.positions.len();
+        let mut pos = Vec::with_capacity(n);
+        let mut nrm = Vec::with_capacity(n);
+        for (i, (p, q)) in s.positions.iter().zip(&s.normals).enumerate() {
+            if !finite(p) {
+                return Err(GltfError::BadVertex { index: i });
+            }
+            pos.push(to_gltf(p));
+            nrm.push(unit(q).ok_or(GltfError::BadVertex { index: i })?);
+        }
+        if s.normals.len() != n {
+            return Err(GltfError::BadVertex {
+                index: s.normals.len().min(n),
+            });
+        }
+        for (i, t) in s.triangles.iter().enumerate() {
+            if let Some(&v) = t.iter().find(|&&v| v as usize >= n) {
+                return Err(GltfError::BadIndex {
+                    index: i,
+                    vertex: v,
+                    count: n,
+                });
+            }
+            // Degenerate in the written (f32) coordinates is what a viewer sees.
+            let [a, bb, c] = t.map(|v| Vector3::from(pos[v as usize]).cast::<f64>());
+            if (bb - a).cross(&(c - a)).norm() <= 0.0 {
+                return Err(GltfError::DegenerateTriangle { index: i });
+            }
+        }
+        let pa = b.vec3(&pos, true);
+        let na = b.vec3(&nrm, false);
+        let ia = b.indices(&s.triangles);
+        let mut attributes = BTreeMap::new();
+        attributes.insert(Checked::Valid(json::mesh::Semantic::Positions), pa);
+        attributes.insert(Checked::Valid(json::mesh::Semantic::Normals), na);
+        let mesh = b.root.push(json::Mesh {
+            extensions: None,
+            extras: None,
+            name: Some("surface".into()),
+            primitives: vec![json::mesh::Primitive {
+                attributes,
+                extensions: None,
+                extras: None,
+                indices: Some(ia),
+                material: None,
+                mode: Checked::Valid(json::mesh::Mode::Triangles),
+                targets: None,
+            }],
+            weights: None,
+        });
+        scene_nodes.push(b.root.push(json::Node {
+            mesh: Some(mesh),
+            name: Some("surface".into()),
+            ..Default::default()
+        }));
+    }
+    while b.bin.len() % 4 != 0 {
+        b.bin.push(0);
+    }
+    if !b.bin.is_empty() {
+        b.root.push(json::Buffer {
+            byte_length: USize64::from(b.bin.len()),
+            name: None,
+            uri: None,
+            extensions: None,
+            extras: None,
+        });
+    }
+    let scene = b.root.push(json::Scene {
+        extensions: None,
+        extras: None,
+        name: None,
+        nodes: scene_nodes,
+    });
+    b.root.scene = Some(scene);
+    let json_text =
+        json::serialize::to_string(&b.root).map_err(|e| GltfError::Serialise(e.to_string()))?;
+    let mut json_bytes = json_text.into_bytes();
+    while json_bytes.len() % 4 != 0 {
+        json_bytes.push(b' ');
+    }
+    let length = 12 + 8 + json_bytes.len() + if b.bin.is_empty() { 0 } else { 8 + b.bin.len() };
+    let glb = gltf::binary::Glb {
+        header: gltf::binary::Header {
+            magic: *b"glTF",
+            version: 2,
+            length: length as u32,
+        },
+        json: std::borrow::Cow::Owned(json_bytes),
+        bin: (!b.bin.is_empty()).then_some(std::borrow::Cow::Owned(b.bin)),
+    };
+    glb.to_vec()
+        .map_err(|e| GltfError::Serialise(e.to_string()))
+}
+
+/// A network read back from a glb (world frame, z up).
+#[derive(Debug, Clone, Default)]
+pub struct ReadNetwork {
+    pub curves: Vec<NetworkCurve>,
+    pub nodes: BTreeMap<u32, Vector3<f64>>,
+    pub surface: Option<SurfaceMesh>,
+}
+
+/// Reads what [`network_glb`] writes (nodes named `network` and `surface`).
+pub fn read_glb(bytes: &[u8]) -> Result<ReadNetwork, String> {
+    let g = gltf::Gltf::from_slice(bytes).map_err(|e| format!("not a valid glb: {e}"))?;
+    let blob = g.blob.as_deref();
+    let mut out = ReadNetwork::default();
+    for node in g.nodes() {
+        let name = node.name().unwrap_or("");
+        if name == "network" {
+            if let Some(x) = node.extras() {
+                let v: serde_json::Value =
+                    serde_json::from_str(x.get()).map_err(|e| e.to_string())?;
+                if let Some(m) = v.get("nodes").and_then(|n| n.as_object()) {
+                    for (k, p) in m {
+                        let a: Vec<f32> =
+                            serde_json::from_value(p.clone()).map_err(|e| e.to_string())?;
+                        let idx: u32 = k
+                            .parse()
+                            .map_err(|_| format!("node key {k:?} is not an index"))?;
+                        if a.len() == 3 {
+                            out.nodes.insert(idx, from_gltf([a[0], a[1], a[2]]));
+                        }
+                    }
+                }
+            }
+        }
+        let Some(mesh) = node.mesh() else { continue };
+        for (pi, prim) in mesh.primitives().enumerate() {
+            let reader = prim.reader(|_| blob);
+            let pos: Vec<Vector3<f64>> = reader
+                .read_positions()
+                .map(|it| it.map(from_gltf).collect())
+                .unwrap_or_default();
+            let nrm: Vec<Vector3<f64>> = reader
+                .read_normals()
+                .map(|it| it.map(from_gltf).collect())
+                .unwrap_or_default();
+            match (name, prim.mode()) {
+                ("network", gltf::mesh::Mode::LineStrip) => {
+                    let extras: serde_json::Value = prim
+                        .extras()
+                        .as_ref()
+                        .and_then(|x| serde_json::from_str(x.get()).ok())
+                        .unwrap_or(serde_json::Value::Null);
+                    out.curves.push(NetworkCurve {
+                        index: extras
+                            .get("curve")
+                            .and_then(|v| v.as_u64())
+                            .unwrap_or(pi as u64) as usize,
+                        boundary: extras
+                            .get("boundary")
+                            .and_then(|v| v.as_bool())
+                            .unwrap_or(false),
+                        nodes: extras
+                            .get("nodes")
+                            .and_then(|v| serde_json::from_value(v.clone()).ok())
+                            .unwrap_or_default(),
+                        points: pos,
+                        normals: nrm,
+                    });
+                }
+                ("surface", gltf::mesh::Mode::Triangles) => {
+                    let idx: Vec<u32> = reader
+                        .read_indices()
+                        .map(|i| i.into_u32().collect())
+                        .unwrap_or_default();
+                    out.surface = Some(SurfaceMesh {
+                        positions: pos,
+                        normals: nrm,
+                        triangles: idx.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
+                    });
+                }
+                _ => {}
+            }
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn roundtrip_and_errors() {
+        let c = NetworkCurve {
+            index: 3,
+            boundary: true,
+            nodes: vec![4, 5],
+            points: vec![Vector3::new(0.1, 0.2, 0.3), Vector3::new(0.4, -0.5, 0.6)],
+            normals: vec![Vector3::z() * 2.0, Vector3::x()],
+        };
+        let mut nodes = BTreeMap::new();
+        nodes.insert(4, c.points[0]);
+        nodes.insert(5, c.points[1]);
+        let surf = SurfaceMesh {
+            positions: vec![Vector3::zeros(), Vector3::x(), Vector3::y()],
+            normals: vec![Vector3::z(); 3],
+            triangles: vec![[0, 1, 2]],
+        };
+        let glb = network_glb(std::slice::from_ref(&c), &nodes, Some(&surf)).unwrap();
+        let r = read_glb(&glb).unwrap();
+        assert_eq!(r.curves.len(), 1);
+        let rc = &r.curves[0];
+        assert_eq!(
+            (rc.index, rc.boundary, rc.nodes.clone()),
+            (3, true, vec![4, 5])
+        );
+        for (a, b) in rc.points.iter().zip(&c.points) {
+            assert!((a - b).norm() < 1e-6);
+        }
+        assert!(
+            (rc.normals[0] - Vector3::z()).norm() < 1e-6,
+            "normals are unit"
+        );
+        assert!((r.nodes[&5] - c.points[1]).norm() < 1e-6);
+        assert_eq!(r.surface.unwrap().triangles, vec![[0, 1, 2]]);
+
+        let mut bad = c.clone();
+        bad.points[1].x = f64::NAN;
+        assert_eq!(
+            network_glb(&[bad], &nodes, None),
+            Err(GltfError::NonFinitePoint { curve: 3, index: 1 })
+        );
+        let mut bad = c.clone();
+        bad.normals[0] = Vector3::zeros();
+        assert_eq!(
+            network_glb(&[bad], &nodes, None),
+            Err(GltfError::BadNormal { curve: 3, index: 0 })
+        );
+        let degenerate = SurfaceMesh {
+            triangles: vec![[0, 1, 1]],
+            ..surf.clone()
+        };
+        assert_eq!(
+            network_glb(std::slice::from_ref(&c), &nodes, Some(&degenerate)),
+            Err(GltfError::DegenerateTriangle { index: 0 })
+        );
+        let out_of_range = SurfaceMesh {
+            triangles: vec![[0, 1, 7]],
+            ..surf
+        };
+        assert!(matches!(
+            network_glb(&[c], &nodes, Some(&out_of_range)),
+            Err(GltfError::BadIndex { .. })
+        ));
+    }
+
+    #[test]
+    fn y_up_conversion_is_a_rotation() {
+        let v = Vector3::new(1.0, 2.0, 3.0);
+        assert_eq!(to_gltf(&v), [1.0, 3.0, -2.0]);
+        assert!((from_gltf(to_gltf(&v)) - v).norm() < 1e-6);
+    }
+}

@@ -1,0 +1,200 @@
+//! `sfs eval` through the binary: a perfect reconstruction scores about 0, a rigid motion plus
+//! 1 mm of noise scores at the expected level after registration, a bent curve scores high,
+//! a surface is measured against the analytic truth.
+
+use nalgebra::{Rotation3, Vector3};
+use sfs::gltf_out::{network_glb, NetworkCurve, SurfaceMesh};
+use sfs::simulate::rng::Rng;
+use sfs::simulate::truth::Truth;
+use sfs::simulate::{self, scene, Profile};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn truth() -> Truth {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
+    let s = scene::load(&scene::find("bowl", &dir)).unwrap();
+    simulate::run(
+        &s,
+        device_protocol::DeviceKind::Morphorider,
+        Profile::Default,
+        1,
+    )
+    .truth
+}
+
+fn curves_of(
+    t: &Truth,
+    mut f: impl FnMut(usize, Vector3<f64>) -> Vector3<f64>,
+) -> (
+    Vec<NetworkCurve>,
+    std::collections::BTreeMap<u32, Vector3<f64>>,
+) {
+    let curves = t
+        .curves
+        .iter()
+        .map(|c| NetworkCurve {
+            index: c.index,
+            boundary: c.boundary,
+            nodes: c.nodes.clone(),
+            points: c
+                .points
+                .iter()
+                .map(|p| f(c.index, Vector3::from(*p)))
+                .collect::<Vec<_>>(),
+            normals: c.normals.iter().map(|n| Vector3::from(*n)).collect(),
+        })
+        .collect();
+    let nodes = t
+        .nodes
+        .iter()
+        .map(|(k, p)| (k.parse().unwrap(), f(usize::MAX, Vector3::from(*p))))
+        .collect();
+    (curves, nodes)
+}
+
+fn eval(t: &Truth, glb: &[u8], name: &str) -> serde_json::Value {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("eval-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("t.truth.json"), serde_json::to_vec(t).unwrap()).unwrap();
+    std::fs::write(dir.join("n.glb"), glb).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["eval", "--truth"])
+        .arg(dir.join("t.truth.json"))
+        .arg("--glb")
+        .arg(dir.join("n.glb"))
+        .arg("--report")
+        .arg(dir.join("eval.json"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let printed: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let written: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("eval.json")).unwrap()).unwrap();
+    assert_eq!(printed, written);
+    printed
+}
+
+fn f(v: &serde_json::Value, path: &[&str]) -> f64 {
+    path.iter().fold(v, |v, k| &v[k]).as_f64().unwrap()
+}
+
+#[test]
+fn perfect_reconstruction_scores_zero() {
+    let t = truth();
+    let (c, n) = curves_of(&t, |_, p| p);
+    let e = eval(&t, &network_glb(&c, &n, None).unwrap(), "perfect");
+    assert!(f(&e, &["curves", "max_pct"]) < 1e-5, "{e}");
+    assert_eq!(e["registration"]["nodes_matched"], 9);
+}
+
+#[test]
+fn rigid_motion_and_1mm_noise_score_at_the_noise_level() {
+    let t = truth();
+    let r = Rotation3::from_euler_angles(0.4, -0.3, 2.0);
+    let shift = Vector3::new(3.0, -1.0, 0.5);
+    let rng = std::cell::RefCell::new(Rng::new(3));
+    let (c, n) = curves_of(&t, |_, p| r * p + shift + rng.borrow_mut().vec3(0.001));
+    let e = eval(&t, &network_glb(&c, &n, None).unwrap(), "rigid");
+    let mean = f(&e, &["curves", "mean_m"]);
+    // Isotropic noise of 1 mm seen across a curve: Rayleigh mean 1 mm · √(π/2) = 1.25 mm.
+    assert!((1.0e-3..1.4e-3).contains(&mean), "mean {mean} m");
+    assert!(
+        (f(&e, &["registration", "rotation_deg"]) - r.angle().to_degrees()).abs() < 0.05,
+        "{e}"
+    );
+    assert!(f(&e, &["curves", "max_m"]) < 0.006);
+}
+
+#[test]
+fn a_bent_curve_scores_high() {
+    let t = truth();
+    let bent = 1; // a section through the bottom of the bowl
+    let len = t.curves[bent].points.len();
+    let mut k = 0usize;
+    let (c, n) = curves_of(&t, |ci, p| {
+        if ci != bent {
+            return p;
+        }
+        k += 1;
+        let u = k as f64 / len as f64;
+        p + Vector3::new(0.0, 0.0, 0.05 * (std::f64::consts::PI * u).sin())
+    });
+    let e = eval(&t, &network_glb(&c, &n, None).unwrap(), "bent");
+    assert!(f(&e, &["curves", "max_m"]) > 0.03, "{e}");
+    assert!(f(&e, &["curves", "max_pct"]) > 2.0);
+}
+
+#[test]
+fn surface_vertices_are_measured_against_the_truth_surface() {
+    let t = truth();
+    let (c, n) = curves_of(&t, |_, p| p);
+    // The bowl's analytic surface, sampled: exact vertices, then the same raised by 1 cm.
+    let mut positions = Vec::new();
+    let mut triangles = Vec::new();
+    let m = 20;
+    for i in 0..=m {
+        for j in 0..=m {
+            let (x, y) = (
+                -0.25 + 0.5 * i as f64 / m as f64,
+                -0.25 + 0.5 * j as f64 / m as f64,
+            );
+            positions.push(Vector3::new(x, y, x * x + y * y));
+        }
+    }
+    for i in 0..m {
+        for j in 0..m {
+            let a = (i * (m + 1) + j) as u32;
+            let (b, cc, d) = (a + 1, a + m as u32 + 2, a + m as u32 + 1);
+            triangles.push([a, d, cc]);
+            triangles.push([a, cc, b]);
+        }
+    }
+    let normals = vec![Vector3::z(); positions.len()];
+    let exact = SurfaceMesh {
+        positions: positions.clone(),
+        normals: normals.clone(),
+        triangles: triangles.clone(),
+    };
+    let e = eval(&t, &network_glb(&c, &n, Some(&exact)).unwrap(), "surface");
+    assert!(f(&e, &["surface", "max_m"]) < 1e-6, "{e}");
+    let raised = SurfaceMesh {
+        positions: positions
+            .iter()
+            .map(|p| p + Vector3::new(0.0, 0.0, 0.01))
+            .collect(),
+        normals,
+        triangles,
+    };
+    let e = eval(&t, &network_glb(&c, &n, Some(&raised)).unwrap(), "raised");
+    let mean = f(&e, &["surface", "mean_m"]);
+    assert!((0.007..0.0101).contains(&mean), "mean {mean}");
+}
+
+#[test]
+fn missing_or_invalid_inputs_are_input_errors() {
+    let dir =
+        PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("eval-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("t.truth.json"),
+        serde_json::to_vec(&truth()).unwrap(),
+    )
+    .unwrap();
+    std::fs::write(dir.join("bad.glb"), b"not a glb").unwrap();
+    for glb in ["missing.glb", "bad.glb"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_sfs"))
+            .args(["eval", "--truth"])
+            .arg(dir.join("t.truth.json"))
+            .arg("--glb")
+            .arg(dir.join(glb))
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(sfs::exit::INPUT), "{glb}");
+        assert!(String::from_utf8_lossy(&out.stderr).contains(glb));
+    }
+}
