@@ -10,7 +10,7 @@
 //! # async fn f() -> Result<(), sfs::source::SourceError> {
 //! use sfs::source::{self, SourceEvent, SourceSpec, Pace};
 //! use sfs::shutdown::Shutdown;
-//! let spec = SourceSpec::Replay { path: "replay-logs/demo-morphorider.bin".into(), pace: Pace::Fast };
+//! let spec = SourceSpec::Replay { path: "replay-logs/cone-morphorider.bin".into(), pace: Pace::Fast };
 //! let mut src = source::spawn(spec, None, Shutdown::new())?;
 //! while let Some(ev) = src.events.recv().await {
 //!     if let SourceEvent::Bytes(b) = ev { println!("{} bytes", b.len()); }

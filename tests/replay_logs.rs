@@ -1,0 +1,98 @@
+//! The curated replay logs: each is exactly what `replay-logs/regenerate.sh` produces (so a
+//! simulator change cannot silently leave stale logs behind), and each replays through the
+//! binary into the truth's curves.
+
+use device_protocol::DeviceKind;
+use sfs::simulate::{self, scene, Profile};
+use std::path::Path;
+use std::process::Command;
+
+const LOGS: &[(&str, &str, DeviceKind, Profile, u64)] = &[
+    (
+        "cone-morphorider",
+        "cone",
+        DeviceKind::Morphorider,
+        Profile::Default,
+        1,
+    ),
+    (
+        "sphere-octa-morphorider-field",
+        "sphere-octa",
+        DeviceKind::Morphorider,
+        Profile::Field,
+        2,
+    ),
+    ("bowl-phone", "bowl", DeviceKind::Phone, Profile::Default, 3),
+];
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn committed_logs_are_what_the_simulator_makes() {
+    for &(name, sc, device, profile, seed) in LOGS {
+        let s = scene::load(&scene::find(sc, &root().join("config/scenes"))).unwrap();
+        let sim = simulate::run(&s, device, profile, seed);
+        let bin = std::fs::read(root().join(format!("replay-logs/{name}.bin"))).unwrap();
+        assert!(
+            bin == sim.bytes,
+            "{name}.bin is stale: run replay-logs/regenerate.sh"
+        );
+        let committed =
+            std::fs::read(root().join(format!("replay-logs/{name}.truth.json"))).unwrap();
+        assert!(
+            committed == serde_json::to_vec(&sim.truth).unwrap(),
+            "{name}.truth.json is stale: run replay-logs/regenerate.sh"
+        );
+    }
+}
+
+#[test]
+fn logs_replay_into_the_truth_curves() {
+    for &(name, ..) in LOGS {
+        let out_dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("logs-{}-{name}", std::process::id()));
+        let out = Command::new(env!("CARGO_BIN_EXE_sfs"))
+            .args(["--log", "off", "replay"])
+            .arg(root().join(format!("replay-logs/{name}.bin")))
+            .arg("--out")
+            .arg(&out_dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out_dir.join("report.json")).unwrap()).unwrap();
+        let truth: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(root().join(format!("replay-logs/{name}.truth.json"))).unwrap(),
+        )
+        .unwrap();
+        let got: Vec<&serde_json::Value> = report["curves"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| &c["nodes"])
+            .collect();
+        let want: Vec<&serde_json::Value> = truth["curves"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| &c["nodes"])
+            .collect();
+        assert_eq!(got, want, "{name}: {}", report["warnings"]);
+        let link = &report["link"];
+        assert!(
+            link["packets"]
+                .as_object()
+                .unwrap()
+                .values()
+                .map(|v| v.as_u64().unwrap())
+                .sum::<u64>()
+                > 10_000
+        );
+    }
+}
