@@ -61,10 +61,18 @@ pub struct EvalArgs {
 }
 
 #[derive(Debug, Args)]
+#[command(group(clap::ArgGroup::new("what").required(true).args(["scene", "structure"])))]
 pub struct SimulateArgs {
     /// Scene name (a file NAME.toml in --scenes) or the path of a scene file.
     #[arg(long)]
-    pub scene: String,
+    pub scene: Option<String>,
+    /// A deforming instrumented structure streamed by a sensor array (monitoring mode):
+    /// PREFIX.truth.json then holds the layout and the truth at every second.
+    #[arg(long, value_parser = ["riser", "panel"])]
+    pub structure: Option<String>,
+    /// Structures: seconds to simulate.
+    #[arg(long, default_value_t = 120.0)]
+    pub duration: f64,
     /// The device scanning it.
     #[arg(long, default_value = "morphorider", value_parser = ["morphorider", "phone", "array"])]
     pub device: String,

@@ -195,9 +195,59 @@ fn calibrate(a: CalibrateArgs) -> i32 {
     }
 }
 
+fn with_ext(prefix: &Path, ext: &str) -> std::path::PathBuf {
+    let mut s = prefix.to_owned().into_os_string();
+    s.push(ext);
+    s.into()
+}
+
+/// Writes the simulator's outputs, creating the directory; an exit code on failure.
+fn write_outputs(files: &[(&Path, &[u8])]) -> Result<(), i32> {
+    for (p, b) in files {
+        if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+            if let Err(e) = std::fs::create_dir_all(dir) {
+                complain!("sfs: cannot create {}: {e}", dir.display());
+                return Err(exit::OUTPUT);
+            }
+        }
+        if let Err(e) = sfs::atomic::write_atomic(p, b) {
+            complain!("sfs: cannot write {}: {e}", p.display());
+            return Err(exit::OUTPUT);
+        }
+    }
+    Ok(())
+}
+
 fn simulate(a: SimulateArgs) -> i32 {
     use sfs::simulate::{self, scene};
-    let path = scene::find(&a.scene, &a.scenes);
+    let (bin, truth) = (with_ext(&a.out, ".bin"), with_ext(&a.out, ".truth.json"));
+    if let Some(st) = &a.structure {
+        let kind: simulate::structure::StructureKind = st
+            .parse()
+            .unwrap_or(simulate::structure::StructureKind::Riser);
+        if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 7.0 * 86_400.0) {
+            complain!(
+                "sfs: --duration: {} s is not between 0 and a week",
+                a.duration
+            );
+            return exit::USAGE;
+        }
+        let (bytes, t) = simulate::structure::run(kind, a.seed, a.duration, 10.0);
+        let json = serde_json::to_vec(&t).unwrap_or_default();
+        if let Err(code) = write_outputs(&[(&bin, &bytes), (&truth, &json)]) {
+            return code;
+        }
+        say!(
+            "{st} (array of {} sensors, seed {}): {} bytes, {:.0} s",
+            t.sensors.len(),
+            a.seed,
+            bytes.len(),
+            a.duration
+        );
+        say!("capture: {}\ntruth:   {}", bin.display(), truth.display());
+        return exit::OK;
+    }
+    let path = scene::find(a.scene.as_deref().unwrap_or_default(), &a.scenes);
     let sc = match scene::load(&path) {
         Ok(s) => s,
         Err(e) => {
@@ -216,18 +266,6 @@ fn simulate(a: SimulateArgs) -> i32 {
     };
     let profile = a.profile.parse().unwrap_or(simulate::Profile::Default);
     let sim = simulate::run(&sc, device, profile, a.seed);
-    let with_ext = |ext: &str| {
-        let mut s = a.out.clone().into_os_string();
-        s.push(ext);
-        std::path::PathBuf::from(s)
-    };
-    let (bin, truth) = (with_ext(".bin"), with_ext(".truth.json"));
-    if let Some(dir) = bin.parent().filter(|d| !d.as_os_str().is_empty()) {
-        if let Err(e) = std::fs::create_dir_all(dir) {
-            complain!("sfs: cannot create {}: {e}", dir.display());
-            return exit::OUTPUT;
-        }
-    }
     let json = match serde_json::to_vec(&sim.truth) {
         Ok(j) => j,
         Err(e) => {
@@ -235,11 +273,8 @@ fn simulate(a: SimulateArgs) -> i32 {
             return exit::INTERNAL;
         }
     };
-    for (p, b) in [(&bin, &sim.bytes), (&truth, &json)] {
-        if let Err(e) = sfs::atomic::write_atomic(p, b) {
-            complain!("sfs: cannot write {}: {e}", p.display());
-            return exit::OUTPUT;
-        }
+    if let Err(code) = write_outputs(&[(&bin, &sim.bytes), (&truth, &json)]) {
+        return code;
     }
     say!(
         "{} ({}, {} profile, seed {}): {} nodes, {} curves, {} bytes, {:.0} s of scanning",

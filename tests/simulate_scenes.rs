@@ -190,3 +190,39 @@ fn scene_errors_name_the_key() {
         assert_eq!(e.key, *key, "{e}");
     }
 }
+
+#[test]
+fn deforming_riser_streams_orientations_that_acquisition_recovers() {
+    use sfs::simulate::structure::{run, StructureKind};
+    let (bytes, truth) = run(StructureKind::Riser, 4, 20.0, 10.0);
+    let (stats, scan) = decode(&bytes);
+    assert_eq!(stats.rejected.total() + stats.lost_packets, 0);
+    assert_eq!(
+        scan.array.len(),
+        41 * 19,
+        "one epoch per sensor and second but the last"
+    );
+    // Each averaged orientation matches the truth at the middle of its window (the structure
+    // moves during the window: tip up to 0.9°/s).
+    let mut worst: f64 = 0.0;
+    for e in &scan.array {
+        let mid = e.t - 0.5;
+        let k = ((mid - 0.5).round().max(0.0) as usize).min(truth.epochs.len() - 1);
+        let q = truth.epochs[k].q[e.sensor as usize];
+        let tq = nalgebra::UnitQuaternion::new_normalize(nalgebra::Quaternion::new(
+            q[0], q[1], q[2], q[3],
+        ));
+        let eq = nalgebra::UnitQuaternion::new_normalize(nalgebra::Quaternion::new(
+            e.q[0], e.q[1], e.q[2], e.q[3],
+        ));
+        worst = worst.max(eq.angle_to(&tq).to_degrees());
+    }
+    assert!(worst < 1.5, "worst sensor orientation error {worst:.2}°");
+    // The tip swings ±2 m (2/3 θ_tip L); 20 s cover a third of the period.
+    let max_tip = truth
+        .epochs
+        .iter()
+        .filter_map(|e| e.tip_displacement)
+        .fold(0.0, f64::max);
+    assert!(max_tip > 1.5, "{max_tip}");
+}

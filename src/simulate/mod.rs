@@ -20,6 +20,7 @@ pub mod operator;
 pub mod rng;
 pub mod scene;
 pub mod shapes;
+pub mod structure;
 pub mod surface;
 pub mod truth;
 
