@@ -88,7 +88,8 @@ pub struct DeviceParams {
     /// Per-curve wheel slip, standard deviation (relative). Default 0.005.
     pub slip_sigma: f64,
     /// Rotation from the mapped sensor axes to the rolling frame (the calibration's
-    /// `mounting`). Default identity.
+    /// `mounting`). Default: Morphorider 0.5° about the normal (its wheel is not perfectly
+    /// aligned with its sensor), phone none.
     pub mounting: Rotation3<f64>,
     /// Phone: standard deviation of the measured segment lengths, m (0: none sent). Default 0.003.
     pub segment_length_sigma: f64,
@@ -121,7 +122,7 @@ impl DeviceParams {
             ticks_per_rev: 1024,
             wheel_circumference_um: 100_000,
             slip_sigma: 0.005,
-            mounting: Rotation3::identity(),
+            mounting: Rotation3::from_axis_angle(&Vector3::z_axis(), 0.5f64.to_radians()),
             segment_length_sigma: 0.0,
             earth: Earth::default(),
             disturbance: None,
