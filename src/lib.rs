@@ -32,6 +32,7 @@ pub mod eval;
 pub mod gltf_out;
 pub mod keypad;
 pub mod link;
+pub mod network;
 pub mod orientation;
 pub mod report;
 pub mod scan;
@@ -40,6 +41,7 @@ pub mod session;
 pub mod shutdown;
 pub mod simulate;
 pub mod source;
+pub mod sparse_llt;
 
 /// Exit codes of the `sfs` binary (a stated policy, also in the README).
 pub mod exit {

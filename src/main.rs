@@ -15,6 +15,7 @@ use std::path::Path;
 use std::time::Duration;
 
 fn main() {
+    sfs::sparse_llt::single_threaded();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {
@@ -114,6 +115,7 @@ fn replay(a: ReplayArgs) -> i32 {
 fn options(cfg: &Config, file: &Path) -> Result<session::Options, ConfigError> {
     Ok(session::Options {
         acquisition: cfg.acquisition_config(file)?,
+        ..Default::default()
     })
 }
 

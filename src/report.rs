@@ -24,6 +24,12 @@ pub struct Report {
     pub acquisition: Counts,
     /// Problems in words naming curve, node and time.
     pub warnings: Vec<String>,
+    /// Reconstructed node positions in the glb's frame (y up), by node index.
+    pub nodes: std::collections::BTreeMap<String, [f32; 3]>,
+    /// Wall time per reconstruction stage, ms.
+    pub timings_ms: Option<crate::network::Timings>,
+    /// What the reconstruction did (curves used, samples, components, node normal agreement).
+    pub network: Option<crate::network::NetworkReport>,
 }
 
 /// A curve in `report.json`.

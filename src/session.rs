@@ -19,11 +19,14 @@ pub const CAPTURE_FILE: &str = "capture.bin";
 pub const REPORT_FILE: &str = "report.json";
 /// Name of the acquired scan (curves of raw samples and tags).
 pub const SCAN_FILE: &str = "scan.json";
+/// Name of the reconstructed network (glTF binary).
+pub const NETWORK_FILE: &str = "network.glb";
 
 /// What a session does with the packets (everything but the source).
 #[derive(Debug, Clone, Default)]
 pub struct Options {
     pub acquisition: AcquisitionConfig,
+    pub network: crate::network::NetworkParams,
 }
 
 /// How often a running session logs its link statistics (when they changed).
@@ -141,9 +144,28 @@ pub async fn run(
         tracing::debug!(bytes = decoder.buffered(), "stream ended inside a frame");
     }
     log_stats("session ended", &stats);
-    let scan = acq.finish();
+    let mut scan = acq.finish();
     let scan_path = out_dir.join(SCAN_FILE);
     write_json(&scan_path, &scan).map_err(output_err(&scan_path))?;
+    let mut reconstructor = crate::network::Reconstructor::new();
+    let network = reconstructor.run(&scan, &options.network);
+    let mut nodes = std::collections::BTreeMap::new();
+    if let Some(net) = &network {
+        scan.warnings.extend(net.warnings.iter().cloned());
+        let glb_path = out_dir.join(NETWORK_FILE);
+        match network_glb(net) {
+            Ok(bytes) => {
+                crate::atomic::write_atomic(&glb_path, &bytes).map_err(output_err(&glb_path))?
+            }
+            Err(e) => {
+                tracing::error!("network.glb not written: {e}");
+                scan.warnings.push(format!("network.glb not written: {e}"));
+            }
+        }
+        for (k, p) in &net.positions.nodes {
+            nodes.insert(k.to_string(), crate::gltf_out::to_gltf(p));
+        }
+    }
     let report = Report {
         sfs_version: env!("CARGO_PKG_VERSION"),
         source: description,
@@ -158,6 +180,9 @@ pub async fn run(
         curves: scan.curves.iter().map(CurveSummary::from).collect(),
         acquisition: scan.counts.clone(),
         warnings: scan.warnings.clone(),
+        nodes,
+        timings_ms: network.as_ref().map(|n| n.report.timings_ms.clone()),
+        network: network.map(|n| n.report),
     };
     let report_path = out_dir.join(REPORT_FILE);
     report
@@ -174,6 +199,23 @@ pub async fn run(
         report_path,
         capture_path,
     })
+}
+
+/// The glb of a reconstruction.
+fn network_glb(net: &crate::network::Network) -> Result<Vec<u8>, crate::gltf_out::GltfError> {
+    let curves: Vec<crate::gltf_out::NetworkCurve> = net
+        .positions
+        .curves
+        .iter()
+        .map(|c| crate::gltf_out::NetworkCurve {
+            index: c.index,
+            boundary: c.boundary,
+            nodes: c.nodes.iter().map(|n| n.1).collect(),
+            points: c.points.clone(),
+            normals: c.normals.clone(),
+        })
+        .collect();
+    crate::gltf_out::network_glb(&curves, &net.positions.nodes, None)
 }
 
 fn write_json<T: serde::Serialize>(path: &Path, v: &T) -> std::io::Result<()> {

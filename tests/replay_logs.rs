@@ -96,3 +96,39 @@ fn logs_replay_into_the_truth_curves() {
         );
     }
 }
+
+/// The reconstruction of the clean Morphorider log scores within the reconstruction target
+/// (mean ≤ 0.10 % of the diagonal) with `sfs eval`, and its glb holds every curve and node.
+#[test]
+fn cone_log_reconstructs_within_target() {
+    let out_dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("logs-rec-{}", std::process::id()));
+    let st = Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "off", "replay"])
+        .arg(root().join("replay-logs/cone-morphorider.bin"))
+        .arg("--out")
+        .arg(&out_dir)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let out = Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["eval", "--truth"])
+        .arg(root().join("replay-logs/cone-morphorider.truth.json"))
+        .arg("--glb")
+        .arg(out_dir.join("network.glb"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let e: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(e["registration"]["nodes_matched"], 12);
+    let mean = e["curves"]["mean_pct"].as_f64().unwrap();
+    assert!(mean <= 0.10, "mean {mean} % of the diagonal");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["nodes"].as_object().unwrap().len(), 12);
+    assert_eq!(report["network"]["curves_used"], 7);
+}
