@@ -7,10 +7,12 @@
 
 pub mod poisson;
 pub mod prefilter;
+pub mod regression;
 
 use crate::scan::Scan;
 use poisson::{PoissonSolver, Positions};
 use prefilter::{prefilter, PrefilterParams, UniformCurve};
+use regression::{RegressionParams, RegressionReport, RegressionSolver};
 use serde::Serialize;
 use std::time::Instant;
 
@@ -18,6 +20,9 @@ use std::time::Instant;
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct NetworkParams {
     pub prefilter: PrefilterParams,
+    pub regression: RegressionParams,
+    /// Skip the regression (pre-filter only), for comparisons.
+    pub no_regression: bool,
 }
 
 /// What a reconstruction did, for `report.json`.
@@ -30,6 +35,8 @@ pub struct NetworkReport {
     pub outliers_removed: usize,
     /// Largest angle between the normals of two curves at a shared node, degrees.
     pub max_node_normal_angle_deg: f64,
+    /// The regression's iterations and energies.
+    pub regression: RegressionReport,
     pub timings_ms: Timings,
 }
 
@@ -53,6 +60,7 @@ pub struct Network {
 #[derive(Debug, Default)]
 pub struct Reconstructor {
     poisson: PoissonSolver,
+    regression: RegressionSolver,
 }
 
 impl Reconstructor {
@@ -81,6 +89,11 @@ impl Reconstructor {
             }
             return None;
         }
+        let regression = if p.no_regression {
+            RegressionReport::default()
+        } else {
+            self.regression.run(&mut uniform, &p.regression)
+        };
         let t2 = Instant::now();
         let positions = match self.poisson.solve(&uniform) {
             Ok(p) => p,
@@ -104,6 +117,7 @@ impl Reconstructor {
             components: positions.components,
             outliers_removed: uniform.iter().map(|u| u.outliers).sum(),
             max_node_normal_angle_deg: max_node_normal_angle(&positions),
+            regression,
             timings_ms: Timings {
                 prefilter: (t1 - t0).as_secs_f64() * 1e3,
                 regression: (t2 - t1).as_secs_f64() * 1e3,

@@ -1,0 +1,573 @@
+//! Regression on SO(3)ᴺ over the whole network (§4.3 of the paper): minimise
+//! `ξ·E_N + Σ_curves (E₀ + λE₁ + μE₂)` with the simplified chordal costs
+//!
+//! - `E₀ = Σ ‖X_i − A_i‖²_F` (stay close to the pre-filtered frames),
+//! - `E₁ = (1/h) Σ ‖X_i − X_{i+1}‖²_F` (stretching),
+//! - `E₂ = (1/h³) Σ ‖skew(X_iᵀ(X_{i+1} + X_{i−1}))‖²_F` (bending),
+//! - `E_N = Σ ‖X_i e₃ − X̃_j e₃‖²` over every two frames of different curves at a node,
+//!
+//! sums periodic on closed curves (whose last sample is their first), by Levenberg–Marquardt
+//! on the manifold: updates `X ← X·exp(ω̂)`, the normal matrix (3×3 blocks, banded per curve
+//! plus the node couplings) factorised by sparse Cholesky with its symbolic factorisation
+//! reused across iterations and runs.
+//!
+//! Units: `E₁` carries `1/h` and `E₂` `1/h³`, so the weights are set from smoothing lengths:
+//! `λ = ℓ₁²/h` and `μ = ℓ₂⁴/h` make the terms compare with `E₀` as a smoothing spline of
+//! lengths `ℓ₁`, `ℓ₂` would, whatever the sampling step (see [`RegressionParams`]).
+
+use super::prefilter::UniformCurve;
+use crate::sparse_llt::SpdPattern;
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use std::collections::HashMap;
+
+/// Regression parameters (documented defaults, chosen by measurement: BENCHMARKS.md).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RegressionParams {
+    /// Stretching smoothing length ℓ₁, m (λ = ℓ₁²/h). Default 0 (no stretching term: it pulls
+    /// frames towards a constant orientation).
+    pub stretch_length: f64,
+    /// Bending smoothing length ℓ₂, m (μ = ℓ₂⁴/h). Default `None`: `bend_fraction` of the
+    /// sampling step h, so that the smoothing follows the resolution of the reconstruction.
+    pub bend_length: Option<f64>,
+    /// ℓ₂ in units of h when `bend_length` is `None`. Default 0.5, chosen by measurement on
+    /// the simulator's scenes (BENCHMARKS.md): longer lengths help smooth, noisy networks
+    /// and flatten the detail of bumpy ones.
+    pub bend_fraction: f64,
+    /// Weight of the node normal consistency ξ. Default 1e4 (the paper's).
+    pub xi: f64,
+    pub max_iterations: usize,
+    /// Stop when the gradient norm falls below this. Default 1e-9.
+    pub gradient_tolerance: f64,
+    /// Stop when an iteration lowers the energy by less than this fraction. Default 1e-9.
+    pub relative_tolerance: f64,
+}
+
+impl Default for RegressionParams {
+    fn default() -> Self {
+        RegressionParams {
+            stretch_length: 0.0,
+            bend_length: None,
+            bend_fraction: 0.5,
+            xi: 1e4,
+            max_iterations: 50,
+            gradient_tolerance: 1e-9,
+            relative_tolerance: 1e-9,
+        }
+    }
+}
+
+/// What the regression did.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct RegressionReport {
+    pub iterations: usize,
+    pub energy_initial: f64,
+    pub energy_final: f64,
+    pub gradient_norm: f64,
+    pub converged: bool,
+}
+
+/// Keeps the symbolic factorisation of the normal matrix between iterations and runs.
+#[derive(Debug, Default)]
+pub struct RegressionSolver {
+    cached: Option<(Vec<(usize, usize)>, SpdPattern)>,
+    pub symbolic_count: usize,
+}
+
+/// The Jacobian of a residual block with respect to one variable: one row of 3 per residual.
+type JacobianBlock = (usize, Vec<[f64; 3]>);
+
+/// Residual blocks, each touching up to three variables: their Jacobians and the residuals.
+struct Terms {
+    blocks: Vec<(Vec<JacobianBlock>, Vec<f64>)>,
+}
+
+fn hat(w: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -w.z, w.y, w.z, 0.0, -w.x, -w.y, w.x, 0.0)
+}
+
+fn vee_skew(m: &Matrix3<f64>) -> Vector3<f64> {
+    // skew(M) = (M − Mᵀ)/2 = hat(s) with s = vee.
+    Vector3::new(
+        m[(2, 1)] - m[(1, 2)],
+        m[(0, 2)] - m[(2, 0)],
+        m[(1, 0)] - m[(0, 1)],
+    ) * 0.5
+}
+
+fn flat(m: &Matrix3<f64>) -> [f64; 9] {
+    let mut o = [0.0; 9];
+    for (i, x) in m.iter().enumerate() {
+        o[i] = *x;
+    }
+    o
+}
+
+/// Parameters with the bending length resolved.
+struct Resolved {
+    stretch_length: f64,
+    bend: f64,
+    xi: f64,
+}
+
+struct Problem {
+    /// Targets and current frames, per variable.
+    a: Vec<Matrix3<f64>>,
+    /// (var i, var i+1, step h) per edge; (prev, mid, next, h) per bending triple.
+    edges: Vec<(usize, usize, f64)>,
+    triples: Vec<(usize, usize, usize, f64)>,
+    /// Node pairs of different curves.
+    pairs: Vec<(usize, usize)>,
+    /// Variable of (curve, sample).
+    var_of: Vec<Vec<usize>>,
+}
+
+fn problem(curves: &[UniformCurve]) -> Problem {
+    let mut a = Vec::new();
+    let mut var_of = Vec::new();
+    let mut edges = Vec::new();
+    let mut triples = Vec::new();
+    let mut at_node: HashMap<u32, Vec<usize>> = HashMap::new();
+    for c in curves {
+        let n = c.q.len();
+        let closed = n > 2 && c.nodes.first().map(|x| x.1) == c.nodes.last().map(|x| x.1);
+        let base = a.len();
+        let m = if closed { n - 1 } else { n };
+        let vars: Vec<usize> = (0..n)
+            .map(|j| base + if closed { j % m } else { j })
+            .collect();
+        for q in c.q.iter().take(m) {
+            a.push(*q.to_rotation_matrix().matrix());
+        }
+        for j in 0..n - 1 {
+            edges.push((vars[j], vars[j + 1], c.edge_h(j)));
+        }
+        let (first, last) = if closed { (0, m) } else { (1, n - 1) };
+        for j in first..last {
+            let prev = if j == 0 { vars[m - 1] } else { vars[j - 1] };
+            let h = if j == 0 {
+                c.edge_h(m - 1).max(c.edge_h(0))
+            } else {
+                (c.edge_h(j - 1) + c.edge_h(j)) / 2.0
+            };
+            triples.push((prev, vars[j], vars[j + 1], h));
+        }
+        for &(i, nd) in &c.nodes {
+            let v = vars[i];
+            let list = at_node.entry(nd).or_default();
+            if !list.contains(&v) {
+                list.push(v);
+            }
+        }
+        var_of.push(vars);
+    }
+    let mut pairs = Vec::new();
+    let mut keys: Vec<&u32> = at_node.keys().collect();
+    keys.sort();
+    for k in keys {
+        let vs = &at_node[k];
+        for i in 0..vs.len() {
+            for j in i + 1..vs.len() {
+                pairs.push((vs[i], vs[j]));
+            }
+        }
+    }
+    Problem {
+        a,
+        edges,
+        triples,
+        pairs,
+        var_of,
+    }
+}
+
+/// The bending length in use: explicit, or a fraction of the mean sampling step.
+pub fn bend_length(curves: &[UniformCurve], p: &RegressionParams) -> f64 {
+    p.bend_length.unwrap_or_else(|| {
+        let hs: Vec<f64> = curves.iter().flat_map(|c| c.h.iter().copied()).collect();
+        let h = hs.iter().sum::<f64>() / hs.len().max(1) as f64;
+        p.bend_fraction * h
+    })
+}
+
+/// Weighted residuals and Jacobians at frames `x`.
+fn terms(pb: &Problem, x: &[Matrix3<f64>], p: &Resolved) -> Terms {
+    let mut blocks =
+        Vec::with_capacity(pb.a.len() + pb.edges.len() + pb.triples.len() + pb.pairs.len());
+    let basis = [Vector3::x(), Vector3::y(), Vector3::z()];
+    // E0.
+    for (i, (xi, ai)) in x.iter().zip(&pb.a).enumerate() {
+        let r = flat(&(xi - ai));
+        let jac: Vec<[f64; 3]> = (0..9)
+            .map(|e| {
+                let mut row = [0.0; 3];
+                for (k, b) in basis.iter().enumerate() {
+                    row[k] = flat(&(xi * hat(b)))[e];
+                }
+                row
+            })
+            .collect();
+        blocks.push((vec![(i, jac)], r.to_vec()));
+    }
+    // E1.
+    if p.stretch_length > 0.0 {
+        for &(i, j, h) in &pb.edges {
+            let w = (p.stretch_length * p.stretch_length / h / h).sqrt();
+            let r = flat(&((x[i] - x[j]) * w));
+            let ji: Vec<[f64; 3]> = (0..9)
+                .map(|e| std::array::from_fn(|k| flat(&(x[i] * hat(&basis[k]) * w))[e]))
+                .collect();
+            let jj: Vec<[f64; 3]> = (0..9)
+                .map(|e| std::array::from_fn(|k| -flat(&(x[j] * hat(&basis[k]) * w))[e]))
+                .collect();
+            blocks.push((vec![(i, ji), (j, jj)], r.to_vec()));
+        }
+    }
+    // E2: ‖skew(M)‖²_F = 2‖s‖², μ/h³ with μ = ℓ⁴/h.
+    if p.bend > 0.0 {
+        for &(a, b, c, h) in &pb.triples {
+            let mu = p.bend.powi(4) / h;
+            let w = (2.0 * mu / (h * h * h)).sqrt();
+            let xbt = x[b].transpose();
+            let pa = xbt * x[a];
+            let pc = xbt * x[c];
+            let m = pa + pc;
+            let s = vee_skew(&m) * w;
+            let col = |f: &dyn Fn(&Matrix3<f64>) -> Matrix3<f64>| -> Vec<[f64; 3]> {
+                let cols: Vec<Vector3<f64>> =
+                    basis.iter().map(|e| vee_skew(&f(&hat(e))) * w).collect();
+                (0..3)
+                    .map(|row| [cols[0][row], cols[1][row], cols[2][row]])
+                    .collect()
+            };
+            let ja = col(&|eh| pa * eh);
+            let jc = col(&|eh| pc * eh);
+            let jb = col(&|eh| -(eh * m));
+            blocks.push((vec![(a, ja), (b, jb), (c, jc)], s.as_slice().to_vec()));
+        }
+    }
+    // E_N.
+    let sx = p.xi.sqrt();
+    let e3 = Vector3::z();
+    for &(i, j) in &pb.pairs {
+        let r = (x[i] * e3 - x[j] * e3) * sx;
+        let ji = -(x[i] * hat(&e3)) * sx;
+        let jj = (x[j] * hat(&e3)) * sx;
+        let rows = |m: Matrix3<f64>| -> Vec<[f64; 3]> {
+            (0..3)
+                .map(|rr| [m[(rr, 0)], m[(rr, 1)], m[(rr, 2)]])
+                .collect()
+        };
+        blocks.push((vec![(i, rows(ji)), (j, rows(jj))], r.as_slice().to_vec()));
+    }
+    Terms { blocks }
+}
+
+fn energy(t: &Terms) -> f64 {
+    t.blocks
+        .iter()
+        .map(|(_, r)| r.iter().map(|x| x * x).sum::<f64>())
+        .sum()
+}
+
+fn retract(x: &Matrix3<f64>, w: &Vector3<f64>) -> Matrix3<f64> {
+    x * Rotation3::from_scaled_axis(*w).matrix()
+}
+
+impl RegressionSolver {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Regresses the frames of `curves` in place.
+    pub fn run(
+        &mut self,
+        curves: &mut [UniformCurve],
+        params: &RegressionParams,
+    ) -> RegressionReport {
+        let pb = problem(curves);
+        let p = &Resolved {
+            stretch_length: params.stretch_length,
+            bend: bend_length(curves, params),
+            xi: params.xi,
+        };
+        let n = pb.a.len();
+        if n == 0 {
+            return RegressionReport::default();
+        }
+        let mut x = pb.a.clone();
+        // Block pattern (lower triangle of 3×3 blocks) from the residual structure.
+        let mut block_keys: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
+        let mut add = |a: usize, b: usize| {
+            if a != b {
+                block_keys.push((a.max(b), a.min(b)));
+            }
+        };
+        if p.stretch_length > 0.0 {
+            for &(i, j, _) in &pb.edges {
+                add(i, j);
+            }
+        }
+        if p.bend > 0.0 {
+            for &(a, b, c, _) in &pb.triples {
+                add(a, b);
+                add(b, c);
+                add(a, c);
+            }
+        }
+        for &(i, j) in &pb.pairs {
+            add(i, j);
+        }
+        block_keys.sort_unstable();
+        block_keys.dedup();
+        let block_index: HashMap<(usize, usize), usize> = block_keys
+            .iter()
+            .enumerate()
+            .map(|(k, &b)| (b, k))
+            .collect();
+        let mut entries = Vec::with_capacity(block_keys.len() * 9);
+        for &(bi, bj) in &block_keys {
+            for a in 0..3 {
+                for b in 0..3 {
+                    if bi != bj || a >= b {
+                        entries.push((3 * bi + a, 3 * bj + b));
+                    }
+                }
+            }
+        }
+        if !matches!(&self.cached, Some((e, _)) if *e == entries) {
+            match SpdPattern::new(3 * n, &entries) {
+                Ok(pat) => {
+                    self.symbolic_count += 1;
+                    self.cached = Some((entries.clone(), pat));
+                }
+                Err(e) => {
+                    tracing::error!("regression: {e}");
+                    return RegressionReport::default();
+                }
+            }
+        }
+        let mut t = terms(&pb, &x, p);
+        let e0 = energy(&t);
+        let mut report = RegressionReport {
+            energy_initial: e0,
+            energy_final: e0,
+            ..Default::default()
+        };
+        let mut damping = 1e-6;
+        let mut e = e0;
+        for it in 0..params.max_iterations {
+            report.iterations = it + 1;
+            // Normal equations.
+            let mut blocks = vec![Matrix3::<f64>::zeros(); block_keys.len()];
+            let mut g = vec![Vector3::<f64>::zeros(); n];
+            for (vars, r) in &t.blocks {
+                for (vi, ji) in vars {
+                    let mut jtr = Vector3::zeros();
+                    for (row, rv) in ji.iter().zip(r) {
+                        jtr += Vector3::from(*row) * *rv;
+                    }
+                    g[*vi] += jtr;
+                    for (vj, jj) in vars {
+                        if vj > vi {
+                            continue;
+                        }
+                        let mut blk = Matrix3::zeros();
+                        for (ra, rb) in ji.iter().zip(jj) {
+                            blk += Vector3::from(*ra) * Vector3::from(*rb).transpose();
+                        }
+                        blocks[block_index[&(*vi, *vj)]] += blk;
+                    }
+                }
+            }
+            let gnorm = g.iter().map(|v| v.norm_squared()).sum::<f64>().sqrt();
+            report.gradient_norm = gnorm;
+            if gnorm < params.gradient_tolerance {
+                report.converged = true;
+                break;
+            }
+            let pat = &self.cached.as_ref().expect("set above").1;
+            let mut accepted = false;
+            for _ in 0..10 {
+                let mut vals = Vec::with_capacity(entries.len());
+                for (k, &(bi, bj)) in block_keys.iter().enumerate() {
+                    for a in 0..3 {
+                        for b in 0..3 {
+                            if bi != bj || a >= b {
+                                let mut v = blocks[k][(a, b)];
+                                if bi == bj && a == b {
+                                    v += damping * (1.0 + blocks[k][(a, a)]);
+                                }
+                                vals.push(v);
+                            }
+                        }
+                    }
+                }
+                let Ok(f) = pat.factor(&vals) else {
+                    damping *= 10.0;
+                    continue;
+                };
+                let mut rhs: Vec<[f64; 1]> =
+                    g.iter().flat_map(|v| [[-v.x], [-v.y], [-v.z]]).collect();
+                f.solve(&mut rhs);
+                let trial: Vec<Matrix3<f64>> = x
+                    .iter()
+                    .enumerate()
+                    .map(|(i, xi)| {
+                        retract(
+                            xi,
+                            &Vector3::new(rhs[3 * i][0], rhs[3 * i + 1][0], rhs[3 * i + 2][0]),
+                        )
+                    })
+                    .collect();
+                if trial.iter().any(|m| m.iter().any(|v| !v.is_finite())) {
+                    damping *= 10.0;
+                    continue;
+                }
+                let tt = terms(&pb, &trial, p);
+                let et = energy(&tt);
+                if et <= e {
+                    let rel = (e - et) / e.max(1e-300);
+                    x = trial;
+                    t = tt;
+                    e = et;
+                    damping = (damping / 3.0).max(1e-12);
+                    accepted = true;
+                    if rel < params.relative_tolerance {
+                        report.converged = true;
+                    }
+                    break;
+                }
+                damping *= 4.0;
+            }
+            if !accepted || report.converged {
+                report.converged |= !accepted && gnorm < 1e-6;
+                break;
+            }
+        }
+        report.energy_final = e;
+        // Write back, re-orthonormalised.
+        for (c, vars) in curves.iter_mut().zip(&pb.var_of) {
+            for (q, &v) in c.q.iter_mut().zip(vars) {
+                *q = UnitQuaternion::from_matrix(&x[v]);
+            }
+        }
+        report
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulate::rng::Rng;
+
+    fn arc(
+        noise: f64,
+        seed: u64,
+        index: usize,
+        nodes: (u32, u32),
+        tilt: f64,
+    ) -> (UniformCurve, Vec<UnitQuaternion<f64>>) {
+        let mut rng = Rng::new(seed);
+        let n = 200;
+        let h = 0.005;
+        let truth: Vec<UnitQuaternion<f64>> = (0..=n)
+            .map(|j| {
+                let s = j as f64 * h;
+                UnitQuaternion::from_euler_angles(tilt, 0.5 * s, 2.0 * s)
+            })
+            .collect();
+        let q = truth
+            .iter()
+            .map(|t| t * UnitQuaternion::from_scaled_axis(rng.vec3(noise)))
+            .collect();
+        (
+            UniformCurve {
+                index,
+                boundary: false,
+                d: (0..=n).map(|j| j as f64 * h).collect(),
+                q,
+                nodes: vec![(0, nodes.0), (n, nodes.1)],
+                h: vec![h],
+                outliers: 0,
+            },
+            truth,
+        )
+    }
+
+    #[test]
+    fn smooths_noise_and_aligns_node_normals() {
+        let (a, ta) = arc(0.02, 1, 0, (0, 1), 0.0);
+        let (mut b, tb) = arc(0.02, 2, 1, (0, 2), 0.0);
+        // Curve b leaves node 0 in another direction: rotate it about the normal there.
+        let turn = UnitQuaternion::from_axis_angle(&(ta[0] * Vector3::z_axis()), 1.0);
+        for q in b.q.iter_mut() {
+            *q = turn * *q;
+        }
+        let tb: Vec<UnitQuaternion<f64>> = tb.iter().map(|t| turn * t).collect();
+        let mut curves = vec![a, b];
+        let err = |c: &[UniformCurve]| -> f64 {
+            let e: Vec<f64> = c[0]
+                .q
+                .iter()
+                .zip(&ta)
+                .chain(c[1].q.iter().zip(&tb))
+                .map(|(q, t)| q.angle_to(t))
+                .collect();
+            (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt()
+        };
+        let before = err(&curves);
+        let p = RegressionParams {
+            bend_length: Some(0.03),
+            ..Default::default()
+        };
+        let rep = RegressionSolver::new().run(&mut curves, &p);
+        let after = err(&curves);
+        assert!(rep.energy_final < rep.energy_initial);
+        assert!(after < 0.5 * before, "rms {before} → {after}");
+        let n0 = curves[0].q[0] * Vector3::z();
+        let n1 = curves[1].q[0] * Vector3::z();
+        assert!(
+            n0.angle(&n1).to_degrees() < 0.5,
+            "{}",
+            n0.angle(&n1).to_degrees()
+        );
+    }
+
+    #[test]
+    fn jacobians_match_finite_differences() {
+        let (a, _) = arc(0.05, 3, 0, (0, 1), 0.3);
+        let (b, _) = arc(0.05, 4, 1, (0, 2), -0.2);
+        let pb = problem(&[a, b]);
+        let p = Resolved {
+            stretch_length: 0.02,
+            bend: 0.03,
+            xi: 1e4,
+        };
+        let x: Vec<Matrix3<f64>> =
+            pb.a.iter()
+                .enumerate()
+                .map(|(i, m)| retract(m, &Vector3::new(0.01 * i as f64, -0.02, 0.03)))
+                .collect();
+        let t = terms(&pb, &x, &p);
+        let eps = 1e-6;
+        for (bk, (vars, r)) in t.blocks.iter().enumerate().step_by(37) {
+            for (v, jac) in vars {
+                for k in 0..3 {
+                    let mut w = Vector3::zeros();
+                    w[k] = eps;
+                    let mut xp = x.clone();
+                    xp[*v] = retract(&x[*v], &w);
+                    let rp = &terms(&pb, &xp, &p).blocks[bk].1;
+                    for (row, (a, b)) in rp.iter().zip(r).enumerate() {
+                        let fd = (a - b) / eps;
+                        assert!(
+                            (fd - jac[row][k]).abs() < 1e-4 * (1.0 + fd.abs()),
+                            "block {bk} var {v} dir {k} row {row}: {fd} vs {}",
+                            jac[row][k]
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
