@@ -12,7 +12,14 @@ fn main() {
     let truth = sfs::simulate::truth::Truth::load(std::path::Path::new(&a[2])).expect("truth");
     let num = |i: usize, d: f64| a.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
     let mut dec = Decoder::new();
-    let mut acq = Acquisition::new(AcquisitionConfig::default());
+    // SFS_MOUNT="ax,ay,az,deg": a known mounting rotation for the calibration.
+    let mut cfg = AcquisitionConfig::default();
+    if let Ok(m) = std::env::var("SFS_MOUNT") {
+        let v: Vec<f64> = m.split(',').filter_map(|x| x.parse().ok()).collect();
+        let axis = nalgebra::Unit::new_normalize(nalgebra::Vector3::new(v[0], v[1], v[2]));
+        cfg.calibration.mounting = nalgebra::Rotation3::from_axis_angle(&axis, v[3].to_radians());
+    }
+    let mut acq = Acquisition::new(cfg);
     for e in dec.feed(&bytes) {
         acq.event(&e);
     }

@@ -46,6 +46,10 @@ pub struct UniformCurve {
     pub nodes: Vec<(usize, u32)>,
     /// Step of the segment that starts at each node (one per segment).
     pub h: Vec<f64>,
+    /// Reliability of every sample in [0, 1]: the kernel-weighted mean of the raw samples'
+    /// weights (low where every raw sample was flagged, e.g. near a magnet), lowered further
+    /// across gaps in the data. The regression trusts the data that much.
+    pub w: Vec<f64>,
     /// Raw samples removed as outliers.
     pub outliers: usize,
 }
@@ -201,6 +205,7 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
     }
     // Gaussian-weighted q-method means.
     let mut q = Vec::with_capacity(d.len());
+    let mut rel = Vec::with_capacity(d.len());
     let mut last = uniq[0].1;
     for (k, &t) in d.iter().enumerate() {
         let seg = nodes
@@ -210,24 +215,29 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
             .min(hs.len() - 1);
         let width = p.sigma * hs[seg];
         let mut radius = 3.0 * width;
-        let mean = loop {
+        let (mean, reliability) = loop {
             let lo = ds.partition_point(|&x| x < t - radius);
             let hi = ds.partition_point(|&x| x <= t + radius);
             let mut ten = StructureTensor::new();
+            let (mut kw, mut k) = (0.0, 0.0);
             for (u, dd) in uniq[lo..hi].iter().zip(&spacing[lo..hi]) {
                 let z = (t - u.0) / width.max(1e-12);
-                ten.add(&u.1, u.2 * dd.max(1e-12) * (-0.5 * z * z).exp());
+                let kernel = dd.max(1e-12) * (-0.5 * z * z).exp();
+                ten.add(&u.1, u.2 * kernel);
+                kw += u.2 * kernel;
+                k += kernel;
             }
             // A gap in the data: widen the window (and the kernel with it) until it holds
             // samples, up to the whole curve.
             match ten.mean() {
-                Some(m) if ten.weight() > 1e-12 => break m,
-                _ if radius > 2.0 * length + 1.0 => break last,
+                Some(m) if ten.weight() > 1e-12 => break (m, (kw / k) * (3.0 * width / radius)),
+                _ if radius > 2.0 * length + 1.0 => break (last, 0.0),
                 _ => radius *= 2.0,
             }
         };
         last = mean;
         q.push(mean);
+        rel.push(reliability.clamp(0.0, 1.0));
     }
     Ok(UniformCurve {
         index: c.index,
@@ -236,6 +246,7 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
         q,
         nodes,
         h: hs,
+        w: rel,
         outliers,
     })
 }

@@ -112,6 +112,8 @@ struct Resolved {
 struct Problem {
     /// Targets and current frames, per variable.
     a: Vec<Matrix3<f64>>,
+    /// Reliability of each target (weight of its E₀ term).
+    w: Vec<f64>,
     /// (var i, var i+1, step h) per edge; (prev, mid, next, h) per bending triple.
     edges: Vec<(usize, usize, f64)>,
     triples: Vec<(usize, usize, usize, f64)>,
@@ -123,6 +125,7 @@ struct Problem {
 
 fn problem(curves: &[UniformCurve]) -> Problem {
     let mut a = Vec::new();
+    let mut w = Vec::new();
     let mut var_of = Vec::new();
     let mut edges = Vec::new();
     let mut triples = Vec::new();
@@ -135,8 +138,15 @@ fn problem(curves: &[UniformCurve]) -> Problem {
         let vars: Vec<usize> = (0..n)
             .map(|j| base + if closed { j % m } else { j })
             .collect();
-        for q in c.q.iter().take(m) {
+        for (j, q) in c.q.iter().take(m).enumerate() {
             a.push(*q.to_rotation_matrix().matrix());
+            // A closed curve's first sample stands for its last too.
+            let wj = if closed && j == 0 {
+                c.w[0].max(c.w[n - 1])
+            } else {
+                c.w[j]
+            };
+            w.push(wj.max(1e-4));
         }
         for j in 0..n - 1 {
             edges.push((vars[j], vars[j + 1], c.edge_h(j)));
@@ -173,6 +183,7 @@ fn problem(curves: &[UniformCurve]) -> Problem {
     }
     Problem {
         a,
+        w,
         edges,
         triples,
         pairs,
@@ -196,12 +207,13 @@ fn terms(pb: &Problem, x: &[Matrix3<f64>], p: &Resolved) -> Terms {
     let basis = [Vector3::x(), Vector3::y(), Vector3::z()];
     // E0.
     for (i, (xi, ai)) in x.iter().zip(&pb.a).enumerate() {
-        let r = flat(&(xi - ai));
+        let sw = pb.w[i].sqrt();
+        let r = flat(&((xi - ai) * sw));
         let jac: Vec<[f64; 3]> = (0..9)
             .map(|e| {
                 let mut row = [0.0; 3];
                 for (k, b) in basis.iter().enumerate() {
-                    row[k] = flat(&(xi * hat(b)))[e];
+                    row[k] = flat(&(xi * hat(b) * sw))[e];
                 }
                 row
             })
