@@ -203,6 +203,7 @@ mod tests {
             q,
             nodes: vec![(0, nodes.0), (n / 2, nodes.1), (n, nodes.0)],
             h: vec![h, h],
+            w: vec![1.0; n + 1],
             outliers: 0,
         }
     }

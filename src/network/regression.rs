@@ -500,6 +500,7 @@ mod tests {
                 q,
                 nodes: vec![(0, nodes.0), (n, nodes.1)],
                 h: vec![h],
+                w: vec![1.0; n + 1],
                 outliers: 0,
             },
             truth,
