@@ -51,6 +51,7 @@ fn main() {
         surface: None,
     };
     let e = sfs::eval::evaluate(&truth, &rec).expect("eval");
+    print!("{} samples: ", net.report.samples);
     println!("mean {:.4}% max {:.4}% node-normals {:.2}° iters {} E {:.3e}→{:.3e} t(pre {:.1} reg {:.1} poi {:.1} ms)",
         e.curves.mean_pct, e.curves.max_pct, net.report.max_node_normal_angle_deg, net.report.regression.iterations,
         net.report.regression.energy_initial, net.report.regression.energy_final,

@@ -76,9 +76,13 @@ pub struct RegressionSolver {
 /// The Jacobian of a residual block with respect to one variable: one row of 3 per residual.
 type JacobianBlock = (usize, Vec<[f64; 3]>);
 
-/// Residual blocks, each touching up to three variables: their Jacobians and the residuals.
+/// Residual blocks, each touching up to three variables: their Jacobians and the residuals;
+/// the data term E₀ in closed form (its Gauss–Newton block is `2w·I`).
 struct Terms {
     blocks: Vec<(Vec<JacobianBlock>, Vec<f64>)>,
+    e0_energy: f64,
+    /// Jᵀr of E₀ per variable.
+    e0_grad: Vec<Vector3<f64>>,
 }
 
 fn hat(w: &Vector3<f64>) -> Matrix3<f64> {
@@ -205,20 +209,15 @@ fn terms(pb: &Problem, x: &[Matrix3<f64>], p: &Resolved) -> Terms {
     let mut blocks =
         Vec::with_capacity(pb.a.len() + pb.edges.len() + pb.triples.len() + pb.pairs.len());
     let basis = [Vector3::x(), Vector3::y(), Vector3::z()];
-    // E0.
+    // E0 = Σ w‖X − A‖²_F = Σ w (6 − 2 tr XᵀA); with J_k = √w X ê_k,
+    // Jᵀr = −2w vee(skew(XᵀA)) and JᵀJ = 2w I.
+    let mut e0_energy = 0.0;
+    let mut e0_grad = Vec::with_capacity(x.len());
     for (i, (xi, ai)) in x.iter().zip(&pb.a).enumerate() {
-        let sw = pb.w[i].sqrt();
-        let r = flat(&((xi - ai) * sw));
-        let jac: Vec<[f64; 3]> = (0..9)
-            .map(|e| {
-                let mut row = [0.0; 3];
-                for (k, b) in basis.iter().enumerate() {
-                    row[k] = flat(&(xi * hat(b) * sw))[e];
-                }
-                row
-            })
-            .collect();
-        blocks.push((vec![(i, jac)], r.to_vec()));
+        let w = pb.w[i];
+        let m = xi.transpose() * ai;
+        e0_energy += w * (xi - ai).norm_squared();
+        e0_grad.push(-2.0 * w * vee_skew(&m));
     }
     // E1.
     if p.stretch_length > 0.0 {
@@ -244,16 +243,15 @@ fn terms(pb: &Problem, x: &[Matrix3<f64>], p: &Resolved) -> Terms {
             let pc = xbt * x[c];
             let m = pa + pc;
             let s = vee_skew(&m) * w;
-            let col = |f: &dyn Fn(&Matrix3<f64>) -> Matrix3<f64>| -> Vec<[f64; 3]> {
-                let cols: Vec<Vector3<f64>> =
-                    basis.iter().map(|e| vee_skew(&f(&hat(e))) * w).collect();
-                (0..3)
-                    .map(|row| [cols[0][row], cols[1][row], cols[2][row]])
-                    .collect()
+            // vee(skew(P ω̂)) = ½(tr P · I − Pᵀ) ω and vee(skew(ω̂ M)) = ½(tr M · I − M) ω.
+            let g =
+                |pm: &Matrix3<f64>| (Matrix3::identity() * pm.trace() - pm.transpose()) * (0.5 * w);
+            let rows = |m: Matrix3<f64>| -> Vec<[f64; 3]> {
+                (0..3).map(|r| [m[(r, 0)], m[(r, 1)], m[(r, 2)]]).collect()
             };
-            let ja = col(&|eh| pa * eh);
-            let jc = col(&|eh| pc * eh);
-            let jb = col(&|eh| -(eh * m));
+            let ja = rows(g(&pa));
+            let jc = rows(g(&pc));
+            let jb = rows(-(Matrix3::identity() * m.trace() - m) * (0.5 * w));
             blocks.push((vec![(a, ja), (b, jb), (c, jc)], s.as_slice().to_vec()));
         }
     }
@@ -271,14 +269,19 @@ fn terms(pb: &Problem, x: &[Matrix3<f64>], p: &Resolved) -> Terms {
         };
         blocks.push((vec![(i, rows(ji)), (j, rows(jj))], r.as_slice().to_vec()));
     }
-    Terms { blocks }
+    Terms {
+        blocks,
+        e0_energy,
+        e0_grad,
+    }
 }
 
 fn energy(t: &Terms) -> f64 {
-    t.blocks
-        .iter()
-        .map(|(_, r)| r.iter().map(|x| x * x).sum::<f64>())
-        .sum()
+    t.e0_energy
+        + t.blocks
+            .iter()
+            .map(|(_, r)| r.iter().map(|x| x * x).sum::<f64>())
+            .sum::<f64>()
 }
 
 fn retract(x: &Matrix3<f64>, w: &Vector3<f64>) -> Matrix3<f64> {
@@ -336,6 +339,7 @@ impl RegressionSolver {
             .enumerate()
             .map(|(k, &b)| (b, k))
             .collect();
+        let diag_slot: Vec<usize> = (0..n).map(|i| block_index[&(i, i)]).collect();
         let mut entries = Vec::with_capacity(block_keys.len() * 9);
         for &(bi, bj) in &block_keys {
             for a in 0..3 {
@@ -359,6 +363,23 @@ impl RegressionSolver {
             }
         }
         let mut t = terms(&pb, &x, p);
+        // The normal-matrix slot of every (term, variable pair): the terms keep their order
+        // and variables across iterations, so the lookups are done once.
+        let slots: Vec<Vec<usize>> = t
+            .blocks
+            .iter()
+            .map(|(vars, _)| {
+                let mut v = Vec::new();
+                for (vi, _) in vars {
+                    for (vj, _) in vars {
+                        if vj <= vi {
+                            v.push(block_index[&(*vi, *vj)]);
+                        }
+                    }
+                }
+                v
+            })
+            .collect();
         let e0 = energy(&t);
         let mut report = RegressionReport {
             energy_initial: e0,
@@ -371,8 +392,12 @@ impl RegressionSolver {
             report.iterations = it + 1;
             // Normal equations.
             let mut blocks = vec![Matrix3::<f64>::zeros(); block_keys.len()];
-            let mut g = vec![Vector3::<f64>::zeros(); n];
-            for (vars, r) in &t.blocks {
+            let mut g = t.e0_grad.clone();
+            for (i, w) in pb.w.iter().enumerate() {
+                blocks[diag_slot[i]] += Matrix3::identity() * (2.0 * w);
+            }
+            for ((vars, r), slot) in t.blocks.iter().zip(&slots) {
+                let mut next_slot = slot.iter();
                 for (vi, ji) in vars {
                     let mut jtr = Vector3::zeros();
                     for (row, rv) in ji.iter().zip(r) {
@@ -387,7 +412,7 @@ impl RegressionSolver {
                         for (ra, rb) in ji.iter().zip(jj) {
                             blk += Vector3::from(*ra) * Vector3::from(*rb).transpose();
                         }
-                        blocks[block_index[&(*vi, *vj)]] += blk;
+                        blocks[*next_slot.next().expect("one slot per pair")] += blk;
                     }
                 }
             }
@@ -563,6 +588,21 @@ mod tests {
                 .collect();
         let t = terms(&pb, &x, &p);
         let eps = 1e-6;
+        // The closed-form data term: dE₀/dω = 2 Jᵀr.
+        for v in (0..x.len()).step_by(29) {
+            for k in 0..3 {
+                let mut w = Vector3::zeros();
+                w[k] = eps;
+                let mut xp = x.clone();
+                xp[v] = retract(&x[v], &w);
+                let fd = (terms(&pb, &xp, &p).e0_energy - t.e0_energy) / eps;
+                let an = 2.0 * t.e0_grad[v][k];
+                assert!(
+                    (fd - an).abs() < 1e-4 * (1.0 + an.abs()),
+                    "E0 var {v} dir {k}: {fd} vs {an}"
+                );
+            }
+        }
         for (bk, (vars, r)) in t.blocks.iter().enumerate().step_by(37) {
             for (v, jac) in vars {
                 for k in 0..3 {
