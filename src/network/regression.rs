@@ -485,7 +485,10 @@ impl RegressionSolver {
         // Write back, re-orthonormalised.
         for (c, vars) in curves.iter_mut().zip(&pb.var_of) {
             for (q, &v) in c.q.iter_mut().zip(vars) {
-                *q = UnitQuaternion::from_matrix(&x[v]);
+                // x is a product of exact rotations: convert directly (Shepperd), not by the
+                // iterative projection, which can settle on a wrong rotation far from its guess.
+                *q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(x[v]));
+                q.renormalize();
             }
         }
         report
