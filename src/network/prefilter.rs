@@ -229,7 +229,7 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
             }
             // A gap in the data: widen the window (and the kernel with it) until it holds
             // samples, up to the whole curve.
-            match ten.mean() {
+            match ten.mean_near(&last) {
                 Some(m) if ten.weight() > 1e-12 => break (m, (kw / k) * (3.0 * width / radius)),
                 _ if radius > 2.0 * length + 1.0 => break (last, 0.0),
                 _ => radius *= 2.0,

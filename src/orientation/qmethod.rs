@@ -67,6 +67,36 @@ impl StructureTensor {
     }
 }
 
+impl StructureTensor {
+    /// The mean, by power iteration from `guess` (a nearby mean, e.g. the previous sample's):
+    /// when the inputs are clustered the largest eigenvalue dominates and a few products
+    /// converge; otherwise it falls back to the full eigen-decomposition ([`mean`](Self::mean)).
+    pub fn mean_near(&self, guess: &UnitQuaternion<f64>) -> Option<UnitQuaternion<f64>> {
+        if self.weight <= 0.0 {
+            return None;
+        }
+        let mut v: Vector4<f64> = guess.as_ref().coords;
+        for _ in 0..12 {
+            let w = self.m * v;
+            let n = w.norm();
+            if !(n.is_finite() && n > 0.0) {
+                return self.mean();
+            }
+            let w = w / n;
+            let change = 1.0 - w.dot(&v).abs();
+            v = w;
+            if change < 1e-15 {
+                let mut q = Quaternion::new(v[3], v[0], v[1], v[2]);
+                if q.w < 0.0 {
+                    q = -q;
+                }
+                return Some(UnitQuaternion::new_normalize(q));
+            }
+        }
+        self.mean()
+    }
+}
+
 /// Weighted mean of `(quaternion, weight)` pairs; `None` if the weights sum to zero.
 pub fn mean<I>(items: I) -> Option<UnitQuaternion<f64>>
 where
@@ -118,6 +148,32 @@ mod tests {
                 assert!(cost(&p) >= c - 1e-12);
             }
         }
+    }
+
+    #[test]
+    fn power_iteration_agrees_with_the_eigen_decomposition() {
+        let mut t = StructureTensor::new();
+        for i in 0..20 {
+            let q = UnitQuaternion::from_scaled_axis(Vector3::new(
+                0.01 * i as f64,
+                1.0,
+                -0.3 + 0.005 * i as f64,
+            ));
+            let q = if i % 2 == 0 {
+                q
+            } else {
+                UnitQuaternion::new_unchecked(-q.into_inner())
+            };
+            t.add(&q, 1.0 + i as f64);
+        }
+        let exact = t.mean().unwrap();
+        let guess = exact * UnitQuaternion::from_scaled_axis(Vector3::new(0.05, 0.0, 0.02));
+        let fast = t.mean_near(&guess).unwrap();
+        assert!(fast.angle_to(&exact) < 1e-9, "{}", fast.angle_to(&exact));
+        // A hopeless guess (orthogonal) still ends at the mean.
+        let far =
+            exact * UnitQuaternion::from_scaled_axis(Vector3::new(std::f64::consts::PI, 0.0, 0.0));
+        assert!(t.mean_near(&far).unwrap().angle_to(&exact) < 1e-6);
     }
 
     #[test]
