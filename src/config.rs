@@ -33,6 +33,15 @@
 //! array_window_s = 1.0               # sensor arrays: averaging window
 //! [acquisition.segment_lengths]      # phone: measured segment lengths (m) per curve index
 //! "0" = [0.30, 0.25]
+//!
+//! [network]                          # curve-network reconstruction
+//! h = 0.01                           # sampling step, m
+//! sigma = 0.3                        # pre-filter kernel width, in h
+//! alpha = 0.9                        # outlier threshold on |q_i · q_i±1|
+//! regression = true                  # false: pre-filter only
+//! bend_fraction = 0.5                # bending smoothing length ℓ₂ in h (or bend_length in m)
+//! stretch_length = 0.0               # stretching smoothing length ℓ₁, m
+//! xi = 1e4                           # weight of the node normal consistency
 //! ```
 
 use crate::acquisition::AcquisitionConfig;
@@ -69,6 +78,22 @@ pub struct Config {
     pub calibration: CalibrationConfig,
     #[serde(default)]
     pub acquisition: AcquisitionToml,
+    #[serde(default)]
+    pub network: NetworkToml,
+}
+
+/// `[network]`, as written (see the module documentation).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NetworkToml {
+    pub h: Option<f64>,
+    pub sigma: Option<f64>,
+    pub alpha: Option<f64>,
+    pub regression: Option<bool>,
+    pub bend_length: Option<f64>,
+    pub bend_fraction: Option<f64>,
+    pub stretch_length: Option<f64>,
+    pub xi: Option<f64>,
 }
 
 /// `[calibration]`, as written (see the module documentation).
@@ -201,7 +226,51 @@ impl Config {
         })?;
         cfg.source_spec(file)?;
         cfg.acquisition_config(file)?;
+        cfg.network_params(file)?;
         Ok(cfg)
+    }
+
+    /// The reconstruction settings this configuration describes.
+    pub fn network_params(
+        &self,
+        file: &Path,
+    ) -> Result<crate::network::NetworkParams, ConfigError> {
+        let n = &self.network;
+        let mut p = crate::network::NetworkParams::default();
+        let check =
+            |key: &str, v: Option<f64>, lo: f64, hi: f64| -> Result<Option<f64>, ConfigError> {
+                match v {
+                    Some(x) if !(x.is_finite() && x >= lo && x <= hi) => Err(ConfigError {
+                        file: file.to_owned(),
+                        key: format!("network.{key}"),
+                        reason: format!("{x} is out of range [{lo}, {hi}]"),
+                    }),
+                    v => Ok(v),
+                }
+            };
+        if let Some(x) = check("h", n.h, 1e-4, 10.0)? {
+            p.prefilter.h = x;
+        }
+        if let Some(x) = check("sigma", n.sigma, 0.01, 5.0)? {
+            p.prefilter.sigma = x;
+        }
+        if let Some(x) = check("alpha", n.alpha, 0.0, 1.0)? {
+            p.prefilter.alpha = x;
+        }
+        p.no_regression = n.regression == Some(false);
+        if let Some(x) = check("bend_length", n.bend_length, 0.0, 100.0)? {
+            p.regression.bend_length = Some(x);
+        }
+        if let Some(x) = check("bend_fraction", n.bend_fraction, 0.0, 100.0)? {
+            p.regression.bend_fraction = x;
+        }
+        if let Some(x) = check("stretch_length", n.stretch_length, 0.0, 100.0)? {
+            p.regression.stretch_length = x;
+        }
+        if let Some(x) = check("xi", n.xi, 0.0, 1e9)? {
+            p.regression.xi = x;
+        }
+        Ok(p)
     }
 
     /// The acquisition settings (calibration included) this configuration describes.
@@ -468,6 +537,15 @@ mod tests {
         ))
         .unwrap();
         let a = ok.acquisition_config(Path::new("x")).unwrap();
+        let e = parse(&format!("{base}[network]\nh = -1.0\n")).unwrap_err();
+        assert_eq!(e.key, "network.h", "{e}");
+        let e = parse(&format!("{base}[network]\nsmoothing = 1.0\n")).unwrap_err();
+        assert_eq!(e.key, "network.smoothing", "{e}");
+        let n = parse(&format!("{base}[network]\nh = 0.005\nregression = false\n"))
+            .unwrap()
+            .network_params(Path::new("x"))
+            .unwrap();
+        assert!(n.no_regression && (n.prefilter.h - 0.005).abs() < 1e-15);
         assert_eq!(a.segment_lengths[&0], vec![0.3, 0.2]);
         assert!((a.calibration.mounting.angle() - 2f64.to_radians()).abs() < 1e-12);
     }

@@ -115,7 +115,7 @@ fn replay(a: ReplayArgs) -> i32 {
 fn options(cfg: &Config, file: &Path) -> Result<session::Options, ConfigError> {
     Ok(session::Options {
         acquisition: cfg.acquisition_config(file)?,
-        ..Default::default()
+        network: cfg.network_params(file)?,
     })
 }
 
