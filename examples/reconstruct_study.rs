@@ -34,22 +34,7 @@ fn main() {
     p.regression.stretch_length = num(6, 0.0);
     p.regression.xi = num(7, p.regression.xi);
     let net = Reconstructor::new().run(&scan, &p).expect("network");
-    let rec = sfs::gltf_out::ReadNetwork {
-        curves: net
-            .positions
-            .curves
-            .iter()
-            .map(|c| sfs::gltf_out::NetworkCurve {
-                index: c.index,
-                boundary: c.boundary,
-                nodes: c.nodes.iter().map(|n| n.1).collect(),
-                points: c.points.clone(),
-                normals: c.normals.clone(),
-            })
-            .collect(),
-        nodes: net.positions.nodes.clone(),
-        surface: None,
-    };
+    let rec = net.positions.as_read_network();
     let e = sfs::eval::evaluate(&truth, &rec).expect("eval");
     print!("{} samples: ", net.report.samples);
     println!("mean {:.4}% max {:.4}% node-normals {:.2}° iters {} E {:.3e}→{:.3e} t(pre {:.1} reg {:.1} poi {:.1} ms)",

@@ -203,19 +203,7 @@ pub async fn run(
 
 /// The glb of a reconstruction.
 fn network_glb(net: &crate::network::Network) -> Result<Vec<u8>, crate::gltf_out::GltfError> {
-    let curves: Vec<crate::gltf_out::NetworkCurve> = net
-        .positions
-        .curves
-        .iter()
-        .map(|c| crate::gltf_out::NetworkCurve {
-            index: c.index,
-            boundary: c.boundary,
-            nodes: c.nodes.iter().map(|n| n.1).collect(),
-            points: c.points.clone(),
-            normals: c.normals.clone(),
-        })
-        .collect();
-    crate::gltf_out::network_glb(&curves, &net.positions.nodes, None)
+    crate::gltf_out::network_glb(&net.positions.network_curves(), &net.positions.nodes, None)
 }
 
 fn write_json<T: serde::Serialize>(path: &Path, v: &T) -> std::io::Result<()> {

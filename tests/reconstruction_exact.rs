@@ -4,7 +4,6 @@
 //! cannot be used are left out with a reason, a network in two parts is placed per part.
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
-use sfs::gltf_out::{NetworkCurve, ReadNetwork};
 use sfs::network::{NetworkParams, Reconstructor};
 use sfs::scan::{Curve, Samples, Scan, Tag};
 use sfs::simulate::scene::{self, Scene};
@@ -73,22 +72,7 @@ fn score(t: &Truth, scan: &Scan, h: f64) -> f64 {
     let mut p = NetworkParams::default();
     p.prefilter.h = h;
     let net = Reconstructor::new().run(scan, &p).expect("a network");
-    let rec = ReadNetwork {
-        curves: net
-            .positions
-            .curves
-            .iter()
-            .map(|c| NetworkCurve {
-                index: c.index,
-                boundary: c.boundary,
-                nodes: c.nodes.iter().map(|n| n.1).collect(),
-                points: c.points.clone(),
-                normals: c.normals.clone(),
-            })
-            .collect(),
-        nodes: net.positions.nodes.clone(),
-        surface: None,
-    };
+    let rec = net.positions.as_read_network();
     sfs::eval::evaluate(t, &rec).unwrap().curves.mean_pct
 }
 
