@@ -63,6 +63,9 @@ impl Default for AcquisitionConfig {
     }
 }
 
+/// Largest wheel advance between consecutive samples taken as real motion, m.
+pub const MAX_WHEEL_STEP: f64 = 0.5;
+
 /// What [`Acquisition::event`] reports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Update {
@@ -262,7 +265,19 @@ impl Acquisition {
                 let (acc, mag) = (model.acc(s.acc), model.mag(s.mag));
                 let per_tick = model.scales.wheel_m_per_tick.unwrap_or(0.0);
                 if let Some(last) = self.wheel_last.filter(|_| !self.wheel_reset) {
-                    self.wheel_m += s.wheel.wrapping_sub(last) as f64 * per_tick;
+                    let step = s.wheel.wrapping_sub(last) as f64 * per_tick;
+                    // Between two samples (a few ms, or a gap) the operator's hand moves well
+                    // under a metre: a larger jump is a glitch of the counter, bridged.
+                    if step.abs() <= MAX_WHEEL_STEP {
+                        self.wheel_m += step;
+                    } else {
+                        self.scan.counts.wheel_glitches += 1;
+                        if self.scan.counts.wheel_glitches == 1 {
+                            self.warn(format!(
+                                "t = {t:.3} s: the wheel counter jumped {step:.3} m between two samples; such jumps are ignored"
+                            ));
+                        }
+                    }
                 }
                 self.wheel_reset = false;
                 self.wheel_last = Some(s.wheel);

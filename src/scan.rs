@@ -105,6 +105,8 @@ pub struct Counts {
     pub curves_discarded: u64,
     /// Samples of another device kind than the HELLO's (ignored).
     pub wrong_kind: u64,
+    /// Implausible jumps of the wheel counter (ignored).
+    pub wheel_glitches: u64,
 }
 
 /// Per-sensor orientations of a sensor array, one per averaging window.

@@ -202,6 +202,32 @@ impl Scales {
         if has_gyro && !ok(self.gyro) {
             return Err(format!("gyroscope scale {} is not positive", self.gyro));
         }
+        // A plausible sensor: full scale (32767 counts) between 1/100 and 1000 units of g,
+        // µT and rad/s; a wheel advancing at most 10 cm per tick.
+        let full = |x: f64| x * 32767.0;
+        if !(0.098..=98_000.0).contains(&full(self.acc)) {
+            return Err(format!(
+                "accelerometer scale {} m/s² per count is implausible",
+                self.acc
+            ));
+        }
+        if !(1.0..=1e6).contains(&full(self.mag)) {
+            return Err(format!(
+                "magnetometer scale {} µT per count is implausible",
+                self.mag
+            ));
+        }
+        if has_gyro && !(0.01..=1e4).contains(&full(self.gyro)) {
+            return Err(format!(
+                "gyroscope scale {} rad/s per count is implausible",
+                self.gyro
+            ));
+        }
+        if let Some(w) = self.wheel_m_per_tick {
+            if !(w.is_finite() && w > 0.0 && w <= 0.1) {
+                return Err(format!("wheel advance {w} m per tick is implausible"));
+            }
+        }
         Ok(())
     }
 }

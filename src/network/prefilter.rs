@@ -85,7 +85,17 @@ pub enum PrefilterError {
         "curve {curve}: node {node} at {d:.4} m comes before the previous node (backwards segment)"
     )]
     Backwards { curve: usize, node: u32, d: f64 },
+    #[error("curve {curve}: {length:.1} m long at h = {h} m would take more than {max} samples")]
+    TooLong {
+        curve: usize,
+        length: f64,
+        h: f64,
+        max: usize,
+    },
 }
+
+/// Most uniform samples one curve may have (a corrupted distance must not exhaust memory).
+pub const MAX_SAMPLES_PER_CURVE: usize = 1_000_000;
 
 fn quat(a: &[f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::new_normalize(Quaternion::new(a[0], a[1], a[2], a[3]))
@@ -115,6 +125,14 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
                 d: w[1].d,
             });
         }
+    }
+    if length / p.h > MAX_SAMPLES_PER_CURVE as f64 {
+        return Err(PrefilterError::TooLong {
+            curve: c.index,
+            length,
+            h: p.h,
+            max: MAX_SAMPLES_PER_CURVE,
+        });
     }
     let s = &c.samples;
     // Usable raw samples in time order.
