@@ -38,9 +38,9 @@ fn packet() -> impl Strategy<Value = Packet> {
             wheel_circumference_um: 100_000,
             sensors: 1,
         })),
-        30 => (any::<u32>(), v3.clone(), v3.clone(), any::<i32>()).prop_map(|(t, acc, mag, wheel)| Packet::RiderSample(RiderSample { t_us: t, acc, mag, wheel })),
-        10 => (any::<u32>(), v3.clone(), v3.clone(), v3.clone()).prop_map(|(t, acc, gyro, mag)| Packet::PhoneSample(PhoneSample { t_us: t, acc, gyro, mag })),
-        5 => (any::<u32>(), 0u16..4, v3.clone(), v3).prop_map(|(t, sensor, acc, mag)| Packet::ArraySample(ArraySample { t_us: t, sensor, acc, mag })),
+        30 => (any::<u32>(), v3, v3, any::<i32>()).prop_map(|(t, acc, mag, wheel)| Packet::RiderSample(RiderSample { t_us: t, acc, mag, wheel })),
+        10 => (any::<u32>(), v3, v3, v3).prop_map(|(t, acc, gyro, mag)| Packet::PhoneSample(PhoneSample { t_us: t, acc, gyro, mag })),
+        5 => (any::<u32>(), 0u16..4, v3, v3).prop_map(|(t, sensor, acc, mag)| Packet::ArraySample(ArraySample { t_us: t, sensor, acc, mag })),
         10 => (any::<u32>(), prop::sample::select(b"BI0123456789\nUCEX".to_vec())).prop_map(|(t, key)| Packet::Key(Key { t_us: t, key })),
         2 => (any::<u32>(), any::<u16>(), any::<u32>()).prop_map(|(t, segment, length_um)| Packet::SegmentLength(SegmentLength { t_us: t, segment, length_um })),
     ]
