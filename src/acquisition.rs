@@ -101,16 +101,23 @@ struct OpenCurve {
     segment_lengths: BTreeMap<u16, f64>,
 }
 
-/// Monotonic session time from the device clock.
+/// Monotonic session time from the device clock: increments are `t_us` differences (wraps
+/// included); after a reboot ([`Clock::restart`]) the next stamp adds nothing.
 #[derive(Debug, Clone, Default)]
-struct Clock {
+pub(crate) struct Clock {
     last: Option<u32>,
     elapsed_us: u64,
     restart: bool,
 }
 
 impl Clock {
-    fn advance(&mut self, t_us: u32) -> f64 {
+    /// The device restarted: its clock starts over.
+    pub(crate) fn restart(&mut self) {
+        self.restart = true;
+    }
+
+    /// Session time, s, of a packet stamped `t_us`.
+    pub(crate) fn advance(&mut self, t_us: u32) -> f64 {
         if let Some(last) = self.last {
             if !self.restart {
                 self.elapsed_us += t_us.wrapping_sub(last) as u64;
@@ -193,7 +200,7 @@ impl Acquisition {
         match ev {
             Event::Packet { packet, .. } => self.packet(packet),
             Event::DeviceReboot => {
-                self.clock.restart = true;
+                self.clock.restart();
                 self.wheel_reset = true;
                 let t = self.clock.elapsed_us as f64 * 1e-6;
                 if let Some(o) = &self.open {
@@ -848,7 +855,7 @@ mod tests {
         let mut c = Clock::default();
         assert_eq!(c.advance(u32::MAX - 999), 0.0);
         assert!((c.advance(1000) - 0.002).abs() < 1e-9); // wrapped: +2000 µs
-        c.restart = true;
+        c.restart();
         assert!((c.advance(5) - 0.002).abs() < 1e-9); // reboot adds nothing
         assert!((c.advance(10_005) - 0.012).abs() < 1e-9);
     }

@@ -30,6 +30,18 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     result
 }
 
+/// Writes `value` as JSON (indented when `pretty`), atomically.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T, pretty: bool) -> io::Result<()> {
+    let mut json = if pretty {
+        serde_json::to_vec_pretty(value)
+    } else {
+        serde_json::to_vec(value)
+    }
+    .map_err(io::Error::other)?;
+    json.push(b'\n');
+    write_atomic(path, &json)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

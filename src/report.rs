@@ -58,8 +58,6 @@ impl From<&Curve> for CurveSummary {
 impl Report {
     /// Writes the report as pretty JSON, atomically.
     pub fn write(&self, path: &Path) -> std::io::Result<()> {
-        let mut json = serde_json::to_vec_pretty(self).map_err(std::io::Error::other)?;
-        json.push(b'\n');
-        crate::atomic::write_atomic(path, &json)
+        crate::atomic::write_json(path, self, true)
     }
 }

@@ -146,7 +146,7 @@ pub async fn run(
     log_stats("session ended", &stats);
     let mut scan = acq.finish();
     let scan_path = out_dir.join(SCAN_FILE);
-    write_json(&scan_path, &scan).map_err(output_err(&scan_path))?;
+    crate::atomic::write_json(&scan_path, &scan, false).map_err(output_err(&scan_path))?;
     let mut reconstructor = crate::network::Reconstructor::new();
     let network = reconstructor.run(&scan, &options.network);
     let mut nodes = std::collections::BTreeMap::new();
@@ -204,12 +204,6 @@ pub async fn run(
 /// The glb of a reconstruction.
 fn network_glb(net: &crate::network::Network) -> Result<Vec<u8>, crate::gltf_out::GltfError> {
     crate::gltf_out::network_glb(&net.positions.network_curves(), &net.positions.nodes, None)
-}
-
-fn write_json<T: serde::Serialize>(path: &Path, v: &T) -> std::io::Result<()> {
-    let mut json = serde_json::to_vec(v).map_err(std::io::Error::other)?;
-    json.push(b'\n');
-    crate::atomic::write_atomic(path, &json)
 }
 
 fn log_stats(msg: &str, s: &LinkStats) {

@@ -13,6 +13,17 @@ fn sfs() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sfs"))
 }
 
+/// `sfs run --stdin --session DIR`, standard input piped, standard output discarded.
+fn run_stdin(log: &str, session: impl AsRef<Path>) -> std::process::Child {
+    sfs()
+        .args(["--log", log, "run", "--stdin", "--session"])
+        .arg(session.as_ref())
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap()
+}
+
 fn report(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()
 }
@@ -29,13 +40,7 @@ fn kill(pid: u32, sig: &str) {
 fn stdin_session_capture_replays_to_the_same_statistics() {
     let dir = tmpdir("capture-stdin");
     let (bytes, exp) = fault_stream(2000);
-    let mut child = sfs()
-        .args(["--log", "warn", "run", "--stdin", "--session"])
-        .arg(dir.join("live"))
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut child = run_stdin("warn", dir.join("live"));
     {
         let mut stdin = child.stdin.take().unwrap();
         for c in bytes.chunks(1000) {
@@ -78,13 +83,7 @@ fn resumed_session_appends_to_its_capture() {
     let (bytes, _) = fault_stream(300);
     let (a, b) = bytes.split_at(bytes.len() / 3);
     for part in [a, b] {
-        let mut child = sfs()
-            .args(["--log", "off", "run", "--stdin", "--session"])
-            .arg(&dir)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::null())
-            .spawn()
-            .unwrap();
+        let mut child = run_stdin("off", &dir);
         child.stdin.take().unwrap().write_all(part).unwrap();
         assert!(child.wait().unwrap().success());
     }
@@ -96,13 +95,7 @@ fn sigkill_loses_at_most_the_last_second() {
     let dir = tmpdir("capture-sigkill");
     let (bytes, _) = fault_stream(2000);
     let (early, late) = bytes.split_at(bytes.len() * 2 / 3);
-    let mut child = sfs()
-        .args(["--log", "off", "run", "--stdin", "--session"])
-        .arg(&dir)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut child = run_stdin("off", &dir);
     let mut stdin = child.stdin.take().unwrap();
     stdin.write_all(early).unwrap();
     stdin.flush().unwrap();
@@ -127,13 +120,7 @@ fn sigkill_loses_at_most_the_last_second() {
 fn sigterm_finishes_with_report_and_exit_0() {
     let dir = tmpdir("capture-sigterm");
     let (bytes, exp) = fault_stream(500);
-    let mut child = sfs()
-        .args(["--log", "off", "run", "--stdin", "--session"])
-        .arg(&dir)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut child = run_stdin("off", &dir);
     let mut stdin = child.stdin.take().unwrap();
     stdin.write_all(&bytes).unwrap();
     stdin.flush().unwrap();

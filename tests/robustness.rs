@@ -2,6 +2,8 @@
 //! included; arbitrary samples; keys from the keypad's alphabet and beyond) go through
 //! acquisition and reconstruction; every glb written holds only finite numbers.
 
+mod common;
+
 use device_protocol::*;
 use proptest::prelude::*;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
@@ -79,22 +81,6 @@ proptest! {
     }
 }
 
-fn good_hello() -> Packet {
-    Packet::Hello(Hello {
-        proto: 1,
-        kind: DeviceKind::Morphorider,
-        device_id: 1,
-        firmware: 1,
-        rate_hz: 100,
-        acc_scale: 0.0024,
-        gyro_scale: 0.0,
-        mag_scale: 0.15,
-        ticks_per_rev: 1024,
-        wheel_circumference_um: 100_000,
-        sensors: 1,
-    })
-}
-
 proptest! {
     #![proptest_config(ProptestConfig { cases: 100, failure_persistence: None, ..ProptestConfig::default() })]
 
@@ -109,7 +95,7 @@ proptest! {
         let mut wire = Vec::new();
         let mut seq = 0u8;
         let mut put = |p: Packet, w: &mut Vec<u8>| { p.encode(seq, w); seq = seq.wrapping_add(1); };
-        put(good_hello(), &mut wire);
+        put(common::hello(), &mut wire);
         let mut t = 0u32;
         let mut wheel = 0i32;
         let per = samples.len() / (nodes.len() * curves);

@@ -41,40 +41,31 @@ pub fn recording(bytes: &[u8], sensor: u16) -> Option<Recording> {
     let mut dec = Decoder::new();
     let mut rec = Recording::default();
     let mut scales: Option<(f64, f64, f64)> = None;
-    let mut elapsed = 0u64;
-    let mut last: Option<u32> = None;
-    let mut advance = |t_us: u32, restart: bool| -> f64 {
-        if let (Some(l), false) = (last, restart) {
-            elapsed += t_us.wrapping_sub(l) as u64;
-        }
-        last = Some(t_us);
-        elapsed as f64 * 1e-6
-    };
-    let mut restart = false;
+    let mut clock = crate::acquisition::Clock::default();
     let v = |r: [i16; 3], s: f64| Vector3::new(r[0] as f64, r[1] as f64, r[2] as f64) * s;
     for ev in dec.feed(bytes) {
         match ev {
-            Event::DeviceReboot => restart = true,
+            Event::DeviceReboot => clock.restart(),
             Event::Packet { packet, .. } => match packet {
                 Packet::Hello(h) => {
                     scales = Some((h.acc_scale as f64, h.gyro_scale as f64, h.mag_scale as f64))
                 }
                 Packet::RiderSample(s) => {
                     let Some((sa, _, sm)) = scales else { continue };
-                    rec.t.push(advance(s.t_us, std::mem::take(&mut restart)));
+                    rec.t.push(clock.advance(s.t_us));
                     rec.acc.push(v(s.acc, sa));
                     rec.mag.push(v(s.mag, sm));
                 }
                 Packet::PhoneSample(s) => {
                     let Some((sa, sg, sm)) = scales else { continue };
-                    rec.t.push(advance(s.t_us, std::mem::take(&mut restart)));
+                    rec.t.push(clock.advance(s.t_us));
                     rec.acc.push(v(s.acc, sa));
                     rec.mag.push(v(s.mag, sm));
                     rec.gyro.push(v(s.gyro, sg));
                 }
                 Packet::ArraySample(s) if s.sensor == sensor => {
                     let Some((sa, _, sm)) = scales else { continue };
-                    rec.t.push(advance(s.t_us, std::mem::take(&mut restart)));
+                    rec.t.push(clock.advance(s.t_us));
                     rec.acc.push(v(s.acc, sa));
                     rec.mag.push(v(s.mag, sm));
                 }

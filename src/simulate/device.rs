@@ -265,7 +265,8 @@ impl Emitter {
     }
 }
 
-fn counts(v: &Vector3<f64>, lsb: f64) -> [i16; 3] {
+/// A sensor value in counts of `lsb`, clamped to the i16 rails.
+pub(crate) fn counts(v: &Vector3<f64>, lsb: f64) -> [i16; 3] {
     [0, 1, 2].map(|i| (v[i] / lsb).round().clamp(i16::MIN as f64, i16::MAX as f64) as i16)
 }
 

@@ -283,9 +283,6 @@ fn run_array(scene: &Scene, profile: Profile, seed: u64, rng: &mut Rng) -> Simul
         wheel_circumference_um: 0,
         sensors: sensors.len() as u16,
     });
-    let counts = |v: Vector3<f64>, lsb: f64| {
-        [0, 1, 2].map(|i| (v[i] / lsb).round().clamp(-32768.0, 32767.0) as i16)
-    };
     for k in 0..200u32 {
         if k % 100 == 0 {
             put(hello, &mut bytes);
@@ -301,8 +298,8 @@ fn run_array(scene: &Scene, profile: Profile, seed: u64, rng: &mut Rng) -> Simul
                 Packet::ArraySample(ArraySample {
                     t_us: 1_000_000 + k * 50_000 + s.sensor as u32 * 10,
                     sensor: s.sensor,
-                    acc: counts(acc, acc_lsb),
-                    mag: counts(mag, mag_lsb),
+                    acc: device::counts(&acc, acc_lsb),
+                    mag: device::counts(&mag, mag_lsb),
                 }),
                 &mut bytes,
             );

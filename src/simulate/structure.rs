@@ -227,9 +227,6 @@ pub fn run(
     let mut rng = Rng::new(seed);
     let field = Earth::default().field();
     let (acc_lsb, mag_lsb) = (16.0 * G / 65536.0, 0.15);
-    let counts = |v: Vector3<f64>, lsb: f64| {
-        [0, 1, 2].map(|i| (v[i] / lsb).round().clamp(-32768.0, 32767.0) as i16)
-    };
     let mut out = Vec::new();
     let mut seq = 0u8;
     let mut put = |p: Packet, out: &mut Vec<u8>| {
@@ -295,8 +292,8 @@ pub fn run(
                 Packet::ArraySample(ArraySample {
                     t_us: (1e6 + ts * 1e6) as u32,
                     sensor: s.sensor,
-                    acc: counts(acc, acc_lsb),
-                    mag: counts(mag, mag_lsb),
+                    acc: super::device::counts(&acc, acc_lsb),
+                    mag: super::device::counts(&mag, mag_lsb),
                 }),
                 &mut out,
             );
