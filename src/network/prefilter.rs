@@ -238,8 +238,11 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
             let hi = ds.partition_point(|&x| x <= t + radius);
             let mut ten = StructureTensor::new();
             let (mut kw, mut k) = (0.0, 0.0);
+            // The kernel widens with the window (3σ = radius), so that a gap in the data is
+            // bridged by the nearest samples rather than by weights that underflow.
+            let kernel_width = (radius / 3.0).max(1e-12);
             for (u, dd) in uniq[lo..hi].iter().zip(&spacing[lo..hi]) {
-                let z = (t - u.0) / width.max(1e-12);
+                let z = (t - u.0) / kernel_width;
                 let kernel = dd.max(1e-12) * (-0.5 * z * z).exp();
                 ten.add(&u.1, u.2 * kernel);
                 kw += u.2 * kernel;

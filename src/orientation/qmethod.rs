@@ -51,7 +51,13 @@ impl StructureTensor {
         if self.weight <= 0.0 {
             return None;
         }
-        let eig = SymmetricEigen::new(self.m / self.weight);
+        // Scale by the largest entry (dividing by a tiny total weight can overflow), and bound
+        // the iterations: a non-finite matrix must give `None`, never an endless loop.
+        let scale = self.m.amax();
+        if !(scale.is_finite() && scale > 0.0) {
+            return None;
+        }
+        let eig = SymmetricEigen::try_new(self.m / scale, 1e-15, 1000)?;
         let (i, _) = eig
             .eigenvalues
             .iter()
@@ -174,6 +180,26 @@ mod tests {
         let far =
             exact * UnitQuaternion::from_scaled_axis(Vector3::new(std::f64::consts::PI, 0.0, 0.0));
         assert!(t.mean_near(&far).unwrap().angle_to(&exact) < 1e-6);
+    }
+
+    /// Regression: kernel weights so small that `M / Σw` overflowed sent the eigen-solver into
+    /// an endless loop (found by the robustness property test).
+    #[test]
+    fn tiny_or_huge_weights_neither_hang_nor_fail() {
+        let q = UnitQuaternion::from_scaled_axis(Vector3::new(0.3, -0.2, 0.1));
+        for w in [1e-310, 1e-200, 1e200] {
+            let mut t = StructureTensor::new();
+            t.add(&q, w);
+            t.add(&q, w);
+            assert!(t.mean().unwrap().angle_to(&q) < 1e-9, "weight {w}");
+            assert!(
+                t.mean_near(&UnitQuaternion::identity())
+                    .unwrap()
+                    .angle_to(&q)
+                    < 1e-9,
+                "weight {w}"
+            );
+        }
     }
 
     #[test]
