@@ -85,6 +85,13 @@ pub enum PrefilterError {
         "curve {curve}: node {node} at {d:.4} m comes before the previous node (backwards segment)"
     )]
     Backwards { curve: usize, node: u32, d: f64 },
+    #[error("curve {curve}: nodes {a} and {b} are tagged {length:.4} m apart (less than 1 mm)")]
+    EmptySegment {
+        curve: usize,
+        a: u32,
+        b: u32,
+        length: f64,
+    },
     #[error("curve {curve}: {length:.1} m long at h = {h} m would take more than {max} samples")]
     TooLong {
         curve: usize,
@@ -93,6 +100,9 @@ pub enum PrefilterError {
         max: usize,
     },
 }
+
+/// Shortest segment between two consecutive node tags, m.
+pub const MIN_SEGMENT: f64 = 0.001;
 
 /// Most uniform samples one curve may have (a corrupted distance must not exhaust memory).
 pub const MAX_SAMPLES_PER_CURVE: usize = 1_000_000;
@@ -125,6 +135,19 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
                 d: w[1].d,
             });
         }
+    }
+    // A segment of (almost) no length has no step to sample it with (and would stall the
+    // kernel search below): two nodes tagged without moving.
+    if let Some(w) = c.tags.windows(2).find(|w| {
+        let l = w[1].d - w[0].d;
+        l.is_nan() || l < MIN_SEGMENT
+    }) {
+        return Err(PrefilterError::EmptySegment {
+            curve: c.index,
+            a: w[0].node,
+            b: w[1].node,
+            length: w[1].d - w[0].d,
+        });
     }
     if length / p.h > MAX_SAMPLES_PER_CURVE as f64 {
         return Err(PrefilterError::TooLong {
@@ -232,7 +255,7 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
             .unwrap_or(0)
             .min(hs.len() - 1);
         let width = p.sigma * hs[seg];
-        let mut radius = 3.0 * width;
+        let mut radius = (3.0 * width).max(1e-9);
         let (mean, reliability) = loop {
             let lo = ds.partition_point(|&x| x < t - radius);
             let hi = ds.partition_point(|&x| x <= t + radius);
@@ -379,6 +402,33 @@ mod tests {
             let err = q.angle_to(&UnitQuaternion::from_axis_angle(&Vector3::z_axis(), d));
             assert!(err < tolerance(d, 1.0), "at {d}: {err}");
         }
+    }
+
+    /// Regression: two nodes tagged at the same distance made a segment of step 0, and the
+    /// kernel search doubled a zero radius for ever (found by the robustness property test).
+    #[test]
+    fn a_segment_of_no_length_is_reported_not_looped_on() {
+        let mut c = curve(100, |u| u);
+        c.tags.insert(
+            1,
+            Tag {
+                node: 7,
+                d: 0.25,
+                t: 0.25,
+            },
+        );
+        c.tags.insert(
+            1,
+            Tag {
+                node: 6,
+                d: 0.25,
+                t: 0.25,
+            },
+        );
+        assert!(matches!(
+            prefilter(&c, &PrefilterParams::default()),
+            Err(PrefilterError::EmptySegment { a: 6, b: 7, .. })
+        ));
     }
 
     #[test]
