@@ -92,7 +92,7 @@ struct Raw {
 struct OpenCurve {
     index: usize,
     boundary: bool,
-    tags: Vec<(u32, f64)>,
+    tags: Vec<(u32, f64, bool)>,
     /// `(first digit, Enter)` times of every node tag: the operator stands while typing.
     typing: Vec<(f64, f64)>,
     /// Time of the first digit of the index being typed.
@@ -214,7 +214,7 @@ impl Acquisition {
             }
             Event::SequenceGap { .. } => {
                 self.gap = true;
-                self.keypad.link_gap();
+                self.keypad.link_gap(self.clock.elapsed_us as f64 * 1e-6);
                 None
             }
             _ => None,
@@ -409,9 +409,11 @@ impl Acquisition {
                         segment_lengths: BTreeMap::new(),
                     });
                 }
-                KeyEvent::Tagged { node, t, .. } => {
+                KeyEvent::Tagged {
+                    node, t, uncertain, ..
+                } => {
                     if let Some(o) = &mut self.open {
-                        o.tags.push((node, t));
+                        o.tags.push((node, t, uncertain));
                         o.typing.push((o.first_digit.take().unwrap_or(t), t));
                     }
                 }
@@ -576,7 +578,12 @@ impl Acquisition {
             tags: o
                 .tags
                 .iter()
-                .map(|&(node, t)| Tag { node, d: 0.0, t })
+                .map(|&(node, t, uncertain)| Tag {
+                    node,
+                    d: 0.0,
+                    t,
+                    uncertain,
+                })
                 .collect(),
             segment_lengths: vec![None; o.tags.len().saturating_sub(1)],
             samples: s,

@@ -16,6 +16,13 @@
 //! curve; `B`/`I` while a curve is open ends it first (kept if it has two tags, else
 //! discarded); an unknown key is ignored.
 //!
+//! Packets lost on the link ([`Keypad::link_gap`]) can take keys with them. Digits left
+//! without their Enter after a loss are tagged at their last digit (the Enter is presumed
+//! lost). An Enter with no digits after a loss means the index was lost but the operator did
+//! tag a node there: the curve keeps the tag as an *anonymous* node (an index from
+//! [`ANONYMOUS_NODE_BASE`] up, used by no other curve), so its segmentation, and the segment
+//! lengths measured for it, stay right.
+//!
 //! ```
 //! use sfs::keypad::{Keypad, KeyEvent};
 //! let mut k = Keypad::new();
@@ -60,11 +67,13 @@ pub enum KeyEvent {
         curve: CurveIndex,
         boundary: bool,
     },
-    /// Node `node` tagged at time `t` (the Enter press).
+    /// Node `node` tagged at time `t` (the Enter press). `uncertain`: packets were lost
+    /// while it was typed, so a digit may be missing.
     Tagged {
         curve: CurveIndex,
         node: u32,
         t: f64,
+        uncertain: bool,
     },
     Untagged {
         curve: CurveIndex,
@@ -84,6 +93,15 @@ pub enum KeyEvent {
 /// Largest node index accepted (six digits).
 pub const MAX_NODE: u32 = 999_999;
 
+/// First index given to anonymous nodes (tags whose index was lost on the link); they are
+/// numbered upwards in the order they occur and can never collide with a typed index.
+pub const ANONYMOUS_NODE_BASE: u32 = MAX_NODE + 1;
+
+/// Whether `node` is an anonymous node (see [`ANONYMOUS_NODE_BASE`]).
+pub fn is_anonymous(node: u32) -> bool {
+    node >= ANONYMOUS_NODE_BASE
+}
+
 #[derive(Debug, Clone)]
 struct Open {
     curve: CurveIndex,
@@ -99,6 +117,14 @@ pub struct Keypad {
     /// Time of the last digit typed, and whether packets were lost since.
     last_digit: f64,
     gap_since_digit: bool,
+    /// Packets were lost since the last key, and when (session time of the last packet
+    /// before the loss, as told by [`link_gap`](Self::link_gap)).
+    gap_since_key: bool,
+    gap_time: f64,
+    /// Packets were lost while the pending digits were typed (or just before the first).
+    digits_uncertain: bool,
+    /// Anonymous nodes handed out so far.
+    anonymous: u32,
 }
 
 /// Digits not confirmed within this many seconds are stale (the operator moved on).
@@ -174,9 +200,11 @@ impl Keypad {
         }
     }
 
-    /// Tells the keypad that packets were lost on the link (a sequence gap): a key may be
-    /// missing.
-    pub fn link_gap(&mut self) {
+    /// Tells the keypad that packets were lost on the link (a sequence gap) after session
+    /// time `t`: a key may be missing.
+    pub fn link_gap(&mut self, t: f64) {
+        self.gap_since_key = true;
+        self.gap_time = t;
         if !self.digits.is_empty() {
             self.gap_since_digit = true;
         }
@@ -210,6 +238,7 @@ impl Keypad {
                     curve,
                     node,
                     t: t_tag,
+                    uncertain: true,
                 });
             }
         } else {
@@ -226,10 +255,15 @@ impl Keypad {
 
     /// Processes one key pressed at session time `t`, appending what happened to `out`.
     pub fn key(&mut self, t: f64, key: u8, out: &mut Vec<KeyEvent>) {
+        let gap_before = std::mem::take(&mut self.gap_since_key);
         self.stale_digits(t, key, out);
         if key.is_ascii_digit() && self.open.is_some() {
             if self.digits.is_empty() {
                 self.gap_since_digit = false;
+                // A loss shortly before the first digit may have taken a leading digit.
+                self.digits_uncertain = gap_before && t - self.gap_time <= DIGIT_TIMEOUT;
+            } else if gap_before {
+                self.digits_uncertain = true; // a middle digit may be gone
             }
             self.last_digit = t;
         }
@@ -269,6 +303,25 @@ impl Keypad {
                     return;
                 }
                 if digits.is_empty() {
+                    if gap_before {
+                        let node = ANONYMOUS_NODE_BASE + self.anonymous;
+                        self.anonymous += 1;
+                        self.warn(
+                            out,
+                            t,
+                            Some(node),
+                            "Enter after packets were lost and with no digits: the node index was lost; tagged as an anonymous node that joins no other curve".into(),
+                        );
+                        let open = self.open.as_mut().expect("checked");
+                        open.tags.push(node);
+                        out.push(KeyEvent::Tagged {
+                            curve: open.curve,
+                            node,
+                            t,
+                            uncertain: false, // anonymous: joins nothing
+                        });
+                        return;
+                    }
                     self.warn(
                         out,
                         t,
@@ -278,6 +331,8 @@ impl Keypad {
                     return;
                 }
                 let node: u32 = digits.parse().expect("only digits, at most 6");
+                // A loss between the last digit and the Enter may have taken a digit too.
+                let uncertain = std::mem::take(&mut self.digits_uncertain) || gap_before;
                 let open = self.open.as_mut().expect("checked");
                 if open.tags.last() == Some(&node) {
                     self.warn(
@@ -293,6 +348,7 @@ impl Keypad {
                     curve: open.curve,
                     node,
                     t,
+                    uncertain,
                 });
             }
             b'B' | b'I' => {
@@ -470,7 +526,7 @@ mod tests {
         ] {
             k.key(t, c, &mut out);
         }
-        k.link_gap(); // the Enter after "16" was lost
+        k.link_gap(0.0); // the Enter after "16" was lost
         for (t, c) in [(9.0, b'8'), (9.2, b'\n'), (9.5, b'E')] {
             k.key(t, c, &mut out);
         }
@@ -503,7 +559,8 @@ mod tests {
         assert!(out.contains(&KeyEvent::Tagged {
             curve: 0,
             node: 2,
-            t: 6.1
+            t: 6.1,
+            uncertain: false
         }));
         // A loss between two digits of one index (a sample packet) does not split the index.
         let mut k = Keypad::new();
@@ -511,7 +568,7 @@ mod tests {
         for (t, c) in [(0.0, b'I'), (1.0, b'2')] {
             k.key(t, c, &mut out);
         }
-        k.link_gap();
+        k.link_gap(0.0);
         for (t, c) in [(1.25, b'9'), (1.5, b'\n')] {
             k.key(t, c, &mut out);
         }
@@ -519,11 +576,82 @@ mod tests {
             out.contains(&KeyEvent::Tagged {
                 curve: 0,
                 node: 29,
-                t: 1.5
+                t: 1.5,
+                uncertain: true
             }),
             "{out:?}"
         );
         assert!(warnings(&out).is_empty());
+    }
+
+    #[test]
+    fn enter_after_a_loss_with_no_digits_tags_an_anonymous_node() {
+        let mut k = Keypad::new();
+        let mut out = Vec::new();
+        for (t, c) in [(0.0, b'I'), (1.0, b'3'), (1.1, b'\n')] {
+            k.key(t, c, &mut out);
+        }
+        k.link_gap(0.0); // the digit "4" was lost
+        for (t, c) in [(5.1, b'\n'), (8.0, b'5'), (8.1, b'\n')] {
+            k.key(t, c, &mut out);
+        }
+        k.link_gap(0.0); // a second lost index in the same curve gets its own node
+        for (t, c) in [(9.1, b'\n'), (9.5, b'E')] {
+            k.key(t, c, &mut out);
+        }
+        let tags: Vec<u32> = out
+            .iter()
+            .filter_map(|e| match e {
+                KeyEvent::Tagged { node, .. } => Some(*node),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            tags,
+            [3, ANONYMOUS_NODE_BASE, 5, ANONYMOUS_NODE_BASE + 1],
+            "{out:?}"
+        );
+        assert!(tags.iter().filter(|&&n| is_anonymous(n)).count() == 2);
+        let w = warnings(&out);
+        assert_eq!(w.len(), 2, "{out:?}");
+        assert!(w[0].message.contains("index was lost") && w[0].curve == Some(0));
+        assert_eq!(ended(&out), [0]);
+        // Without a loss, an Enter with no digits is still ignored.
+        let ev = run("I1\n\n2\nE");
+        assert_eq!(warnings(&ev).len(), 1);
+        assert!(!ev
+            .iter()
+            .any(|e| matches!(e, KeyEvent::Tagged { node, .. } if is_anonymous(*node))));
+    }
+
+    #[test]
+    fn a_loss_while_an_index_is_typed_marks_the_tag_uncertain() {
+        let tag = |gap: Option<f64>| {
+            let mut k = Keypad::new();
+            let mut out = Vec::new();
+            for (t, c) in [(0.0, b'I'), (1.0, b'1'), (1.1, b'\n')] {
+                k.key(t, c, &mut out);
+            }
+            if let Some(g) = gap {
+                k.link_gap(g);
+            }
+            for (t, c) in [(5.0, b'9'), (5.1, b'\n')] {
+                k.key(t, c, &mut out);
+            }
+            out.iter()
+                .filter_map(|e| match e {
+                    KeyEvent::Tagged {
+                        node, uncertain, ..
+                    } => Some((*node, *uncertain)),
+                    _ => None,
+                })
+                .collect::<Vec<_>>()
+        };
+        // "29" lost its "2" just before the "9" arrived.
+        assert_eq!(tag(Some(4.9)), [(1, false), (9, true)]);
+        // A loss long before the typing started says nothing about the index.
+        assert_eq!(tag(Some(1.5)), [(1, false), (9, false)]);
+        assert_eq!(tag(None), [(1, false), (9, false)]);
     }
 
     #[test]

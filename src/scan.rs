@@ -17,6 +17,10 @@ pub struct Tag {
     pub d: f64,
     /// Session time of the Enter press, s.
     pub t: f64,
+    /// Packets were lost on the link while this index was typed (a digit may be missing):
+    /// the reconstruction detaches such a tag if the network's loops refuse it.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub uncertain: bool,
 }
 
 /// Raw samples of one curve, as parallel arrays.

@@ -54,6 +54,7 @@ fn exact_scan(s: &Scene) -> Scan {
                 node,
                 d: smp.d[i],
                 t: i as f64,
+                uncertain: false,
             })
             .collect::<Vec<_>>();
         scan.curves.push(Curve {
@@ -110,11 +111,13 @@ fn unusable_curves_are_left_out_with_a_reason_and_parts_placed_separately() {
             node: 0,
             d: 0.0,
             t: 0.0,
+            uncertain: false,
         },
         Tag {
             node: 9,
             d: 0.001,
             t: 1.0,
+            uncertain: false,
         },
     ];
     let mut apart = scan.curves[2].clone();

@@ -1,10 +1,14 @@
 //! Curve-network reconstruction: tagged curves → filtered frames → positions.
 //!
 //! - [`prefilter`]: per-curve outlier removal, duplicates, uniform Gaussian resampling.
+//! - [`closure`]: node tags the network's loops refuse (a mistyped or half-lost index) are
+//!   detached from their node.
+//! - [`regression`]: the frames regressed on SO(3)ᴺ over the whole network.
 //! - [`poisson`]: positions of the whole network from its tangents, nodes shared.
 //!
 //! [`reconstruct`] runs them over a scan, leaving out (with a warning) what cannot be used.
 
+pub mod closure;
 pub mod poisson;
 pub mod prefilter;
 pub mod regression;
@@ -23,6 +27,8 @@ pub struct NetworkParams {
     pub regression: RegressionParams,
     /// Skip the regression (pre-filter only), for comparisons.
     pub no_regression: bool,
+    /// Skip the loop-closure test of the tags ([`closure`]), for comparisons.
+    pub no_closure_check: bool,
 }
 
 /// What a reconstruction did, for `report.json`.
@@ -33,6 +39,8 @@ pub struct NetworkReport {
     pub samples: usize,
     pub components: usize,
     pub outliers_removed: usize,
+    /// Tags detached from their node by the loop-closure test (each also a warning).
+    pub tags_detached: usize,
     /// Largest angle between the normals of two curves at a shared node, degrees.
     pub max_node_normal_angle_deg: f64,
     /// The regression's iterations and energies.
@@ -89,6 +97,24 @@ impl Reconstructor {
             }
             return None;
         }
+        let closure = if p.no_closure_check {
+            closure::ClosureReport::default()
+        } else {
+            let uncertain: std::collections::BTreeSet<(usize, usize)> = scan
+                .curves
+                .iter()
+                .flat_map(|c| {
+                    c.tags
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, t)| t.uncertain)
+                        .map(|(k, _)| (c.index, k))
+                })
+                .collect();
+            closure::detach_outlier_tags(&mut uniform, |c, k| uncertain.contains(&(c, k)))
+        };
+        warnings.extend(closure.detached.iter().map(|d| d.to_string()));
+        warnings.extend(closure.warnings.iter().cloned());
         let regression = if p.no_regression {
             RegressionReport::default()
         } else {
@@ -116,6 +142,7 @@ impl Reconstructor {
             samples: uniform.iter().map(|u| u.q.len()).sum(),
             components: positions.components,
             outliers_removed: uniform.iter().map(|u| u.outliers).sum(),
+            tags_detached: closure.detached.len(),
             max_node_normal_angle_deg: max_node_normal_angle(&positions),
             regression,
             timings_ms: Timings {

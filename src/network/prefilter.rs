@@ -324,16 +324,19 @@ mod tests {
                     node: 0,
                     d: 0.0,
                     t: 0.0,
+                    uncertain: false,
                 },
                 Tag {
                     node: 1,
                     d: speed_profile(0.5),
                     t: 0.5,
+                    uncertain: false,
                 },
                 Tag {
                     node: 2,
                     d: speed_profile(1.0),
                     t: 1.0,
+                    uncertain: false,
                 },
             ],
             segment_lengths: vec![None, None],
@@ -415,6 +418,7 @@ mod tests {
                 node: 7,
                 d: 0.25,
                 t: 0.25,
+                uncertain: false,
             },
         );
         c.tags.insert(
@@ -423,6 +427,7 @@ mod tests {
                 node: 6,
                 d: 0.25,
                 t: 0.25,
+                uncertain: false,
             },
         );
         assert!(matches!(

@@ -1,0 +1,449 @@
+//! Loop closure of the tags: finds node tags that the network's loops refuse.
+//!
+//! A node index typed wrong, or one whose leading digit was lost on the link ("29" arriving as
+//! "9"), ties a curve to a node it never touched. The Poisson reconstruction then has to
+//! stretch whole curves to meet it, and the error spreads over the network (a lost digit on
+//! one tag of a 9-curve network gave 3.2 % of the diagonal instead of 0.3 %). Such a tag is
+//! visible in the misfit of the network's loops, so before the regression every tag is tested
+//! and the worst offender, if it is clearly an outlier *and* something else points to a wrong
+//! index (packets were lost while it was typed, or the curve passes the same node twice), is
+//! *detached*: its curve keeps the tag as an anonymous node (its segmentation and segment
+//! lengths are kept) but no longer joins the node. Repeated until no such tag stands out.
+//! A refused tag without a second sign is only reported: a heading disturbed along one curve
+//! (a magnet) refuses its loops just as much, and detaching a right tag loses a constraint.
+//!
+//! ## The test
+//! Each segment `s` of a curve (between two consecutive tags, nodes `a → b`) integrates its
+//! tangents to a chord `d_s = Σ_j h_j (T_j + T_{j+1})/2`. Eliminating the samples inside the
+//! segments from the Poisson energy (exactly: a chain of edges of weight `1/h_j²` is one edge
+//! of weight `c_s = 1/Σ_j h_j²`) leaves a scalar graph Laplacian over the nodes:
+//! `E(x) = Σ_s c_s |x_b − x_a − d_s|²`. Detaching the tag at node `v` of a curve adds a free
+//! offset `δ` to that curve's end(s) at `v`; the energy then drops by exactly
+//! `|g|² / σ` with `g = ∂E/∂δ / 2 = Σ ± c_s e_s` at the optimum and
+//! `σ = Σ c_s − uᵀ L⁻¹ u` (the Schur complement of `δ`; `u` couples `δ` to the nodes), one
+//! sparse solve per tag with the Laplacian factorised once. A tag is detached when its drop
+//! is more than [`SHARE`] of the whole energy *and* more than [`RATIO`] times the energy per
+//! degree of freedom left in the other loops (a 3-dof χ² at that ratio is far beyond noise).
+
+use super::prefilter::UniformCurve;
+use crate::keypad::ANONYMOUS_NODE_BASE;
+use crate::sparse_llt::SpdPattern;
+use nalgebra::Vector3;
+use std::collections::BTreeMap;
+
+/// Share of the network's misfit energy a single tag must explain to be detached.
+pub const SHARE: f64 = 0.5;
+/// Its energy drop against the mean energy per remaining degree of freedom.
+pub const RATIO: f64 = 50.0;
+/// At most this many tags are detached (a network that needs more has a worse problem).
+pub const MAX_DETACHED: usize = 4;
+
+/// A tag detached from its node.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Detached {
+    /// Scan index of the curve.
+    pub curve: usize,
+    /// Position of the tag in the curve's tag list (0 = first).
+    pub tag: usize,
+    /// The node it was typed as.
+    pub node: u32,
+    /// The anonymous node it keeps.
+    pub anonymous: u32,
+    /// How far the curve's end(s) at the tag had to be pulled to meet the node, m.
+    pub offset_m: f64,
+    /// Share of the network's misfit energy it explained.
+    pub share: f64,
+}
+
+impl std::fmt::Display for Detached {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "curve {}, node {} (tag {} of the curve): the network's loops do not close through this tag (the curve would have to be pulled {:.0} mm to meet the node; {:.0} % of the network's misfit); probably a mistyped index or a digit lost on the link: the tag is kept as anonymous node {} that joins no other curve",
+            self.curve,
+            self.node,
+            self.tag + 1,
+            self.offset_m * 1e3,
+            self.share * 100.0,
+            self.anonymous
+        )
+    }
+}
+
+struct Segment {
+    curve: usize,
+    /// Tag positions (in the curve's tag list) at both ends.
+    tags: (usize, usize),
+    a: usize,
+    b: usize,
+    c: f64,
+    d: Vector3<f64>,
+}
+
+/// A tag's energy drop when detached.
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    curve: usize,
+    tag: usize,
+    drop: f64,
+    offset: f64,
+}
+
+/// The network's misfit energy, its loops' degrees of freedom, and every tag's drop.
+struct Drops {
+    energy: f64,
+    dof: f64,
+    tags: Vec<Candidate>,
+}
+
+impl Drops {
+    /// Whether `c` passes the test (see the module docs).
+    fn refuses(&self, c: &Candidate) -> bool {
+        let per_dof = (self.energy - c.drop).max(0.0) / self.dof;
+        c.drop > SHARE * self.energy && c.drop > RATIO * per_dof
+    }
+}
+
+fn drops(curves: &[UniformCurve]) -> Option<Drops> {
+    let mut var: BTreeMap<u32, usize> = BTreeMap::new();
+    for c in curves {
+        for &(_, n) in &c.nodes {
+            let k = var.len();
+            var.entry(n).or_insert(k);
+        }
+    }
+    let n = var.len();
+    let mut segs = Vec::new();
+    for (ci, c) in curves.iter().enumerate() {
+        for k in 0..c.nodes.len().saturating_sub(1) {
+            let (ia, na) = c.nodes[k];
+            let (ib, nb) = c.nodes[k + 1];
+            let mut d = Vector3::zeros();
+            let mut r = 0.0;
+            for j in ia..ib {
+                let h = c.edge_h(j);
+                d += (c.q[j] * Vector3::x() + c.q[j + 1] * Vector3::x()) * (0.5 * h);
+                r += h * h;
+            }
+            if r > 0.0 && r.is_finite() && d.iter().all(|x| x.is_finite()) {
+                segs.push(Segment {
+                    curve: ci,
+                    tags: (k, k + 1),
+                    a: var[&na],
+                    b: var[&nb],
+                    c: 1.0 / r,
+                    d,
+                });
+            }
+        }
+    }
+    if n < 2 || segs.is_empty() {
+        return None;
+    }
+    // Components and gauges.
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn find(p: &mut [usize], mut x: usize) -> usize {
+        while p[x] != x {
+            p[x] = p[p[x]];
+            x = p[x];
+        }
+        x
+    }
+    let mut links = 0usize;
+    for s in &segs {
+        let (ra, rb) = (find(&mut parent, s.a), find(&mut parent, s.b));
+        if ra != rb {
+            parent[ra.max(rb)] = ra.min(rb);
+            links += 1;
+        }
+    }
+    let components = n - links;
+    let loops = segs.iter().filter(|s| s.a != s.b).count() + components - n
+        + segs.iter().filter(|s| s.a == s.b).count();
+    if loops == 0 {
+        return None; // a tree of segments: nothing to check against
+    }
+    let mean_c = segs.iter().map(|s| s.c).sum::<f64>() / segs.len() as f64;
+    let mut entries: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
+    let mut vals = vec![0.0; n];
+    let mut rhs = vec![[0.0; 3]; n];
+    for s in &segs {
+        if s.a == s.b {
+            continue;
+        }
+        vals[s.a] += s.c;
+        vals[s.b] += s.c;
+        entries.push((s.a.max(s.b), s.a.min(s.b)));
+        vals.push(-s.c);
+        for (d, v) in s.d.iter().enumerate() {
+            rhs[s.b][d] += s.c * v;
+            rhs[s.a][d] -= s.c * v;
+        }
+    }
+    for (x, v) in vals.iter_mut().enumerate().take(n) {
+        if find(&mut parent, x) == x {
+            *v += mean_c;
+        }
+    }
+    let f = SpdPattern::new(n, &entries).ok()?.factor(&vals).ok()?;
+    f.solve(&mut rhs);
+    let x: Vec<Vector3<f64>> = rhs.iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
+    let resid = |s: &Segment| x[s.b] - x[s.a] - s.d;
+    let energy: f64 = segs.iter().map(|s| s.c * resid(s).norm_squared()).sum();
+    if energy.is_nan() || energy <= 0.0 || energy.is_infinite() {
+        return None;
+    }
+    // Segments at each tag: (segment, the tag is its end b?).
+    let mut at: BTreeMap<(usize, usize), Vec<(usize, bool)>> = BTreeMap::new();
+    for (si, s) in segs.iter().enumerate() {
+        at.entry((s.curve, s.tags.0)).or_default().push((si, false));
+        at.entry((s.curve, s.tags.1)).or_default().push((si, true));
+    }
+    let mut tags = Vec::with_capacity(at.len());
+    for (&(ci, tag), list) in &at {
+        // δ moves the curve's end(s) at the tag: e_s gains +δ where the tag is the end b, −δ
+        // where it is the end a.
+        let mut g = Vector3::zeros();
+        let mut hdd = 0.0;
+        let mut u: BTreeMap<usize, f64> = BTreeMap::new();
+        for &(si, is_b) in list {
+            let s = &segs[si];
+            let sign = if is_b { 1.0 } else { -1.0 };
+            g += resid(s) * (sign * s.c);
+            hdd += s.c;
+            // Coupling of δ with the nodes in e_s = x_b − x_a − d: ∂e/∂δ = sign.
+            *u.entry(s.b).or_default() += sign * s.c;
+            *u.entry(s.a).or_default() -= sign * s.c;
+        }
+        let mut y = vec![[0.0]; n];
+        for (&i, &ui) in &u {
+            y[i][0] = ui;
+        }
+        f.solve(&mut y);
+        let uy: f64 = u.iter().map(|(&i, &ui)| ui * y[i][0]).sum();
+        let sigma = hdd - uy;
+        if sigma.is_nan() || sigma <= 1e-9 * hdd {
+            continue; // detaching the tag frees nothing (the node holds only this curve)
+        }
+        tags.push(Candidate {
+            curve: ci,
+            tag,
+            drop: g.norm_squared() / sigma,
+            offset: g.norm() / sigma,
+        });
+    }
+    Some(Drops {
+        energy,
+        dof: (3 * loops).saturating_sub(3).max(1) as f64,
+        tags,
+    })
+}
+
+/// Whether tag `tag` of `c` repeats a node the curve passes elsewhere (not the closing pair
+/// of a closed curve): a curve that meets itself is rare, a misread index is not.
+fn repeats_in_curve(c: &UniformCurve, tag: usize) -> bool {
+    let n = c.nodes[tag].1;
+    let last = c.nodes.len() - 1;
+    c.nodes
+        .iter()
+        .enumerate()
+        .any(|(k, &(_, m))| k != tag && m == n && !(k.min(tag) == 0 && k.max(tag) == last))
+}
+
+/// What the loop-closure test found.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ClosureReport {
+    /// Tags detached, in order.
+    pub detached: Vec<Detached>,
+    /// Warnings about tags the loops refuse but with no other sign of a wrong index (kept:
+    /// the misfit may be the data's, e.g. a heading disturbed along the whole curve).
+    pub warnings: Vec<String>,
+}
+
+/// Detaches the tags the network's loops refuse (see the module docs) when there is a second
+/// sign of a wrong index: packets were lost while it was typed (`uncertain(curve index, tag)`),
+/// or the curve passes the same node elsewhere. Each detached tag is renamed to a fresh
+/// anonymous node in `curves`. A refused tag without such a sign is kept, with a warning.
+pub fn detach_outlier_tags(
+    curves: &mut [UniformCurve],
+    uncertain: impl Fn(usize, usize) -> bool,
+) -> ClosureReport {
+    let mut out = ClosureReport::default();
+    while out.detached.len() < MAX_DETACHED {
+        let Some(d) = drops(curves) else { break };
+        let worst = d
+            .tags
+            .iter()
+            .filter(|c| d.refuses(c))
+            .max_by(|a, b| a.drop.total_cmp(&b.drop));
+        let evidenced = d
+            .tags
+            .iter()
+            .filter(|c| {
+                uncertain(curves[c.curve].index, c.tag) || repeats_in_curve(&curves[c.curve], c.tag)
+            })
+            .filter(|c| d.refuses(c))
+            .max_by(|a, b| a.drop.total_cmp(&b.drop));
+        if let Some(w) = worst {
+            tracing::debug!(
+                "closure: worst tag curve {} tag {}: {:.0} % of the misfit, offset {:.1} mm",
+                curves[w.curve].index,
+                w.tag,
+                100.0 * w.drop / d.energy,
+                w.offset * 1e3
+            );
+        }
+        let Some(c) = evidenced.copied() else {
+            if let Some(w) = worst {
+                let cu = &curves[w.curve];
+                out.warnings.push(format!(
+                    "curve {}, node {} (tag {} of the curve): the network's loops do not close through this tag ({:.0} % of the network's misfit; the curve would have to be pulled {:.0} mm to meet the node); nothing else suggests a wrong index, so it is kept: check the index, or the data of this curve",
+                    cu.index,
+                    cu.nodes[w.tag].1,
+                    w.tag + 1,
+                    100.0 * w.drop / d.energy,
+                    w.offset * 1e3
+                ));
+            }
+            break;
+        };
+        let next = curves
+            .iter()
+            .flat_map(|c| c.nodes.iter().map(|n| n.1))
+            .max()
+            .map_or(ANONYMOUS_NODE_BASE, |m| m.saturating_add(1))
+            .max(ANONYMOUS_NODE_BASE);
+        let cu = &mut curves[c.curve];
+        let node = cu.nodes[c.tag].1;
+        cu.nodes[c.tag].1 = next;
+        out.detached.push(Detached {
+            curve: cu.index,
+            tag: c.tag,
+            node,
+            anonymous: next,
+            offset_m: c.offset,
+            share: c.drop / d.energy,
+        });
+    }
+    out
+}
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulate::rng::Rng;
+    use nalgebra::UnitQuaternion;
+
+    /// A planar grid of `k` curves along x and `k` along y (spacing 1 m, step 1 cm) through
+    /// nodes `i + k·j`, frames with normal +z, each sample's frame turned by a random rotation
+    /// of up to `noise_deg` (independently per sample, as the pre-filter leaves it).
+    fn grid(k: usize, noise_deg: f64, seed: u64) -> Vec<UniformCurve> {
+        let mut rng = Rng::new(seed);
+        let steps = 100;
+        let h = 1.0 / steps as f64;
+        let mut curves = Vec::new();
+        for dir in 0..2 {
+            for j in 0..k {
+                let n = (k - 1) * steps;
+                let yaw = if dir == 0 {
+                    0.0
+                } else {
+                    std::f64::consts::FRAC_PI_2
+                };
+                let q = (0..=n)
+                    .map(|_| {
+                        let axis = Vector3::new(
+                            rng.range(-1.0, 1.0),
+                            rng.range(-1.0, 1.0),
+                            rng.range(-1.0, 1.0),
+                        );
+                        let noise = UnitQuaternion::from_scaled_axis(
+                            axis.normalize() * rng.range(0.0, noise_deg.to_radians()),
+                        );
+                        noise * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw)
+                    })
+                    .collect();
+                let nodes = (0..k)
+                    .map(|i| {
+                        let node = if dir == 0 { i + k * j } else { j + k * i };
+                        (i * steps, node as u32)
+                    })
+                    .collect();
+                curves.push(UniformCurve {
+                    index: curves.len(),
+                    boundary: false,
+                    d: (0..=n).map(|s| s as f64 * h).collect(),
+                    q,
+                    nodes,
+                    h: vec![h; k - 1],
+                    w: vec![1.0; n + 1],
+                    outliers: 0,
+                });
+            }
+        }
+        curves
+    }
+
+    #[test]
+    fn a_consistent_network_keeps_every_tag() {
+        for seed in 1..=5 {
+            for noise in [0.0, 1.0, 3.0] {
+                let mut g = grid(4, noise, seed);
+                let before: Vec<_> = g.iter().map(|c| c.nodes.clone()).collect();
+                assert!(
+                    detach_outlier_tags(&mut g, |_, _| true) == ClosureReport::default(),
+                    "seed {seed}, {noise}°"
+                );
+                let after: Vec<_> = g.iter().map(|c| c.nodes.clone()).collect();
+                assert_eq!(before, after);
+            }
+        }
+    }
+
+    #[test]
+    fn a_wrong_index_is_detached_with_its_curve_and_tag_named() {
+        for seed in 1..=5 {
+            let mut g = grid(4, 1.0, seed);
+            // Curve 2 (along x at y = 2) has its third node (x = 2, node 10) typed as node 5
+            // (x = 1, y = 1), a node it never passes.
+            assert_eq!(g[2].nodes[2].1, 10);
+            g[2].nodes[2].1 = 5;
+            // With no second sign of a wrong index the tag is kept, with a warning.
+            let kept = detach_outlier_tags(&mut g.clone(), |_, _| false);
+            assert!(kept.detached.is_empty());
+            assert_eq!(kept.warnings.len(), 1, "{kept:?}");
+            assert!(kept.warnings[0].contains("curve 2, node 5 (tag 3"));
+            // Packets lost while it was typed: detached.
+            let d = detach_outlier_tags(&mut g, |c, k| (c, k) == (2, 2)).detached;
+            assert_eq!(d.len(), 1, "seed {seed}: {d:?}");
+            assert_eq!((d[0].curve, d[0].tag, d[0].node), (2, 2, 5));
+            assert!(crate::keypad::is_anonymous(d[0].anonymous));
+            assert_eq!(g[2].nodes[2].1, d[0].anonymous);
+            // The curve had to reach 1 m sideways (spread over its segments and the others).
+            assert!(d[0].offset_m > 0.5 && d[0].share > 0.9, "{}", d[0]);
+            let msg = d[0].to_string();
+            assert!(msg.contains("curve 2, node 5 (tag 3"), "{msg}");
+        }
+    }
+
+    #[test]
+    fn a_node_repeated_inside_a_curve_is_a_second_sign() {
+        let mut g = grid(4, 1.0, 7);
+        // Curve 1 (y = 1, nodes 4 5 6 7) with its third node typed as its first.
+        g[1].nodes[2].1 = 4;
+        let r = detach_outlier_tags(&mut g, |_, _| false);
+        assert_eq!(r.detached.len(), 1, "{r:?}");
+        assert_eq!((r.detached[0].curve, r.detached[0].tag), (1, 2));
+        assert!(r.warnings.is_empty());
+    }
+
+    #[test]
+    fn a_tree_of_curves_has_nothing_to_check() {
+        let mut g = grid(2, 0.0, 1);
+        g.truncate(3); // three sides of a square: no loop
+        g[2].nodes[1].1 = 17;
+        assert_eq!(
+            detach_outlier_tags(&mut g, |_, _| true),
+            ClosureReport::default()
+        );
+    }
+}

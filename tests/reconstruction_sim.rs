@@ -1,0 +1,82 @@
+//! The reconstruction of simulated scans, end to end through the bytes (simulator → decoder →
+//! acquisition → reconstruction → `eval`), for the failures field sessions bring.
+
+use device_protocol::{Decoder, DeviceKind};
+use sfs::acquisition::{Acquisition, AcquisitionConfig};
+use sfs::network::{NetworkParams, Reconstructor};
+use sfs::scan::Scan;
+use sfs::simulate::{self, scene, Profile};
+use std::path::Path;
+
+fn decode(bytes: &[u8]) -> Scan {
+    let mut dec = Decoder::new();
+    let mut acq = Acquisition::new(AcquisitionConfig::default());
+    for chunk in bytes.chunks(4096) {
+        for e in dec.feed(chunk) {
+            acq.event(&e);
+        }
+    }
+    acq.finish()
+}
+
+/// Issue 5: in the seed-1 phone scan of the lilium, the link lost the leading digit of node
+/// 29 on curve 7 (it arrived as node 9, a node the curve had started from) and the only digit
+/// of a node on curve 3. The first tied the curve to the wrong node and made the mean error
+/// 3.2 % of the diagonal; the second dropped a tag and misapplied the measured segment
+/// lengths. Now the keypad keeps the second as an anonymous tag and the loop-closure test
+/// detaches the first, naming it.
+#[test]
+fn issue5_lost_index_digits_do_not_distort_the_network() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    if !root
+        .join("../shared/data/libigl-tutorial-data/lilium.obj")
+        .exists()
+    {
+        eprintln!("skipping: ../shared/data is not beside the repository");
+        return;
+    }
+    let s = scene::load(&scene::find("lilium", &root.join("config/scenes"))).unwrap();
+    let sim = simulate::run(&s, DeviceKind::Phone, Profile::Default, 1);
+    let scan = decode(&sim.bytes);
+    // The capture must still hold the two faults this test is about.
+    let tags = |i: usize| -> Vec<u32> { scan.curves[i].tags.iter().map(|t| t.node).collect() };
+    assert_eq!(
+        (tags(7)[4], sim.truth.curves[7].nodes[4]),
+        (9, 29),
+        "the simulator no longer loses this digit; pick the seed again"
+    );
+    assert!(
+        scan.curves[7].tags[4].uncertain,
+        "packets were lost while node 29 was typed"
+    );
+    assert!(
+        sfs::keypad::is_anonymous(tags(3)[5]),
+        "curve 3 keeps its tag with a lost index as an anonymous node: {:?}",
+        tags(3)
+    );
+    let net = Reconstructor::new()
+        .run(&scan, &NetworkParams::default())
+        .unwrap();
+    assert_eq!(net.report.tags_detached, 1, "{:?}", net.warnings);
+    assert!(
+        net.warnings
+            .iter()
+            .any(|w| w.contains("curve 7, node 9 (tag 5")),
+        "{:?}",
+        net.warnings
+    );
+    let e = sfs::eval::evaluate(&sim.truth, &net.positions.as_read_network()).unwrap();
+    assert!(
+        e.curves.mean_pct <= 0.40,
+        "mean {} % of the diagonal (phone target 0.40 %)",
+        e.curves.mean_pct
+    );
+    // Without the closure test the wrong tag distorts everything.
+    let p = NetworkParams {
+        no_closure_check: true,
+        ..Default::default()
+    };
+    let net = Reconstructor::new().run(&scan, &p).unwrap();
+    let e = sfs::eval::evaluate(&sim.truth, &net.positions.as_read_network()).unwrap();
+    assert!(e.curves.mean_pct > 1.0, "{}", e.curves.mean_pct);
+}
