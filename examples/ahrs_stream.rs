@@ -27,6 +27,12 @@ fn main() -> std::io::Result<()> {
     if let Some(v) = env("TAU_BIAS") {
         p.tau_bias = v;
     }
+    if let Some(v) = env("TAU_HEADING_BIAS") {
+        p.tau_heading_bias = v;
+    }
+    if let Some(v) = env("TAU_TILT_BIAS") {
+        p.tau_tilt_bias = v;
+    }
     if let Some(v) = env("REST_MIN") {
         p.rest_min = v;
     }

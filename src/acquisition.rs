@@ -38,6 +38,12 @@ pub struct AcquisitionConfig {
     pub stationary_distance: f64,
     /// Phone: gyroscope below this (rad/s) over the window counts as still. Default 3°/s.
     pub stationary_gyro: f64,
+    /// Phone: a still run counts as standing only within this many seconds of the typing of
+    /// a node index (first digit to Enter). Default 2 s. A phone sliding slowly over a large,
+    /// gently curved surface turns as little as a standing one (0.5°/s on a 6 m radius at
+    /// 5 cm/s), so a still run may cover a whole curve; only the operator's stand at the
+    /// node is taken out of the moving time.
+    pub stand_margin: f64,
     /// Phone: speed assumed where no segment length is known, m/s. Default 0.05.
     pub nominal_speed: f64,
     /// Phone: measured segment lengths per curve index (m), from the configuration.
@@ -55,6 +61,7 @@ impl Default for AcquisitionConfig {
             stationary_window: 0.25,
             stationary_distance: 0.002,
             stationary_gyro: 3f64.to_radians(),
+            stand_margin: 2.0,
             nominal_speed: 0.05,
             segment_lengths: BTreeMap::new(),
             ahrs: AhrsParams::default(),
@@ -545,6 +552,7 @@ impl Acquisition {
             // A phone moving straight on a flat part does not rotate either: only still runs
             // that contain the typing of a node index count (the operator stands to type).
             keep_runs_touching(&s.t, &mut still, &o.typing);
+            clip_to_intervals(&s.t, &mut still, &o.typing, self.cfg.stand_margin);
             for (f, st) in s.flags.iter_mut().zip(still) {
                 if st {
                     *f |= flags::STATIONARY;
@@ -794,6 +802,19 @@ fn keep_runs_touching(t: &[f64], mask: &mut [bool], intervals: &[(f64, f64)]) {
     }
 }
 
+/// Clears `mask` wherever `t` is more than `margin` from every interval (sorted by start).
+fn clip_to_intervals(t: &[f64], mask: &mut [bool], intervals: &[(f64, f64)], margin: f64) {
+    let mut k = 0;
+    for (m, &x) in mask.iter_mut().zip(t) {
+        while k < intervals.len() && intervals[k].1 + margin < x {
+            k += 1;
+        }
+        if *m {
+            *m = intervals.get(k).is_some_and(|&(a, _)| x >= a - margin);
+        }
+    }
+}
+
 /// Phone distances: within each segment (between consecutive tags), distance grows with the
 /// time spent moving (stationary samples add none), scaled to the segment's measured length,
 /// else to `nominal_speed` × moving time.
@@ -847,6 +868,33 @@ fn phone_distances(c: &mut Curve, nominal_speed: f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 5 (torus phone scan): a phone sliding slowly over a large surface turned less
+    /// than the stationary threshold for a whole curve; the still run touched the typing of
+    /// its first index, so the whole curve counted as standing and its distances collapsed.
+    /// Standing is now clipped to the margin around the typing.
+    #[test]
+    fn issue5_standing_is_clipped_to_the_typing() {
+        let t: Vec<f64> = (0..100).map(|i| i as f64 * 0.5).collect(); // 0 … 49.5 s
+        let mut still = vec![true; t.len()];
+        clip_to_intervals(&t, &mut still, &[(1.0, 2.0), (40.0, 41.0)], 2.0);
+        let kept: Vec<f64> = t
+            .iter()
+            .zip(&still)
+            .filter(|p| *p.1)
+            .map(|p| *p.0)
+            .collect();
+        let expect: Vec<f64> = t
+            .iter()
+            .copied()
+            .filter(|&x| x <= 4.0 || (38.0..=43.0).contains(&x))
+            .collect();
+        assert_eq!(kept, expect);
+        // Samples that were moving stay moving.
+        let mut none = vec![false; t.len()];
+        clip_to_intervals(&t, &mut none, &[(1.0, 2.0)], 2.0);
+        assert!(none.iter().all(|m| !m));
+    }
 
     #[test]
     fn interp_clamps_and_interpolates() {

@@ -29,6 +29,9 @@
 //! stationary_window_s = 0.25         # half-width of the standing-still test
 //! stationary_distance = 0.002        # Morphorider: still if the wheel moves less (m)
 //! stationary_gyro_deg_s = 3.0        # phone: still below this rotation rate
+//! stand_margin_s = 2.0               # phone: standing only this close to typing an index
+//! heading_bias_tau_s = 0.0           # phone: learn the gyro bias in motion from the heading
+//! tilt_bias_tau_s = 0.0              #   and tilt corrections (time constants; 0 = off)
 //! nominal_speed = 0.05               # phone: m/s where no segment length is known
 //! array_window_s = 1.0               # sensor arrays: averaging window
 //! [acquisition.segment_lengths]      # phone: measured segment lengths (m) per curve index
@@ -149,6 +152,9 @@ pub struct AcquisitionToml {
     pub stationary_window_s: Option<f64>,
     pub stationary_distance: Option<f64>,
     pub stationary_gyro_deg_s: Option<f64>,
+    pub stand_margin_s: Option<f64>,
+    pub heading_bias_tau_s: Option<f64>,
+    pub tilt_bias_tau_s: Option<f64>,
     pub nominal_speed: Option<f64>,
     pub array_window_s: Option<f64>,
     #[serde(default)]
@@ -367,6 +373,20 @@ impl Config {
             90.0,
         )? {
             out.stationary_gyro = x.to_radians();
+        }
+        if let Some(x) = positive("acquisition.stand_margin_s", a.stand_margin_s, 60.0)? {
+            out.stand_margin = x;
+        }
+        // 0 turns the bias learning in motion off.
+        let off_or_positive = |key: &str, v: Option<f64>| match v {
+            Some(0.0) => Ok(Some(0.0)),
+            v => positive(key, v, 3600.0),
+        };
+        if let Some(x) = off_or_positive("acquisition.heading_bias_tau_s", a.heading_bias_tau_s)? {
+            out.ahrs.tau_heading_bias = x;
+        }
+        if let Some(x) = off_or_positive("acquisition.tilt_bias_tau_s", a.tilt_bias_tau_s)? {
+            out.ahrs.tau_tilt_bias = x;
         }
         if let Some(x) = positive("acquisition.nominal_speed", a.nominal_speed, 10.0)? {
             out.nominal_speed = x;

@@ -2,7 +2,9 @@
 //! (Laidig & Seel 2023): strapdown integration of the gyroscope, tilt correction from the
 //! accelerometer low-pass filtered in an almost-inertial frame (so that motion acceleration
 //! averages out), heading correction from the magnetometer as a separate first-order filter
-//! with magnetic disturbance rejection, and gyroscope bias estimation at rest.
+//! with magnetic disturbance rejection, and gyroscope bias estimation at rest and, in motion,
+//! from the corrections themselves (the integral terms of PI loops: VQF estimates the bias in
+//! motion too).
 //!
 //! Every step uses the measured interval `dt` between samples, never a nominal rate.
 //! The filter initialises from the first accelerometer and magnetometer sample, and its filters
@@ -53,6 +55,20 @@ pub struct AhrsParams {
     pub tau_bias: f64,
     /// Largest bias the estimator accepts, rad/s. Default 2°/s.
     pub max_bias: f64,
+    /// Bias learning in motion from the heading correction (the integral term of a PI loop
+    /// whose proportional term is `1/tau_mag`): the part of the bias about the vertical is
+    /// learned with gain `1/(tau_mag · tau_heading_bias)`; 0 (the default) turns it off.
+    /// Without it a constant bias `b` leaves a heading lag of `b · tau_mag` (0.3°/s × 25 s
+    /// ≈ 7° on the simulated phone, whose operator rests too briefly at the nodes for the
+    /// rest estimator). Off by default because it made every BROAD trial worse (a real,
+    /// well-calibrated IMU in a real field); 10 s with `tau_tilt_bias` = 10 s is what
+    /// measured best on simulated phone scans with an uncalibrated gyroscope (BENCHMARKS.md;
+    /// `config/phone-uncalibrated.toml`).
+    pub tau_heading_bias: f64,
+    /// Bias learning in motion from the tilt correction: the horizontal part of the bias
+    /// follows the rate the tilt is corrected at with this time constant, s; 0 (the default)
+    /// turns it off. Without it a horizontal bias leaves a tilt lag of `b · tau_acc`.
+    pub tau_tilt_bias: f64,
     /// Longest interval that is integrated, s. Default 0.5 s.
     pub max_dt: f64,
 }
@@ -70,6 +86,8 @@ impl Default for AhrsParams {
             rest_min: 1.0,
             tau_bias: 3.0,
             max_bias: 2f64.to_radians(),
+            tau_heading_bias: 0.0,
+            tau_tilt_bias: 0.0,
             max_dt: 0.5,
         }
     }
@@ -303,6 +321,15 @@ impl Ahrs {
             let a_e = self.q_acc * lp;
             if let Some(c) = UnitQuaternion::rotation_between(&a_e, &Vector3::z()) {
                 self.q_acc = c * self.q_acc;
+                if self.p.tau_tilt_bias > 0.0 && self.acc_lp.t >= self.p.tau_acc {
+                    // The tilt had to be corrected by `c` because the gyroscope integrated a
+                    // rotation about a horizontal axis that did not happen: learn that rate.
+                    let v = (self.q_acc * self.q_gyr).inverse() * c.scaled_axis();
+                    let b = self.bias - v / self.p.tau_tilt_bias;
+                    if b.norm() <= self.p.max_bias && finite(&b) {
+                        self.bias = b;
+                    }
+                }
             }
         }
 
@@ -371,7 +398,19 @@ impl Ahrs {
         }
         let k = gain(dt, self.p.tau_mag, self.mag_t);
         self.mag_t += dt;
-        self.delta = wrap_pi(self.delta + k * wrap_pi(target - self.delta));
+        let err = wrap_pi(target - self.delta);
+        self.delta = wrap_pi(self.delta + k * err);
+        if self.p.tau_heading_bias > 0.0 && self.mag_t >= self.p.tau_mag {
+            // The heading has to be corrected by `err` because the gyroscope integrated a
+            // rotation about the vertical that did not happen: learn that rate as bias (in
+            // frame axes, along the frame's view of the vertical).
+            let up = q6.inverse() * Vector3::z();
+            let ki = 1.0 / (self.p.tau_mag * self.p.tau_heading_bias);
+            let b = self.bias - up * (ki * err * dt);
+            if b.norm() <= self.p.max_bias && finite(&b) {
+                self.bias = b;
+            }
+        }
     }
 
     /// Rest detection and bias learning.
@@ -387,7 +426,7 @@ impl Ahrs {
         };
         let still = acc_still
             && (gyro - self.gyr_mean).norm() < self.p.rest_gyro
-            && (self.gyr_mean - self.bias).norm() < self.p.max_bias * 2.0;
+            && (self.gyr_mean - self.bias).norm() < self.p.rest_gyro;
         if still {
             self.rest_t += dt;
         } else {
@@ -535,5 +574,54 @@ mod tests {
             assert!(q.coords.iter().all(|x| x.is_finite()), "step {i}");
         }
         assert!(f.orientation().angle_to(&truth).to_degrees() < 0.5);
+    }
+
+    /// A device that never rests (slow continuous turning, as sliding over a surface), with a
+    /// constant gyroscope bias of 0.3°/s per axis: without learning the bias in motion the
+    /// heading lags by about `b · tau_mag`; with it, the bias and the error are recovered.
+    #[test]
+    fn learns_the_bias_in_motion_when_asked() {
+        let run = |p: AhrsParams| {
+            let mut rng = Rng(3);
+            let mut f = Ahrs::new(p);
+            let bias = Vector3::new(0.005, -0.005, 0.005);
+            let mut truth = UnitQuaternion::from_euler_angles(0.2, -0.1, 0.0);
+            let (mut t, dt) = (0.0f64, 0.005);
+            let mut errs = Vec::new();
+            while t < 300.0 {
+                let w = Vector3::new(
+                    0.05 * (t * 0.11).sin(),
+                    0.05 * (t * 0.07).cos(),
+                    0.08 + 0.05 * (t * 0.05).sin(),
+                );
+                truth *= UnitQuaternion::from_scaled_axis(w * dt);
+                t += dt;
+                let q = f.update(
+                    dt,
+                    &(w + bias + rng.v(0.003)),
+                    &(truth.inverse() * GRAV + rng.v(0.03)),
+                    Some(&(truth.inverse() * FIELD + rng.v(0.4))),
+                );
+                if t > 200.0 {
+                    errs.push(q.angle_to(&truth).to_degrees());
+                }
+            }
+            errs.sort_by(f64::total_cmp);
+            (errs[errs.len() / 2], (f.bias() - bias).norm())
+        };
+        let (off, off_bias) = run(AhrsParams::default());
+        let (on, on_bias) = run(AhrsParams {
+            tau_heading_bias: 10.0,
+            tau_tilt_bias: 10.0,
+            ..Default::default()
+        });
+        eprintln!("median error off {off:.2}° on {on:.2}°; bias error {off_bias:.4} {on_bias:.4}");
+        assert!(off > 2.0, "the lag this test is about: {off:.2}°");
+        assert!(on < 0.5 && on < off / 4.0, "{on:.2}° vs {off:.2}°");
+        assert!(on_bias < 0.2 * bias_norm(), "bias error {on_bias} rad/s");
+    }
+
+    fn bias_norm() -> f64 {
+        Vector3::new(0.005, -0.005, 0.005).norm()
     }
 }

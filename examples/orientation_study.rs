@@ -1,0 +1,103 @@
+//! Orientation errors of a simulated scan, split into tilt and heading, per curve: which part
+//! of the frames the reconstruction error comes from.
+//!
+//! `cargo run --release --example orientation_study -- SCENE [phone|morphorider] [default|field] [SEED]`
+
+use device_protocol::{Decoder, DeviceKind};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use sfs::acquisition::{Acquisition, AcquisitionConfig};
+use sfs::simulate::{self, scene, Profile};
+use std::path::Path;
+
+fn main() {
+    let a: Vec<String> = std::env::args().skip(1).collect();
+    let name = a.first().map_or("bowl", |s| s.as_str());
+    let device = match a.get(1).map(|s| s.as_str()) {
+        Some("phone") => DeviceKind::Phone,
+        _ => DeviceKind::Morphorider,
+    };
+    let profile = match a.get(2).map(|s| s.as_str()) {
+        Some("field") => Profile::Field,
+        _ => Profile::Default,
+    };
+    let seed = a.get(3).and_then(|s| s.parse().ok()).unwrap_or(1);
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
+    let s = scene::load(&scene::find(name, &dir)).expect("scene");
+    let sim = simulate::run(&s, device, profile, seed);
+    let mut dec = Decoder::new();
+    let mut cfg = AcquisitionConfig::default();
+    // Parameter studies: SFS_TAU_MAG, SFS_TAU_BIAS override the phone filter's defaults.
+    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
+    if let Some(v) = env("SFS_TAU_MAG") {
+        cfg.ahrs.tau_mag = v;
+    }
+    if let Some(v) = env("SFS_TAU_HB") {
+        cfg.ahrs.tau_heading_bias = v;
+    }
+    if let Some(v) = env("SFS_TAU_TB") {
+        cfg.ahrs.tau_tilt_bias = v;
+    }
+    if let Some(v) = env("SFS_TAU_BIAS") {
+        cfg.ahrs.tau_bias = v;
+    }
+    let mut acq = Acquisition::new(cfg);
+    for chunk in sim.bytes.chunks(4096) {
+        for e in dec.feed(chunk) {
+            acq.event(&e);
+        }
+    }
+    let scan = acq.finish();
+    let truth = &sim.samples;
+    println!("curve  samples  total(median/p90)  tilt(median)  heading(median, mean signed)");
+    for c in &scan.curves {
+        let (mut tot, mut tilt, mut head) = (vec![], vec![], vec![]);
+        for (i, q) in c.samples.q.iter().enumerate() {
+            let t_abs = c.samples.t[i] + truth.t[0];
+            let k = truth.t.partition_point(|&x| x < t_abs - 2e-6);
+            if k >= truth.t.len()
+                || (truth.t[k] - t_abs).abs() > 2e-6
+                || (truth.standing[k] && std::env::var("SFS_SHOW_WORST").is_err())
+            {
+                continue;
+            }
+            let est = UnitQuaternion::new_normalize(Quaternion::new(q[0], q[1], q[2], q[3]));
+            let tq = truth.q[k];
+            tot.push(est.angle_to(&tq).to_degrees());
+            if std::env::var("SFS_SHOW_WORST").is_ok() && est.angle_to(&tq).to_degrees() > 20.0 {
+                println!(
+                    "  curve {} t {:.2} s {:.3} err {:.1}°",
+                    c.index,
+                    c.samples.t[i],
+                    truth.s[k],
+                    est.angle_to(&tq).to_degrees()
+                );
+            }
+            let up_e = est.inverse() * Vector3::z();
+            let up_t = tq.inverse() * Vector3::z();
+            tilt.push(up_e.angle(&up_t).to_degrees());
+            // Heading: the rotation about world z left after aligning the tilts.
+            let d = est * tq.inverse();
+            let x = d * Vector3::x();
+            head.push(x.y.atan2(x.x).to_degrees());
+        }
+        if tot.is_empty() {
+            continue;
+        }
+        let med = |mut v: Vec<f64>, p: f64| {
+            v.sort_by(f64::total_cmp);
+            v[((v.len() - 1) as f64 * p) as usize]
+        };
+        let mean_h = head.iter().sum::<f64>() / head.len() as f64;
+        let abs_h: Vec<f64> = head.iter().map(|h| h.abs()).collect();
+        println!(
+            "{:5}  {:7}  {:6.2}° / {:6.2}°   {:6.2}°      {:6.2}°, {:+6.2}°",
+            c.index,
+            tot.len(),
+            med(tot.clone(), 0.5),
+            med(tot, 0.9),
+            med(tilt, 0.5),
+            med(abs_h, 0.5),
+            mean_h
+        );
+    }
+}
