@@ -1,6 +1,6 @@
 //! Reconstruction speed at about the paper's size (Table 2: 3094 uniform samples): a simulated
 //! Morphorider scan of the sphere-octa scene resampled at h = 6 mm (≈ 3.1 k samples), and the
-//! torus at h = 1 cm (≈ 10 k samples) for the cost per sample.
+//! torus at h = 1 cm and 3.2 mm (≈ 10 k and 31 k samples) for the cost per sample.
 //! `cargo bench --bench reconstruction`; targets in BENCHMARKS.md.
 
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -34,7 +34,7 @@ fn uniform(scan: &Scan, p: &PrefilterParams) -> Vec<UniformCurve> {
 
 fn bench(c: &mut Criterion) {
     sfs::sparse_llt::single_threaded();
-    for (name, h) in [("sphere-octa", 0.006), ("torus", 0.01)] {
+    for (name, h) in [("sphere-octa", 0.006), ("torus", 0.01), ("torus", 0.0032)] {
         let sc = scan(name);
         let p = PrefilterParams {
             h,
@@ -43,7 +43,7 @@ fn bench(c: &mut Criterion) {
         let u = uniform(&sc, &p);
         let n: usize = u.iter().map(|c| c.q.len()).sum();
         let mut g = c.benchmark_group(format!("{name}_{n}_samples"));
-        g.sample_size(20);
+        g.sample_size(if n > 20_000 { 10 } else { 20 });
         g.bench_function("prefilter", |b| {
             b.iter(|| black_box(uniform(black_box(&sc), &p)))
         });
