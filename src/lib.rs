@@ -12,15 +12,17 @@
 //! - [`orientation`]: samples → orientations of the frame [T B N] (TRIAD, the phone's
 //!   filter, the q-method mean, disturbance tests).
 //! - [`keypad`], [`acquisition`], [`scan`]: orientations and key presses → tagged curves.
+//! - [`network`]: tagged curves → filtered frames (pre-filter, regression on SO(3)) →
+//!   positions of the network (Poisson), with the loop-closure test of the tags;
+//!   [`sparse_llt`]: the sparse Cholesky they share (symbolic factorisation reused).
+//! - [`surface`]: network → surface (cycles from normals; tessellation and the fit to come).
+//! - [`gltf_out`]: network (and surface) → `network.glb`; [`eval`]: scoring against a truth.
 //! - [`session`]: one run of the pipeline, source → decoder → acquisition → outputs.
 //! - [`report`]: `report.json`; [`atomic`]: atomic replacement of output files.
 //! - [`calibrate`]: `sfs calibrate` (ellipsoid and static-pose fits).
 //! - [`simulate`]: captures of known shapes (operator timeline, device models).
 //! - [`config`]: the resolved configuration (`config/*.toml`); [`cli`]: raw flags.
 //! - [`shutdown`]: the stop signal passed into every long-running part.
-//!
-//! Later stages (filtered frames → network → surface → glTF) are added as modules in that
-//! order.
 
 pub mod acquisition;
 pub mod atomic;
@@ -42,6 +44,7 @@ pub mod shutdown;
 pub mod simulate;
 pub mod source;
 pub mod sparse_llt;
+pub mod surface;
 
 /// Exit codes of the `sfs` binary (a stated policy, also in the README).
 pub mod exit {

@@ -1,0 +1,578 @@
+//! Cycles from normals (Stanko et al. 2016, §3.2): the faces of the curve network.
+//!
+//! At every node the incident segments are sorted by angle around the node's normal; a face
+//! is traced by leaving each node along the segment that comes next *clockwise* after the one
+//! it arrived by, so that every face lies on the left of its boundary seen from outside (the
+//! side the normals point to). Every segment is traversed once in each direction, so the
+//! directed segments fall into faces exactly. Faces made only of boundary-tagged segments
+//! whose corners show the surface lying on the other side are the outer faces (holes), not
+//! patches.
+//!
+//! The cell complex is then checked: every segment in at most two patches, no face that uses
+//! a segment in both directions (a dangling curve or a bridge), and the Euler characteristic
+//! `V − E + F` (outer faces counted as caps) even and at most 2 per connected part. Failures
+//! are explained in words naming the nodes and curves, and faces that fail are not patches.
+//!
+//! ```
+//! use nalgebra::Vector3;
+//! use sfs::surface::cycles::{cycles, NetworkSegments};
+//! // A square in the plane z = 0 seen from +z: χ = 4 − 4 + 2 = 2.
+//! let p = |x: f64, y: f64| Vector3::new(x, y, 0.0);
+//! let mut net = NetworkSegments::default();
+//! let pts = [p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)];
+//! for (k, (a, b)) in [(0u32, 1u32), (1, 2), (2, 3), (3, 0)].into_iter().enumerate() {
+//!     let line = vec![pts[a as usize], pts[b as usize]];
+//!     net.push(k, true, (a, b), line, vec![Vector3::z(); 2]);
+//! }
+//! for n in 0..4 {
+//!     net.set_normal(n, Vector3::z());
+//! }
+//! // Tagged as boundary: the side facing +z is the patch, the other the outside.
+//! let c = cycles(&net);
+//! assert_eq!((c.patches.len(), c.outer.len(), c.euler), (1, 1, 2));
+//! assert!(c.problems.is_empty());
+//! ```
+
+use nalgebra::Vector3;
+use std::collections::BTreeMap;
+
+/// One segment of a curve between two consecutive node tags.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Segment {
+    /// Scan index of the curve and position of the segment in it (0 = first).
+    pub curve: usize,
+    pub k: usize,
+    pub boundary: bool,
+    /// Nodes at its start and end.
+    pub a: u32,
+    pub b: u32,
+    /// Its points from `a` to `b` (at least two).
+    pub points: Vec<Vector3<f64>>,
+    /// Unit surface normals at the points.
+    pub normals: Vec<Vector3<f64>>,
+}
+
+impl Segment {
+    /// Direction leaving its start (`at_end = false`) or its end, along the segment: from the
+    /// end point to the first point at least 1 % of the segment's length away (robust to
+    /// repeated points).
+    fn leaving(&self, at_end: bool) -> Vector3<f64> {
+        let pts = &self.points;
+        let n = pts.len();
+        let len: f64 = pts.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+        let (p0, rest): (Vector3<f64>, Box<dyn Iterator<Item = &Vector3<f64>>>) = if at_end {
+            (pts[n - 1], Box::new(pts[..n - 1].iter().rev()))
+        } else {
+            (pts[0], Box::new(pts[1..].iter()))
+        };
+        let mut last = Vector3::zeros();
+        for q in rest {
+            last = q - p0;
+            if last.norm() >= 0.01 * len {
+                break;
+            }
+        }
+        last
+    }
+}
+
+/// The segments of a network and the normals at its nodes: the input of [`cycles`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct NetworkSegments {
+    pub segments: Vec<Segment>,
+    /// Unit normal at each node (e.g. the mean of the curves' normals there).
+    pub normals: BTreeMap<u32, Vector3<f64>>,
+}
+
+impl NetworkSegments {
+    /// Adds the segment of curve `curve` from node `a` to node `b` through `points` with
+    /// surface `normals` (one per point).
+    pub fn push(
+        &mut self,
+        curve: usize,
+        boundary: bool,
+        (a, b): (u32, u32),
+        points: Vec<Vector3<f64>>,
+        normals: Vec<Vector3<f64>>,
+    ) {
+        let k = self.segments.iter().filter(|s| s.curve == curve).count();
+        self.segments.push(Segment {
+            curve,
+            k,
+            boundary,
+            a,
+            b,
+            points,
+            normals,
+        });
+    }
+
+    pub fn set_normal(&mut self, node: u32, n: Vector3<f64>) {
+        self.normals.insert(node, n);
+    }
+
+    /// The segments of reconstructed curves (`crate::network::poisson::Positions`), with node
+    /// normals averaged over the curves through each node.
+    pub fn from_positions(p: &crate::network::poisson::Positions) -> Self {
+        let mut net = NetworkSegments::default();
+        let mut sums: BTreeMap<u32, Vector3<f64>> = BTreeMap::new();
+        for c in &p.curves {
+            for w in c.nodes.windows(2) {
+                let ((i, a), (j, b)) = (w[0], w[1]);
+                if j > i {
+                    net.push(
+                        c.index,
+                        c.boundary,
+                        (a, b),
+                        c.points[i..=j].to_vec(),
+                        c.normals[i..=j].to_vec(),
+                    );
+                }
+            }
+            for &(i, n) in &c.nodes {
+                *sums.entry(n).or_insert_with(Vector3::zeros) += c.normals[i];
+            }
+        }
+        for (n, s) in sums {
+            if let Some(u) = s.try_normalize(1e-12) {
+                net.normals.insert(n, u);
+            }
+        }
+        net
+    }
+}
+
+/// A segment traversed forwards (`a → b`) or backwards.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct HalfEdge {
+    pub segment: usize,
+    pub forward: bool,
+}
+
+impl HalfEdge {
+    fn twin(self) -> Self {
+        HalfEdge {
+            segment: self.segment,
+            forward: !self.forward,
+        }
+    }
+}
+
+/// A face: its half-edges in order, the face on their left seen from the normals' side.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cycle {
+    pub edges: Vec<HalfEdge>,
+}
+
+impl Cycle {
+    /// Nodes at the start of each half-edge.
+    pub fn nodes(&self, net: &NetworkSegments) -> Vec<u32> {
+        self.edges
+            .iter()
+            .map(|h| {
+                let s = &net.segments[h.segment];
+                if h.forward {
+                    s.a
+                } else {
+                    s.b
+                }
+            })
+            .collect()
+    }
+
+    /// Its boundary polyline (closed; the last point is not repeated).
+    pub fn polyline(&self, net: &NetworkSegments) -> Vec<Vector3<f64>> {
+        let mut out = Vec::new();
+        for h in &self.edges {
+            let pts = &net.segments[h.segment].points;
+            if h.forward {
+                out.extend_from_slice(&pts[..pts.len() - 1]);
+            } else {
+                out.extend(pts[1..].iter().rev());
+            }
+        }
+        out
+    }
+}
+
+/// The faces of the network and what was wrong with it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Cycles {
+    /// Faces to surface.
+    pub patches: Vec<Cycle>,
+    /// Faces bounded by boundary curves on the outside of the surface (holes).
+    pub outer: Vec<Cycle>,
+    /// Faces that are neither (they failed a check; explained in `problems`).
+    pub rejected: Vec<Cycle>,
+    /// `V − E + F` over the traced complex (outer faces counted).
+    pub euler: i64,
+    /// Connected parts of the network.
+    pub components: usize,
+    /// Each failure in words, naming nodes and curves.
+    pub problems: Vec<String>,
+}
+
+fn describe(net: &NetworkSegments, h: HalfEdge) -> String {
+    let s = &net.segments[h.segment];
+    format!("curve {} between nodes {} and {}", s.curve, s.a, s.b)
+}
+
+/// Traces the faces of `net` (see the module docs).
+pub fn cycles(net: &NetworkSegments) -> Cycles {
+    let mut out = Cycles::default();
+    // Rotation system: at each node, the half-edges leaving it, sorted counter-clockwise
+    // around the node normal.
+    let mut at: BTreeMap<u32, Vec<(f64, HalfEdge)>> = BTreeMap::new();
+    for (si, s) in net.segments.iter().enumerate() {
+        for (forward, node) in [(true, s.a), (false, s.b)] {
+            let Some(n) = net.normals.get(&node) else {
+                out.problems.push(format!(
+                    "node {node} (curve {}) has no normal: its segments are left out",
+                    s.curve
+                ));
+                continue;
+            };
+            let d = s.leaving(!forward);
+            // Angle in a basis of the tangent plane at the node.
+            let e1 = if n.x.abs() < 0.9 {
+                Vector3::x()
+            } else {
+                Vector3::y()
+            };
+            let e1 = (e1 - n * n.dot(&e1)).normalize();
+            let e2 = n.cross(&e1);
+            let dp = d - n * n.dot(&d);
+            if dp.norm() < 1e-12 * d.norm().max(1e-300) || !dp.iter().all(|x| x.is_finite()) {
+                out.problems.push(format!(
+                    "{} leaves node {node} along its normal: it cannot be ordered around the node",
+                    describe(
+                        net,
+                        HalfEdge {
+                            segment: si,
+                            forward
+                        }
+                    )
+                ));
+            }
+            let angle = dp.dot(&e2).atan2(dp.dot(&e1));
+            at.entry(node).or_default().push((
+                angle,
+                HalfEdge {
+                    segment: si,
+                    forward,
+                },
+            ));
+        }
+    }
+    // Position of every leaving half-edge in its node's rotation.
+    let mut place: BTreeMap<HalfEdge, (u32, usize)> = BTreeMap::new();
+    for (&node, list) in at.iter_mut() {
+        list.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for (i, (_, h)) in list.iter().enumerate() {
+            place.insert(*h, (node, i));
+        }
+    }
+    let end_node = |h: HalfEdge| {
+        let s = &net.segments[h.segment];
+        if h.forward {
+            s.b
+        } else {
+            s.a
+        }
+    };
+    // Next half-edge: arriving at v by h, leave along the one clockwise after h's twin.
+    let next = |h: HalfEdge| -> Option<HalfEdge> {
+        let (v, i) = *place.get(&h.twin())?;
+        debug_assert_eq!(v, end_node(h));
+        let list = &at[&v];
+        Some(list[(i + list.len() - 1) % list.len()].1)
+    };
+    let mut used: BTreeMap<HalfEdge, bool> = place.keys().map(|&h| (h, false)).collect();
+    let mut faces: Vec<Cycle> = Vec::new();
+    let starts: Vec<HalfEdge> = used.keys().copied().collect();
+    for h0 in starts {
+        if used[&h0] {
+            continue;
+        }
+        let mut edges = vec![];
+        let mut h = h0;
+        let ok;
+        loop {
+            if used[&h] {
+                ok = h == h0;
+                break;
+            }
+            used.insert(h, true);
+            edges.push(h);
+            match next(h) {
+                Some(n) => h = n,
+                None => {
+                    ok = false;
+                    break;
+                }
+            }
+        }
+        if !ok {
+            out.problems.push(format!(
+                "the face starting along {} does not close",
+                describe(net, h0)
+            ));
+            out.rejected.push(Cycle { edges });
+            continue;
+        }
+        faces.push(Cycle { edges });
+    }
+    // Components (over nodes, by segments).
+    let nodes: Vec<u32> = at.keys().copied().collect();
+    let idx: BTreeMap<u32, usize> = nodes.iter().enumerate().map(|(i, &n)| (n, i)).collect();
+    let mut parent: Vec<usize> = (0..nodes.len()).collect();
+    fn find(p: &mut [usize], mut x: usize) -> usize {
+        while p[x] != x {
+            p[x] = p[p[x]];
+            x = p[x];
+        }
+        x
+    }
+    let mut edges_used = 0i64;
+    for s in &net.segments {
+        if let (Some(&a), Some(&b)) = (idx.get(&s.a), idx.get(&s.b)) {
+            edges_used += 1;
+            let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+            if ra != rb {
+                parent[ra.max(rb)] = ra.min(rb);
+            }
+        }
+    }
+    out.components = (0..nodes.len())
+        .filter(|&i| find(&mut parent, i) == i)
+        .count();
+    out.euler = nodes.len() as i64 - edges_used + (faces.len() + out.rejected.len()) as i64;
+    if out.euler > 2 * out.components as i64 || out.euler % 2 != 0 {
+        out.problems.push(format!(
+            "the faces traced from the normals do not form a closed surface: V − E + F = {} − {} + {} = {} over {} part(s) (expected even and at most {}); normals that disagree across a node or curves that cross without a node can cause this",
+            nodes.len(),
+            edges_used,
+            faces.len() + out.rejected.len(),
+            out.euler,
+            out.components,
+            2 * out.components
+        ));
+    }
+    // Node normals against their neighbours' (a flipped normal reverses a node's rotation).
+    let mut neighbours: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+    for s in &net.segments {
+        if s.a != s.b {
+            neighbours.entry(s.a).or_default().push(s.b);
+            neighbours.entry(s.b).or_default().push(s.a);
+        }
+    }
+    for (n, list) in &neighbours {
+        let Some(nn) = net.normals.get(n) else {
+            continue;
+        };
+        // Against every neighbour, clearly: on a coarse network (an octahedron's) correct
+        // neighbours are at 90°.
+        let closest = list
+            .iter()
+            .filter_map(|m| net.normals.get(m))
+            .map(|m| nn.dot(m))
+            .fold(f64::MIN, f64::max);
+        if list.len() >= 2 && closest < -0.1 {
+            out.problems.push(format!(
+                "the normal at node {n} points against those of its neighbours (nodes {list:?}): flipped?"
+            ));
+        }
+    }
+    // Classify: rejected if a segment appears in both directions; outer if all boundary and
+    // the surface is on the other side; else a patch.
+    let interior_at: BTreeMap<u32, bool> = at
+        .iter()
+        .map(|(&n, l)| (n, l.iter().any(|(_, h)| !net.segments[h.segment].boundary)))
+        .collect();
+    for f in faces {
+        let twice = f
+            .edges
+            .iter()
+            .find(|h| f.edges.contains(&h.twin()))
+            .copied();
+        if let Some(h) = twice {
+            let nodes = f.nodes(net);
+            out.problems.push(format!(
+                "the face through nodes {nodes:?} runs along {} in both directions: the curve ends without closing a cycle (a dangling curve), is the only link between two parts, or a node normal disagrees with the curves; it is not surfaced",
+                describe(net, h)
+            ));
+            out.rejected.push(f);
+            continue;
+        }
+        let all_boundary = f.edges.iter().all(|h| net.segments[h.segment].boundary);
+        if all_boundary {
+            let nodes = f.nodes(net);
+            let touches_interior = nodes.iter().any(|n| interior_at[n]);
+            let outer = if touches_interior {
+                true
+            } else {
+                // Only boundary curves around: the face whose boundary turns clockwise
+                // around the mean normal is the outside.
+                vector_area(&f.polyline(net)).dot(&boundary_normal(net, &f)) < 0.0
+            };
+            if outer {
+                out.outer.push(f);
+                continue;
+            }
+        }
+        let nodes = f.nodes(net);
+        if vector_area(&f.polyline(net)).dot(&boundary_normal(net, &f)) <= 0.0 {
+            out.problems.push(format!(
+                "the face through nodes {nodes:?} turns clockwise around their normals (a node normal is flipped, or curves cross without a node); it is not surfaced"
+            ));
+            out.rejected.push(f);
+            continue;
+        }
+        out.patches.push(f);
+    }
+    out
+}
+
+/// Vector area of a closed polygon (half the sum of cross products about its centroid).
+fn vector_area(poly: &[Vector3<f64>]) -> Vector3<f64> {
+    if poly.is_empty() {
+        return Vector3::zeros();
+    }
+    let c = poly.iter().sum::<Vector3<f64>>() / poly.len() as f64;
+    let mut area = Vector3::zeros();
+    for i in 0..poly.len() {
+        area += (poly[i] - c).cross(&(poly[(i + 1) % poly.len()] - c));
+    }
+    area * 0.5
+}
+
+/// Sum of the surface normals along a face's boundary.
+fn boundary_normal(net: &NetworkSegments, f: &Cycle) -> Vector3<f64> {
+    f.edges
+        .iter()
+        .flat_map(|h| net.segments[h.segment].normals.iter())
+        .sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The network of a cube's 12 edges pushed onto the unit sphere (arcs of great circles),
+    /// normals radial: six four-sided patches, χ = 8 − 12 + 6 = 2.
+    fn sphere_cube(boundary_top: bool) -> NetworkSegments {
+        let corners: Vec<Vector3<f64>> = (0..8)
+            .map(|i| {
+                Vector3::new(
+                    if i & 1 == 0 { -1.0 } else { 1.0 },
+                    if i & 2 == 0 { -1.0 } else { 1.0 },
+                    if i & 4 == 0 { -1.0 } else { 1.0 },
+                )
+                .normalize()
+            })
+            .collect();
+        let mut net = NetworkSegments::default();
+        let mut curve = 0;
+        for a in 0..8u32 {
+            for bit in [1u32, 2, 4] {
+                let b = a | bit;
+                if b == a {
+                    continue;
+                }
+                let pts: Vec<Vector3<f64>> = (0..=20)
+                    .map(|t| {
+                        let t = t as f64 / 20.0;
+                        (corners[a as usize] * (1.0 - t) + corners[b as usize] * t).normalize()
+                    })
+                    .collect();
+                let top = a & 4 != 0 && b & 4 != 0;
+                let normals = pts.clone();
+                net.push(curve, boundary_top && top, (a, b), pts, normals);
+                curve += 1;
+            }
+        }
+        for (i, c) in corners.iter().enumerate() {
+            net.set_normal(i as u32, *c);
+        }
+        net
+    }
+
+    #[test]
+    fn sphere_cube_has_six_patches_and_euler_two() {
+        let net = sphere_cube(false);
+        assert_eq!(net.segments.len(), 12);
+        let c = cycles(&net);
+        assert!(c.problems.is_empty(), "{:?}", c.problems);
+        assert_eq!((c.patches.len(), c.outer.len(), c.euler), (6, 0, 2));
+        // Every segment in exactly two patches, once in each direction.
+        let mut count: BTreeMap<HalfEdge, usize> = BTreeMap::new();
+        for p in &c.patches {
+            assert_eq!(p.edges.len(), 4);
+            for h in &p.edges {
+                *count.entry(*h).or_default() += 1;
+            }
+        }
+        assert_eq!(count.len(), 24);
+        assert!(count.values().all(|&n| n == 1));
+        // Faces lie to the left seen from outside: each patch's vector area points outwards.
+        for p in &c.patches {
+            let poly = p.polyline(&net);
+            let cen = poly.iter().sum::<Vector3<f64>>() / poly.len() as f64;
+            let mut area = Vector3::zeros();
+            for i in 0..poly.len() {
+                area += (poly[i] - cen).cross(&(poly[(i + 1) % poly.len()] - cen));
+            }
+            assert!(area.dot(&cen) > 0.0, "patch {:?}", p.nodes(&net));
+        }
+    }
+
+    #[test]
+    fn a_boundary_curve_delimits_an_outer_face() {
+        // Remove the top face's interior by tagging its four edges as boundary and dropping
+        // nothing: the top face becomes a hole (outer), five patches remain (an open box).
+        let net = sphere_cube(true);
+        let c = cycles(&net);
+        assert!(c.problems.is_empty(), "{:?}", c.problems);
+        assert_eq!((c.patches.len(), c.outer.len(), c.euler), (5, 1, 2));
+        let mut hole = c.outer[0].nodes(&net);
+        hole.sort();
+        assert_eq!(hole, [4, 5, 6, 7]);
+    }
+
+    #[test]
+    fn a_dangling_curve_is_named() {
+        let mut net = sphere_cube(false);
+        // A curve from node 0 out to a node 8 that nothing else reaches.
+        let p0 = net.segments[0].points[0];
+        let p8 = (p0 + Vector3::new(0.0, 0.0, 0.3)).normalize();
+        let pts = vec![p0, (p0 + p8).normalize(), p8];
+        net.push(99, false, (0, 8), pts.clone(), pts);
+        net.set_normal(8, p8);
+        let c = cycles(&net);
+        assert_eq!(c.patches.len(), 5, "{:?}", c.problems);
+        assert_eq!(c.rejected.len(), 1);
+        assert!(
+            c.problems
+                .iter()
+                .any(|p| p.contains("curve 99 between nodes 0 and 8") && p.contains("dangling")),
+            "{:?}",
+            c.problems
+        );
+    }
+
+    #[test]
+    fn flipped_normal_breaks_the_complex_and_says_so() {
+        let mut net = sphere_cube(false);
+        let n = net.normals[&3];
+        net.set_normal(3, -n);
+        let c = cycles(&net);
+        assert!(c.patches.len() < 6, "{:?}", c.problems);
+        assert!(
+            c.problems
+                .iter()
+                .any(|p| p.contains("normal at node 3 points against")),
+            "{:?}",
+            c.problems
+        );
+    }
+}
