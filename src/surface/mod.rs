@@ -1,9 +1,11 @@
 //! Surfacing the curve network with normal control (Stanko et al. 2016).
 //!
+//! - [`cotmatrix`]: the cotangent Laplacian and mixed Voronoi areas.
 //! - [`cycles`]: the faces of the network, traced from the node normals, and the checks of
 //!   the cell complex they form.
 //!
-//! Tessellation, the cotangent Laplacian, the biharmonic propagation and the mean-curvature
+//! Tessellation, the biharmonic propagation and the mean-curvature
 //! guided fit follow in this order.
 
+pub mod cotmatrix;
 pub mod cycles;
