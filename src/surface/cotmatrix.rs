@@ -245,16 +245,22 @@ pub(crate) mod tests {
         (v, f)
     }
 
-    fn meshes() -> Vec<(&'static str, Vec<Vector3<f64>>, Vec<[usize; 3]>)> {
+    type Mesh = (Vec<Vector3<f64>>, Vec<[usize; 3]>);
+
+    fn meshes() -> Vec<(&'static str, Mesh)> {
         let (a, b) = grid(8, 0.0);
         let (c, d) = grid(9, 0.6);
         let (e, g) = icosphere(3);
-        vec![("grid", a, b), ("jittered grid", c, d), ("icosphere", e, g)]
+        vec![
+            ("grid", (a, b)),
+            ("jittered grid", (c, d)),
+            ("icosphere", (e, g)),
+        ]
     }
 
     #[test]
     fn rows_sum_to_zero_and_the_matrix_is_symmetric() {
-        for (name, v, f) in meshes() {
+        for (name, (v, f)) in meshes() {
             let l = cotmatrix(&v, &f);
             for (i, r) in l.rows.iter().enumerate() {
                 let s: f64 = r.iter().map(|e| e.1).sum();
@@ -282,7 +288,7 @@ pub(crate) mod tests {
 
     #[test]
     fn areas_sum_to_the_mesh_area_and_curvature_of_the_sphere_is_one() {
-        for (name, v, f) in meshes() {
+        for (name, (v, f)) in meshes() {
             let a = voronoi_areas(&v, &f);
             let total: f64 = f
                 .iter()
