@@ -9,4 +9,5 @@
 
 pub mod cotmatrix;
 pub mod cycles;
+pub mod fit;
 pub mod tessellate;
