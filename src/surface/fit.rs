@@ -22,7 +22,7 @@
 
 use super::cotmatrix::{cotmatrix, voronoi_areas, SparseRows};
 use super::cycles::{cycles, Cycles, NetworkSegments};
-use super::tessellate::tessellate;
+use super::tessellate::{tessellate, Embedding};
 use crate::sparse_llt::{SolveError, SpdPattern};
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
@@ -164,18 +164,19 @@ fn assemble(
     for cyc in &cyc.patches {
         let mut ids = Vec::new();
         let mut poly = Vec::new();
-        let mut nsum = Vector3::zeros();
+        let mut pn = Vec::new();
         for h in &cyc.edges {
             let s = &net.segments[h.segment];
             let m = s.points.len();
             for j in 0..m - 1 {
                 let k = if h.forward { j } else { m - 1 - j };
-                ids.push(id(h.segment, k));
+                let g = id(h.segment, k);
+                ids.push(g);
                 poly.push(s.points[k]);
+                pn.push(normals[g]);
             }
-            nsum += s.normals.iter().sum::<Vector3<f64>>();
         }
-        let mesh = match tessellate(&poly, &nsum, edge) {
+        let mesh = match tessellate(&poly, &pn, edge) {
             Ok(m) => m,
             Err(e) => {
                 problems.push(format!(
@@ -186,9 +187,9 @@ fn assemble(
                 continue;
             }
         };
-        if mesh.fallback {
+        if mesh.embedding == Embedding::Circle {
             problems.push(format!(
-                "the patch through nodes {:?} overlaps itself seen along its average normal; it was tessellated on a disk",
+                "the patch through nodes {:?} overlaps itself seen along its average normal and developed; it was tessellated on a disk",
                 cyc.nodes(net)
             ));
         }
@@ -415,25 +416,16 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
         match p.method {
             Method::Biharmonic => {}
             Method::Triharmonic => {
-                // L³V = 0: the normal matrix of ‖M^{-1/2} Lc M⁻¹ Lc V‖², i.e. Lc M⁻¹ Q.
+                // L³V = 0 as the minimum of ∫|∇ΔV|²: the normal matrix −Lc M⁻¹ Lc M⁻¹ Lc
+                // = −Lc M⁻¹ Q (symmetric, positive semi-definite since −Lc is).
                 let mut t = Vec::new();
                 for (k, r) in asm.lc.rows.iter().enumerate() {
                     if asm.mass[k] <= 0.0 || !rows[k] {
                         continue;
                     }
-                    // Row k of B = M^{-1/2} Lc M^{-1} Lc: Σ_j Lc_kj / m_j · Lc_j.
-                    let mut bk: BTreeMap<usize, f64> = BTreeMap::new();
-                    for &(j, a) in r {
-                        if asm.mass[j] <= 0.0 || !rows[j] {
-                            continue;
-                        }
-                        for &(l, b) in &asm.lc.rows[j] {
-                            *bk.entry(l).or_default() += a * b / asm.mass[j];
-                        }
-                    }
-                    let s = 1.0 / asm.mass[k];
-                    for (&i, &a) in &bk {
-                        for (&j, &b) in &bk {
+                    let s = -1.0 / asm.mass[k];
+                    for &(i, a) in r {
+                        for &(j, b) in &q.rows[k] {
                             t.push((i, j, a * b * s));
                         }
                     }

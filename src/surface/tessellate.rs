@@ -6,12 +6,15 @@
 //!
 //! The projection is not always injective (a patch that wraps around more than a half-space
 //! overlaps itself in the plane). That is detected — the projected boundary must be a simple
-//! polygon turning counter-clockwise around the normal — and the fallback maps the boundary by
-//! arc length onto a circle (a convex, always simple polygon), never a folded triangulation.
+//! polygon turning counter-clockwise around the normal — and so is a projection that shrinks
+//! part of the boundary to less than half its length (its triangles would lift to slivers):
+//! the fallback develops the boundary into the plane from its lengths and its turning in the
+//! tangent planes of its normals, and the last resort maps it by arc length onto a circle (a
+//! convex, always simple polygon). Never a folded triangulation. See [`Embedding`].
 //!
 //! ```
 //! use nalgebra::Vector3;
-//! use sfs::surface::tessellate::tessellate;
+//! use sfs::surface::tessellate::{tessellate, Embedding};
 //! // A unit square at z = 1 seen from +z, boundary sampled every 0.25.
 //! let mut b = Vec::new();
 //! for k in 0..16 {
@@ -23,9 +26,9 @@
 //!         _ => Vector3::new(0.0, 1.0 - t, 1.0),
 //!     });
 //! }
-//! let m = tessellate(&b, &Vector3::z(), 0.25).unwrap();
+//! let m = tessellate(&b, &vec![Vector3::z(); 16], 0.25).unwrap();
 //! assert_eq!(m.boundary, 16);
-//! assert!(!m.fallback);
+//! assert_eq!(m.embedding, Embedding::Projection);
 //! let area: f64 = m.triangles.iter().map(|t| m.area(t)).sum();
 //! assert!((area - 1.0).abs() < 1e-9);
 //! ```
@@ -42,8 +45,8 @@ pub struct PatchMesh {
     pub boundary: usize,
     /// Counter-clockwise in the plane (seen from the normal's side).
     pub triangles: Vec<[usize; 3]>,
-    /// The boundary was mapped onto a circle (the plane projection was not injective).
-    pub fallback: bool,
+    /// How the boundary was laid out in the plane.
+    pub embedding: Embedding,
     /// The refinement stopped at its vertex budget (the triangles are valid but coarser).
     pub incomplete: bool,
 }
@@ -71,11 +74,29 @@ pub enum TessellateError {
     Degenerate([usize; 3]),
 }
 
-/// Triangulates the closed polyline `boundary` (last point not repeated) whose surface normals
-/// sum to `normal_sum`, with edges of about `target_edge` inside.
+/// How a cycle was laid out in the plane.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Embedding {
+    /// Orthogonal projection on the plane of the average position and normal (the paper's).
+    Projection,
+    /// The boundary developed into the plane: its edge lengths and its turning angles in the
+    /// tangent planes of its normals (the holonomy spread evenly, the closure gap by arc
+    /// length). Used when the projection shrinks part of the boundary below
+    /// [`MAX_SHRINK`] of its length (a strongly curved patch, e.g. half a torus' tube,
+    /// whose projected triangles would lift to slivers) or is not injective.
+    Development,
+    /// The boundary by arc length on a circle: the last resort, always injective.
+    Circle,
+}
+
+/// Projected edges shorter than this fraction of their length reject the projection.
+pub const MAX_SHRINK: f64 = 0.5;
+
+/// Triangulates the closed polyline `boundary` (last point not repeated) with unit surface
+/// `normals` at its points, with edges of about `target_edge` inside.
 pub fn tessellate(
     boundary: &[Vector3<f64>],
-    normal_sum: &Vector3<f64>,
+    normals: &[Vector3<f64>],
     target_edge: f64,
 ) -> Result<PatchMesh, TessellateError> {
     let n = boundary.len();
@@ -84,26 +105,27 @@ pub fn tessellate(
     }
     let finite = boundary
         .iter()
-        .chain([normal_sum])
+        .chain(normals)
         .all(|p| p.iter().all(|x| x.is_finite()));
-    if !finite || !target_edge.is_finite() || target_edge <= 0.0 {
+    if !finite || normals.len() != n || !target_edge.is_finite() || target_edge <= 0.0 {
         return Err(TessellateError::NonFinite);
     }
     let c = boundary.iter().sum::<Vector3<f64>>() / n as f64;
-    let length: f64 = (0..n)
+    let lens: Vec<f64> = (0..n)
         .map(|i| (boundary[(i + 1) % n] - boundary[i]).norm())
-        .sum();
-    for i in 0..n {
-        if (boundary[(i + 1) % n] - boundary[i]).norm() <= 1e-12 * length {
-            return Err(TessellateError::Coincident(i, (i + 1) % n));
-        }
+        .collect();
+    let length: f64 = lens.iter().sum();
+    if let Some(i) = lens.iter().position(|&l| l <= 1e-12 * length) {
+        return Err(TessellateError::Coincident(i, (i + 1) % n));
     }
     // The plane: the average normal (the paper's), else the polygon's vector area.
     let mut area = Vector3::zeros();
     for i in 0..n {
         area += (boundary[i] - c).cross(&(boundary[(i + 1) % n] - c));
     }
-    let nrm = normal_sum
+    let nrm = normals
+        .iter()
+        .sum::<Vector3<f64>>()
         .try_normalize(1e-12)
         .or_else(|| area.try_normalize(1e-300))
         .ok_or(TessellateError::NonFinite)?;
@@ -118,27 +140,87 @@ pub fn tessellate(
         .iter()
         .map(|p| [(p - c).dot(&e1), (p - c).dot(&e2)])
         .collect();
-    if is_simple_ccw(&projected) {
-        if let Ok(m) = triangulate(&projected, target_edge, false) {
+    let shrink = (0..n)
+        .map(|i| {
+            let (a, b) = (projected[i], projected[(i + 1) % n]);
+            ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt() / lens[i]
+        })
+        .fold(f64::MAX, f64::min);
+    if shrink >= MAX_SHRINK && is_simple_ccw(&projected) {
+        if let Ok(m) = triangulate(&projected, target_edge, Embedding::Projection) {
             return Ok(m);
         }
     }
-    // Fallback: the boundary by arc length onto a circle of the same length.
+    let developed = develop(boundary, normals, &lens);
+    if is_simple_ccw(&developed) {
+        if let Ok(m) = triangulate(&developed, target_edge, Embedding::Development) {
+            return Ok(m);
+        }
+    }
+    if is_simple_ccw(&projected) {
+        if let Ok(m) = triangulate(&projected, target_edge, Embedding::Projection) {
+            return Ok(m);
+        }
+    }
+    // Last resort: the boundary by arc length onto a circle of the same length.
     let r = length / std::f64::consts::TAU;
     let mut s = 0.0;
     let mut circle = Vec::with_capacity(n);
-    for i in 0..n {
+    for l in &lens {
         let a = s / r;
         circle.push([r * a.cos(), r * a.sin()]);
-        s += (boundary[(i + 1) % n] - boundary[i]).norm();
+        s += l;
     }
-    triangulate(&circle, target_edge, true)
+    triangulate(&circle, target_edge, Embedding::Circle)
+}
+
+/// The boundary developed into the plane (see [`Embedding::Development`]).
+fn develop(b: &[Vector3<f64>], normals: &[Vector3<f64>], lens: &[f64]) -> Vec<[f64; 2]> {
+    let n = b.len();
+    let mut turn: Vec<f64> = (0..n)
+        .map(|i| {
+            let nn = normals[i];
+            let a = b[i] - b[(i + n - 1) % n];
+            let c = b[(i + 1) % n] - b[i];
+            let (a, c) = (a - nn * nn.dot(&a), c - nn * nn.dot(&c));
+            nn.dot(&a.cross(&c)).atan2(a.dot(&c))
+        })
+        .collect();
+    let total: f64 = turn.iter().sum();
+    // A disk's boundary turns once around: spread what the surface's curvature took (or
+    // added) evenly over the corners.
+    let fix = (std::f64::consts::TAU - total) / n as f64;
+    for t in &mut turn {
+        *t += fix;
+    }
+    let length: f64 = lens.iter().sum();
+    let mut out = Vec::with_capacity(n + 1);
+    let (mut x, mut y, mut phi) = (0.0, 0.0, 0.0);
+    out.push([x, y]);
+    for i in 0..n {
+        if i > 0 {
+            phi += turn[i];
+        }
+        x += lens[i] * phi.cos();
+        y += lens[i] * phi.sin();
+        out.push([x, y]);
+    }
+    let gap = out[n];
+    let mut s = 0.0;
+    for (i, p) in out.iter_mut().enumerate().take(n) {
+        let f = s / length;
+        p[0] -= gap[0] * f;
+        p[1] -= gap[1] * f;
+        s += lens[i];
+    }
+    out.truncate(n);
+    out
 }
 
 fn triangulate(
     poly: &[[f64; 2]],
     target_edge: f64,
-    fallback: bool,
+    embedding: Embedding,
 ) -> Result<PatchMesh, TessellateError> {
     let n = poly.len();
     let mut cdt: ConstrainedDelaunayTriangulation<Point2<f64>> =
@@ -199,7 +281,7 @@ fn triangulate(
         uv,
         boundary: n,
         triangles,
-        fallback,
+        embedding,
         incomplete: !result.refinement_complete,
     };
     // Drop vertices no triangle uses (cannot happen inside a closed constraint loop, but keep
@@ -343,9 +425,9 @@ mod tests {
             })
             .collect();
         let h = std::f64::consts::TAU / n as f64;
-        let m = tessellate(&b, &Vector3::z(), h).unwrap();
+        let m = tessellate(&b, &vec![Vector3::z(); n], h).unwrap();
         check(&m);
-        assert!(!m.fallback && !m.incomplete);
+        assert!(m.embedding == Embedding::Projection && !m.incomplete);
         assert_eq!(m.boundary, n);
         for (i, p) in b.iter().enumerate() {
             let d = ((m.uv[i][0] - p.x).powi(2) + (m.uv[i][1] - p.y).powi(2)).sqrt();
@@ -375,10 +457,13 @@ mod tests {
             b.push(Vector3::new(a.sin(), 0.5, a.cos()));
         }
         // Outward normals: (sin, 0, cos); their sum points to +z.
-        let sum: Vector3<f64> = b.iter().map(|p| Vector3::new(p.x, 0.0, p.z)).sum();
-        let m = tessellate(&b, &sum, 0.1).unwrap();
-        assert!(m.fallback);
+        let normals: Vec<Vector3<f64>> = b.iter().map(|p| Vector3::new(p.x, 0.0, p.z)).collect();
+        let m = tessellate(&b, &normals, 0.1).unwrap();
+        assert_eq!(m.embedding, Embedding::Development);
         check(&m);
+        // Developed, the boundary keeps its lengths: a 0.5 × 1.5π rectangle.
+        let area: f64 = m.triangles.iter().map(|t| m.area(t)).sum();
+        assert!((area - 0.75 * std::f64::consts::PI).abs() < 0.05, "{area}");
     }
 
     #[test]
@@ -396,17 +481,17 @@ mod tests {
     fn bad_input_is_an_error_not_a_panic() {
         let p = Vector3::new(0.0, 0.0, 0.0);
         assert!(matches!(
-            tessellate(&[p, p], &Vector3::z(), 0.1),
+            tessellate(&[p, p], &[Vector3::z(); 2], 0.1),
             Err(TessellateError::TooFewPoints(2))
         ));
         let q = Vector3::new(1.0, 0.0, 0.0);
         assert!(matches!(
-            tessellate(&[p, q, q, Vector3::y()], &Vector3::z(), 0.1),
+            tessellate(&[p, q, q, Vector3::y()], &[Vector3::z(); 4], 0.1),
             Err(TessellateError::Coincident(1, 2))
         ));
         let nan = Vector3::new(f64::NAN, 0.0, 0.0);
         assert!(matches!(
-            tessellate(&[p, q, nan], &Vector3::z(), 0.1),
+            tessellate(&[p, q, nan], &[Vector3::z(); 3], 0.1),
             Err(TessellateError::NonFinite)
         ));
     }
