@@ -45,6 +45,11 @@
 //! bend_fraction = 0.5                # bending smoothing length ℓ₂ in h (or bend_length in m)
 //! stretch_length = 0.0               # stretching smoothing length ℓ₁, m
 //! xi = 1e4                           # weight of the node normal consistency
+//!
+//! [surface]                          # surfacing with normal control
+//! enabled = true                     # false: write the network only
+//! edge = 0.01                        # target edge length inside patches, m (default: h)
+//! reweight = 1                       # passes with cotangent weights from the 3D surface
 //! ```
 
 use crate::acquisition::AcquisitionConfig;
@@ -83,6 +88,17 @@ pub struct Config {
     pub acquisition: AcquisitionToml,
     #[serde(default)]
     pub network: NetworkToml,
+    #[serde(default)]
+    pub surface: SurfaceToml,
+}
+
+/// `[surface]`, as written (see the module documentation).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SurfaceToml {
+    pub enabled: Option<bool>,
+    pub edge: Option<f64>,
+    pub reweight: Option<usize>,
 }
 
 /// `[network]`, as written (see the module documentation).
@@ -277,6 +293,39 @@ impl Config {
             p.regression.xi = x;
         }
         Ok(p)
+    }
+
+    /// The surfacing settings this configuration describes (`None`: surfacing disabled).
+    pub fn surface_params(
+        &self,
+        file: &Path,
+    ) -> Result<Option<crate::surface::fit::SurfaceParams>, ConfigError> {
+        let s = &self.surface;
+        if s.enabled == Some(false) {
+            return Ok(None);
+        }
+        let mut p = crate::surface::fit::SurfaceParams::default();
+        if let Some(e) = s.edge {
+            if !(e.is_finite() && (1e-4..=10.0).contains(&e)) {
+                return Err(ConfigError {
+                    file: file.to_owned(),
+                    key: "surface.edge".into(),
+                    reason: format!("{e} is out of range [0.0001, 10] m"),
+                });
+            }
+            p.edge = Some(e);
+        }
+        if let Some(r) = s.reweight {
+            if r > 10 {
+                return Err(ConfigError {
+                    file: file.to_owned(),
+                    key: "surface.reweight".into(),
+                    reason: format!("{r} passes is more than 10"),
+                });
+            }
+            p.reweight = r;
+        }
+        Ok(Some(p))
     }
 
     /// The acquisition settings (calibration included) this configuration describes.

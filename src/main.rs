@@ -116,6 +116,7 @@ fn options(cfg: &Config, file: &Path) -> Result<session::Options, ConfigError> {
     Ok(session::Options {
         acquisition: cfg.acquisition_config(file)?,
         network: cfg.network_params(file)?,
+        surface: cfg.surface_params(file)?,
     })
 }
 

@@ -30,6 +30,8 @@ pub struct Report {
     pub timings_ms: Option<crate::network::Timings>,
     /// What the reconstruction did (curves used, samples, components, node normal agreement).
     pub network: Option<crate::network::NetworkReport>,
+    /// What the surfacer did (patches, holes, problems naming nodes and curves).
+    pub surface: Option<crate::surface::fit::SurfaceReport>,
 }
 
 /// A curve in `report.json`.

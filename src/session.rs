@@ -23,10 +23,23 @@ pub const SCAN_FILE: &str = "scan.json";
 pub const NETWORK_FILE: &str = "network.glb";
 
 /// What a session does with the packets (everything but the source).
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct Options {
     pub acquisition: AcquisitionConfig,
     pub network: crate::network::NetworkParams,
+    /// Surfacing settings; `None` writes the network only.
+    pub surface: Option<crate::surface::fit::SurfaceParams>,
+}
+
+impl Default for Options {
+    /// Documented defaults; the surface is made.
+    fn default() -> Self {
+        Options {
+            acquisition: AcquisitionConfig::default(),
+            network: crate::network::NetworkParams::default(),
+            surface: Some(Default::default()),
+        }
+    }
 }
 
 /// How often a running session logs its link statistics (when they changed).
@@ -150,10 +163,29 @@ pub async fn run(
     let mut reconstructor = crate::network::Reconstructor::new();
     let network = reconstructor.run(&scan, &options.network);
     let mut nodes = std::collections::BTreeMap::new();
+    let mut surface_report = None;
     if let Some(net) = &network {
         scan.warnings.extend(net.warnings.iter().cloned());
+        let surfaced = options.surface.as_ref().and_then(|sp| {
+            let t0 = Instant::now();
+            let segs = crate::surface::cycles::NetworkSegments::from_positions(&net.positions);
+            match crate::surface::fit::surface(&segs, sp) {
+                Ok(s) => {
+                    let r = s.report(t0.elapsed().as_secs_f64() * 1e3);
+                    scan.warnings
+                        .extend(s.problems.iter().map(|p| format!("surface: {p}")));
+                    surface_report = Some(r);
+                    Some(s)
+                }
+                Err(e) => {
+                    tracing::warn!("no surface: {e}");
+                    scan.warnings.push(format!("no surface: {e}"));
+                    None
+                }
+            }
+        });
         let glb_path = out_dir.join(NETWORK_FILE);
-        match network_glb(net) {
+        match network_glb(net, surfaced.as_ref()) {
             Ok(bytes) => {
                 crate::atomic::write_atomic(&glb_path, &bytes).map_err(output_err(&glb_path))?
             }
@@ -183,6 +215,7 @@ pub async fn run(
         nodes,
         timings_ms: network.as_ref().map(|n| n.report.timings_ms.clone()),
         network: network.map(|n| n.report),
+        surface: surface_report,
     };
     let report_path = out_dir.join(REPORT_FILE);
     report
@@ -202,8 +235,16 @@ pub async fn run(
 }
 
 /// The glb of a reconstruction.
-fn network_glb(net: &crate::network::Network) -> Result<Vec<u8>, crate::gltf_out::GltfError> {
-    crate::gltf_out::network_glb(&net.positions.network_curves(), &net.positions.nodes, None)
+fn network_glb(
+    net: &crate::network::Network,
+    surface: Option<&crate::surface::fit::Surfaced>,
+) -> Result<Vec<u8>, crate::gltf_out::GltfError> {
+    let mesh = surface.map(|s| s.mesh());
+    crate::gltf_out::network_glb(
+        &net.positions.network_curves(),
+        &net.positions.nodes,
+        mesh.as_ref(),
+    )
 }
 
 fn log_stats(msg: &str, s: &LinkStats) {

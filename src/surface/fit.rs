@@ -30,8 +30,7 @@ use std::collections::BTreeMap;
 /// Settings of the surfacer.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SurfaceParams {
-    /// Target edge length inside the patches, m. `None`: the mean spacing of the network's
-    /// samples.
+    /// Target edge length inside the patches, m. `None`: [`default_edge`].
     pub edge: Option<f64>,
     /// What to solve for.
     pub method: Method,
@@ -82,6 +81,51 @@ pub struct Surfaced {
     /// other problem: each also in `problems`.
     pub skipped: usize,
     pub problems: Vec<String>,
+}
+
+/// What the surfacer did, for `report.json`.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct SurfaceReport {
+    pub patches: usize,
+    pub holes: usize,
+    /// Faces that failed a check of the cell complex, and patches that could not be
+    /// tessellated (each explained in `problems`).
+    pub rejected: usize,
+    pub skipped: usize,
+    /// `V − E + F` of the network's cell complex (2 for a sphere-like network).
+    pub euler: i64,
+    pub vertices: usize,
+    pub constrained: usize,
+    pub triangles: usize,
+    pub problems: Vec<String>,
+    pub time_ms: f64,
+}
+
+impl Surfaced {
+    /// The report of this surface, with the time it took.
+    pub fn report(&self, time_ms: f64) -> SurfaceReport {
+        SurfaceReport {
+            patches: self.cycles.patches.len() - self.skipped,
+            holes: self.cycles.outer.len(),
+            rejected: self.cycles.rejected.len(),
+            skipped: self.skipped,
+            euler: self.cycles.euler,
+            vertices: self.positions.len(),
+            constrained: self.constrained,
+            triangles: self.triangles.len(),
+            problems: self.problems.clone(),
+            time_ms,
+        }
+    }
+
+    /// The mesh as `network.glb` writes it.
+    pub fn mesh(&self) -> crate::gltf_out::SurfaceMesh {
+        crate::gltf_out::SurfaceMesh {
+            positions: self.positions.clone(),
+            normals: self.normals.clone(),
+            triangles: self.triangles.clone(),
+        }
+    }
 }
 
 /// Why there is no surface at all.
@@ -187,6 +231,14 @@ fn assemble(
                 continue;
             }
         };
+        tracing::debug!(
+            "patch {:?}: {} boundary points, {} vertices, {} triangles, {:?}, edge {edge:.4}",
+            cyc.nodes(net),
+            mesh.boundary,
+            mesh.uv.len(),
+            mesh.triangles.len(),
+            mesh.embedding
+        );
         if mesh.embedding == Embedding::Circle {
             problems.push(format!(
                 "the patch through nodes {:?} overlaps itself seen along its average normal and developed; it was tessellated on a disk",
@@ -340,21 +392,39 @@ pub fn mean_curvature_vectors(
     h
 }
 
+/// Default target edge: the mean spacing of the network's samples, but at least
+/// [`EDGE_PER_DIAGONAL`] of the network's bounding-box diagonal (about 20 k vertices on a
+/// sphere-like network, whatever the sampling).
+pub fn default_edge(net: &NetworkSegments) -> f64 {
+    let (mut len, mut cnt) = (0.0, 0usize);
+    let mut lo = Vector3::repeat(f64::MAX);
+    let mut hi = Vector3::repeat(f64::MIN);
+    for s in &net.segments {
+        len += s
+            .points
+            .windows(2)
+            .map(|w| (w[1] - w[0]).norm())
+            .sum::<f64>();
+        cnt += s.points.len().saturating_sub(1);
+        for p in &s.points {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+    }
+    if cnt == 0 {
+        return 1.0;
+    }
+    (len / cnt as f64).max((hi - lo).norm() * EDGE_PER_DIAGONAL)
+}
+
+/// See [`default_edge`].
+pub const EDGE_PER_DIAGONAL: f64 = 1.0 / 120.0;
+
 /// Surfaces the network (see the module docs). Patches that fail are reported and left open.
 pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, SurfaceError> {
     let cyc = cycles(net);
     let mut problems = cyc.problems.clone();
-    let edge = p.edge.unwrap_or_else(|| {
-        let (len, cnt) = net.segments.iter().fold((0.0, 0usize), |(l, c), s| {
-            let sl: f64 = s.points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
-            (l + sl, c + s.points.len() - 1)
-        });
-        if cnt > 0 {
-            len / cnt as f64
-        } else {
-            1.0
-        }
-    });
+    let edge = p.edge.unwrap_or_else(|| default_edge(net));
     let (mut asm, skipped) = assemble(net, &cyc, edge, &mut problems);
     if asm.triangles.is_empty() {
         return Err(SurfaceError::NoPatch(problems));
@@ -451,7 +521,9 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
             }
         }
     }
-    // Output: drop triangles that came out degenerate in 3D (reported), vertex normals.
+    // Output: drop triangles that came out degenerate in 3D (reported; the threshold, a
+    // millionth of a target triangle, keeps them non-degenerate once written in f32), and
+    // vertex normals.
     let scale = edge * edge;
     let mut triangles = Vec::with_capacity(asm.triangles.len());
     let mut vn = vec![Vector3::zeros(); nv];
