@@ -98,7 +98,8 @@ fn logs_replay_into_the_truth_curves() {
 }
 
 /// The reconstruction of the clean Morphorider log scores within the reconstruction target
-/// (mean ≤ 0.10 % of the diagonal) with `sfs eval`, and its glb holds every curve and node.
+/// (mean ≤ 0.10 % of the diagonal) with `sfs eval`, its glb holds every curve and node, and
+/// its surface has the cone's patches and lies within 0.10 % of the diagonal of the truth.
 #[test]
 fn cone_log_reconstructs_within_target() {
     let out_dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
@@ -131,4 +132,10 @@ fn cone_log_reconstructs_within_target() {
         serde_json::from_slice(&std::fs::read(out_dir.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["nodes"].as_object().unwrap().len(), 12);
     assert_eq!(report["network"]["curves_used"], 7);
+    // The surface: the cone's eight patches between its two rims, close to the truth surface.
+    assert_eq!(report["surface"]["patches"], 8, "{}", report["surface"]);
+    assert_eq!(report["surface"]["holes"], 2);
+    assert_eq!(report["surface"]["euler"], 2);
+    let s = e["surface"]["mean_pct"].as_f64().expect("a surface scored");
+    assert!(s <= 0.10, "surface mean {s} % of the diagonal");
 }

@@ -7,6 +7,7 @@
 //!
 //! The biharmonic propagation and the mean-curvature guided fit follow in this order.
 
+pub mod analytic;
 pub mod cotmatrix;
 pub mod cycles;
 pub mod fit;

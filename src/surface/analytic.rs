@@ -1,0 +1,161 @@
+//! Analytic curve networks with exact normals (the paper's Table 1 test shapes), for tests,
+//! benchmarks and `examples/surface_table.rs`, with the distance to their true surface.
+
+use super::cycles::NetworkSegments;
+use nalgebra::Vector3;
+use std::f64::consts::{PI, TAU};
+
+/// Distance from the unit sphere.
+pub fn sphere_distance(p: &Vector3<f64>) -> f64 {
+    (p.norm() - 1.0).abs()
+}
+
+/// Distance from the torus `R = 4, r = 2` around z.
+pub fn torus_distance(p: &Vector3<f64>) -> f64 {
+    let q = (p.x * p.x + p.y * p.y).sqrt() - R;
+    ((q * q + p.z * p.z).sqrt() - RR).abs()
+}
+
+/// Adds a curve sampled from `f(t)`, t ∈ [0, 1], with nodes at the given parameters.
+fn curve(
+    net: &mut NetworkSegments,
+    idx: usize,
+    f: &dyn Fn(f64) -> (Vector3<f64>, Vector3<f64>),
+    nodes: &[(f64, u32)],
+    length: f64,
+    spacing: f64,
+) {
+    for w in nodes.windows(2) {
+        let ((t0, a), (t1, b)) = (w[0], w[1]);
+        let m = (((t1 - t0) * length / spacing).round() as usize).max(2);
+        let (pts, nrm): (Vec<_>, Vec<_>) = (0..=m)
+            .map(|k| f(t0 + (t1 - t0) * k as f64 / m as f64))
+            .unzip();
+        net.push(idx, false, (a, b), pts, nrm);
+    }
+}
+
+/// The unit sphere's network of a cube's 12 edges (great-circle arcs), samples every
+/// `spacing`, normals radial.
+pub fn sphere_cube(spacing: f64) -> NetworkSegments {
+    let corners: Vec<Vector3<f64>> = (0..8)
+        .map(|i| {
+            Vector3::new(
+                if i & 1 == 0 { -1.0 } else { 1.0 },
+                if i & 2 == 0 { -1.0 } else { 1.0 },
+                if i & 4 == 0 { -1.0 } else { 1.0 },
+            )
+            .normalize()
+        })
+        .collect();
+    let mut net = NetworkSegments::default();
+    let mut idx = 0;
+    for a in 0..8u32 {
+        for bit in [1u32, 2, 4] {
+            let b = a | bit;
+            if b == a {
+                continue;
+            }
+            let (pa, pb) = (corners[a as usize], corners[b as usize]);
+            let ang = pa.angle(&pb);
+            let slerp = move |t: f64| {
+                let p = (pa * ((1.0 - t) * ang).sin() + pb * (t * ang).sin()) / ang.sin();
+                (p, p)
+            };
+            curve(&mut net, idx, &slerp, &[(0.0, a), (1.0, b)], ang, spacing);
+            idx += 1;
+        }
+    }
+    for (i, c) in corners.iter().enumerate() {
+        net.set_normal(i as u32, *c);
+    }
+    net
+}
+
+/// The unit sphere's network of three great circles in the coordinate planes.
+pub fn sphere_circles(spacing: f64) -> NetworkSegments {
+    // Three great circles in the coordinate planes; nodes at ±x, ±y, ±z.
+    let node = |v: Vector3<f64>| -> u32 {
+        let k = if v.x.abs() > 0.5 {
+            0
+        } else if v.y.abs() > 0.5 {
+            1
+        } else {
+            2
+        };
+        (2 * k + usize::from(v[k] < 0.0)) as u32
+    };
+    let mut net = NetworkSegments::default();
+    let axes = [Vector3::x(), Vector3::y(), Vector3::z()];
+    for (idx, (u, w)) in [(0, 1), (1, 2), (2, 0)].into_iter().enumerate() {
+        let (eu, ew) = (axes[u], axes[w]);
+        let f = move |t: f64| {
+            let p = eu * (TAU * t).cos() + ew * (TAU * t).sin();
+            (p, p)
+        };
+        let nodes: Vec<(f64, u32)> = (0..=4)
+            .map(|k| {
+                let t = k as f64 / 4.0;
+                (t, node(f(t).0))
+            })
+            .collect();
+        curve(&mut net, idx, &f, &nodes, TAU, spacing);
+    }
+    for (k, a) in axes.iter().enumerate() {
+        net.set_normal(2 * k as u32, *a);
+        net.set_normal(2 * k as u32 + 1, -a);
+    }
+    net
+}
+
+/// The torus' radii.
+pub const R: f64 = 4.0;
+pub const RR: f64 = 2.0;
+
+/// Point and outward normal of the torus at angles `u` (around the axis) and `v` (around
+/// the tube).
+pub fn torus_point(u: f64, v: f64) -> (Vector3<f64>, Vector3<f64>) {
+    let n = Vector3::new(u.cos() * v.cos(), u.sin() * v.cos(), v.sin());
+    let p = Vector3::new(u.cos() * R, u.sin() * R, 0.0) + n * RR;
+    (p, n)
+}
+
+/// The torus `R = 4, r = 2` with 4 meridians and 2 parallels (top and bottom circles).
+pub fn torus(spacing: f64) -> NetworkSegments {
+    // Meridians at u = 0, π/2, π, 3π/2; parallels at v = ±π/2 (top and bottom circles).
+    let mut net = NetworkSegments::default();
+    let node = |i: usize, top: bool| (2 * i + usize::from(!top)) as u32;
+    for i in 0..4 {
+        let u = i as f64 * PI / 2.0;
+        // Meridian from the top (v = π/2) around the outside and back: v = π/2 − 2π t.
+        let f = move |t: f64| torus_point(u, PI / 2.0 - TAU * t);
+        curve(
+            &mut net,
+            i,
+            &f,
+            &[
+                (0.0, node(i, true)),
+                (0.5, node(i, false)),
+                (1.0, node(i, true)),
+            ],
+            TAU * RR,
+            spacing,
+        );
+    }
+    for (k, top) in [(4, true), (5, false)] {
+        let v: f64 = if top { PI / 2.0 } else { -PI / 2.0 };
+        let f = move |t: f64| torus_point(TAU * t, v);
+        let nodes: Vec<(f64, u32)> = (0..=4)
+            .map(|i| (i as f64 / 4.0, node(i % 4, top)))
+            .collect();
+        curve(&mut net, k, &f, &nodes, TAU * R, spacing);
+    }
+    for i in 0..4 {
+        for top in [true, false] {
+            let u = i as f64 * PI / 2.0;
+            let v = if top { PI / 2.0 } else { -PI / 2.0 };
+            net.set_normal(node(i, top), torus_point(u, v).1);
+        }
+    }
+    net
+}
