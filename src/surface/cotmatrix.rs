@@ -36,20 +36,28 @@ pub struct SparseRows {
 impl SparseRows {
     /// Sums `(i, j, value)` triplets into rows of an `n × n` matrix.
     pub fn from_triplets(n: usize, t: impl IntoIterator<Item = (usize, usize, f64)>) -> Self {
-        let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
+        let t: Vec<(usize, usize, f64)> = t.into_iter().collect();
+        let mut count = vec![0usize; n];
+        for &(i, _, _) in &t {
+            count[i] += 1;
+        }
+        let mut rows: Vec<Vec<(usize, f64)>> =
+            count.iter().map(|&c| Vec::with_capacity(c)).collect();
         for (i, j, x) in t {
             rows[i].push((j, x));
         }
         for r in &mut rows {
-            r.sort_by_key(|e| e.0);
-            let mut out: Vec<(usize, f64)> = Vec::with_capacity(r.len());
-            for &(j, x) in r.iter() {
-                match out.last_mut() {
-                    Some(last) if last.0 == j => last.1 += x,
-                    _ => out.push((j, x)),
+            r.sort_unstable_by_key(|e| e.0);
+            let mut w = 0;
+            for k in 0..r.len() {
+                if w > 0 && r[w - 1].0 == r[k].0 {
+                    r[w - 1].1 += r[k].1;
+                } else {
+                    r[w] = r[k];
+                    w += 1;
                 }
             }
-            *r = out;
+            r.truncate(w);
         }
         SparseRows { rows }
     }

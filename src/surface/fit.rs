@@ -285,19 +285,41 @@ fn assemble(
 
 /// `Σ_k∈rows Lc_kᵀ Lc_k / m_k` and the rows' right-hand side `Σ_k Lc_kᵀ t_k`.
 fn normal_matrix(lc: &SparseRows, m: &[f64], rows: &[bool]) -> SparseRows {
-    let mut t = Vec::new();
-    for (k, r) in lc.rows.iter().enumerate() {
-        if !rows[k] || m[k] <= 0.0 {
-            continue;
-        }
-        let inv = 1.0 / m[k];
-        for &(i, a) in r {
-            for &(j, b) in r {
-                t.push((i, j, a * b * inv));
+    // Row i of Q is Σ_k Lc_ik / m_k · (row k of Lc) over its neighbours k (Lc symmetric),
+    // gathered with a dense accumulator: linear in the entries, no sort of triplets.
+    let n = lc.n();
+    let mut acc = vec![0.0; n];
+    let mut seen = vec![false; n];
+    let mut cols: Vec<usize> = Vec::new();
+    let mut out = Vec::with_capacity(n);
+    for ri in &lc.rows {
+        cols.clear();
+        for &(k, a) in ri {
+            if !rows[k] || m[k] <= 0.0 {
+                continue;
+            }
+            let f = a / m[k];
+            for &(j, b) in &lc.rows[k] {
+                if !seen[j] {
+                    seen[j] = true;
+                    cols.push(j);
+                }
+                acc[j] += f * b;
             }
         }
+        cols.sort_unstable();
+        let row: Vec<(usize, f64)> = cols
+            .iter()
+            .map(|&j| {
+                let v = acc[j];
+                acc[j] = 0.0;
+                seen[j] = false;
+                (j, v)
+            })
+            .collect();
+        out.push(row);
     }
-    SparseRows::from_triplets(lc.n(), t)
+    SparseRows { rows: out }
 }
 
 /// Solves `Q_ff X_f = B_f − Q_fc X_c` for the free vertices (indices `c..`), in place in `x`.
@@ -425,20 +447,28 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
     let cyc = cycles(net);
     let mut problems = cyc.problems.clone();
     let edge = p.edge.unwrap_or_else(|| default_edge(net));
+    let t0 = std::time::Instant::now();
     let (mut asm, skipped) = assemble(net, &cyc, edge, &mut problems);
+    let lap = |what: &str, t: &mut std::time::Instant| {
+        tracing::debug!("surface: {what} {:.1} ms", t.elapsed().as_secs_f64() * 1e3);
+        *t = std::time::Instant::now();
+    };
+    let mut tt = t0;
+    lap("cycles + tessellation + planar weights", &mut tt);
     if asm.triangles.is_empty() {
         return Err(SurfaceError::NoPatch(problems));
     }
     let nv = asm.positions.len();
     let c = asm.constrained;
     // Rows in the energy: vertices whose ring is closed (every edge in two triangles).
-    let mut edge_count: BTreeMap<(usize, usize), i32> = BTreeMap::new();
+    let mut edges: Vec<(usize, usize)> = Vec::with_capacity(3 * asm.triangles.len());
     for t in &asm.triangles {
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
-            *edge_count.entry((a.min(b), a.max(b))).or_default() += 1;
+            edges.push((a.min(b), a.max(b)));
         }
     }
+    edges.sort_unstable();
     let mut rows = vec![true; nv];
     let mut used = vec![false; nv];
     for t in &asm.triangles {
@@ -446,11 +476,17 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
             used[i] = true;
         }
     }
-    for (&(a, b), &k) in &edge_count {
-        if k != 2 {
-            rows[a] = false;
-            rows[b] = false;
+    let mut k = 0;
+    while k < edges.len() {
+        let mut m = k + 1;
+        while m < edges.len() && edges[m] == edges[k] {
+            m += 1;
         }
+        if m - k != 2 {
+            rows[edges[k].0] = false;
+            rows[edges[k].1] = false;
+        }
+        k = m;
     }
     for i in 0..nv {
         if !used[i] {
@@ -466,8 +502,11 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
             asm.lc = cotmatrix(&asm.positions, &asm.triangles);
             asm.mass = voronoi_areas(&asm.positions, &asm.triangles);
         }
+        lap("weights", &mut tt);
         let q = normal_matrix(&asm.lc, &asm.mass, &rows);
+        lap("normal matrix", &mut tt);
         let solver = FreeSolver::with_pattern(&q, c, &mut pattern)?;
+        lap("factorisation", &mut tt);
         // 1. Biharmonic positions (the first pass, and the comparison methods) and normals.
         if pass == 0 || p.method != Method::NormalControl {
             solver.solve(&q, &zero, &mut asm.positions);
@@ -521,6 +560,7 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
             }
         }
     }
+    lap("solves", &mut tt);
     // Output: drop triangles that came out degenerate in 3D (reported; the threshold, a
     // millionth of a target triangle, keeps them non-degenerate once written in f32), and
     // vertex normals.

@@ -1,0 +1,34 @@
+//! Speed of the surfacer (tessellation, weights, both propagations, the guided fit and one
+//! reweighting pass) on the unit sphere's cube network at about 10 k and 100 k vertices.
+//! `cargo bench --bench surface`; targets in BENCHMARKS.md.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use sfs::surface::analytic::sphere_cube;
+use sfs::surface::fit::{surface, SurfaceParams};
+use std::hint::black_box;
+
+fn bench(c: &mut Criterion) {
+    sfs::sparse_llt::single_threaded();
+    for (spacing, edge) in [(0.026, 0.035), (0.0083, 0.0112)] {
+        let net = sphere_cube(spacing);
+        let p = SurfaceParams {
+            edge: Some(edge),
+            ..Default::default()
+        };
+        let s = surface(&net, &p).expect("a surface");
+        let n = s.positions.len();
+        let mut g = c.benchmark_group(format!("sphere_cube_{n}_vertices"));
+        g.sample_size(10);
+        g.bench_function("surface", |b| {
+            b.iter(|| black_box(surface(black_box(&net), &p).expect("a surface")))
+        });
+        let p0 = SurfaceParams { reweight: 0, ..p };
+        g.bench_function("surface_without_reweighting", |b| {
+            b.iter(|| black_box(surface(black_box(&net), &p0).expect("a surface")))
+        });
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
