@@ -7,7 +7,7 @@
 
 use nalgebra::Vector3;
 use sfs::surface::analytic::{
-    sphere_circles, sphere_cube, sphere_distance, torus, torus_distance, R,
+    sphere_circles, sphere_cube, sphere_distance, torus, torus_distance, torus_with_parallels, R,
 };
 use sfs::surface::cycles::NetworkSegments;
 use sfs::surface::fit::{surface, Method, SurfaceParams};
@@ -43,8 +43,14 @@ fn main() {
             Box::new(sphere_distance),
         ),
         (
-            "torus R = 4, r = 2",
+            "torus R = 4, r = 2 (parallels at top and bottom)",
             torus(5.0 * s),
+            1.35 * 5.0 * s,
+            Box::new(torus_distance),
+        ),
+        (
+            "torus R = 4, r = 2 (parallels at the equators)",
+            torus_with_parallels(5.0 * s, 0.0),
             1.35 * 5.0 * s,
             Box::new(torus_distance),
         ),

@@ -122,13 +122,18 @@ pub fn torus_point(u: f64, v: f64) -> (Vector3<f64>, Vector3<f64>) {
 
 /// The torus `R = 4, r = 2` with 4 meridians and 2 parallels (top and bottom circles).
 pub fn torus(spacing: f64) -> NetworkSegments {
-    // Meridians at u = 0, π/2, π, 3π/2; parallels at v = ±π/2 (top and bottom circles).
+    torus_with_parallels(spacing, PI / 2.0)
+}
+
+/// The torus with 4 meridians and the 2 parallels at `v0` and `v0 − π`.
+pub fn torus_with_parallels(spacing: f64, v0: f64) -> NetworkSegments {
+    // Meridians at u = 0, π/2, π, 3π/2; parallels at v0 and v0 − π.
     let mut net = NetworkSegments::default();
     let node = |i: usize, top: bool| (2 * i + usize::from(!top)) as u32;
     for i in 0..4 {
         let u = i as f64 * PI / 2.0;
-        // Meridian from the top (v = π/2) around the outside and back: v = π/2 − 2π t.
-        let f = move |t: f64| torus_point(u, PI / 2.0 - TAU * t);
+        // Meridian from the first parallel around and back: v = v0 − 2π t.
+        let f = move |t: f64| torus_point(u, v0 - TAU * t);
         curve(
             &mut net,
             i,
@@ -143,17 +148,17 @@ pub fn torus(spacing: f64) -> NetworkSegments {
         );
     }
     for (k, top) in [(4, true), (5, false)] {
-        let v: f64 = if top { PI / 2.0 } else { -PI / 2.0 };
+        let v: f64 = if top { v0 } else { v0 - PI };
         let f = move |t: f64| torus_point(TAU * t, v);
         let nodes: Vec<(f64, u32)> = (0..=4)
             .map(|i| (i as f64 / 4.0, node(i % 4, top)))
             .collect();
-        curve(&mut net, k, &f, &nodes, TAU * R, spacing);
+        curve(&mut net, k, &f, &nodes, TAU * (R + RR * v.cos()), spacing);
     }
     for i in 0..4 {
         for top in [true, false] {
             let u = i as f64 * PI / 2.0;
-            let v = if top { PI / 2.0 } else { -PI / 2.0 };
+            let v = if top { v0 } else { v0 - PI };
             net.set_normal(node(i, top), torus_point(u, v).1);
         }
     }
