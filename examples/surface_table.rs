@@ -75,6 +75,7 @@ fn main() {
                     } else {
                         0
                     },
+                    soft: None,
                 },
             );
             let ms = t0.elapsed().as_secs_f64() * 1e3;

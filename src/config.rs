@@ -50,6 +50,7 @@
 //! enabled = true                     # false: write the network only
 //! edge = 0.01                        # target edge length inside patches, m (default: h)
 //! reweight = 1                       # passes with cotangent weights from the 3D surface
+//! soft = 0.1                         # soft positional constraints of weight ω; 0: hard
 //! ```
 
 use crate::acquisition::AcquisitionConfig;
@@ -99,6 +100,7 @@ pub struct SurfaceToml {
     pub enabled: Option<bool>,
     pub edge: Option<f64>,
     pub reweight: Option<usize>,
+    pub soft: Option<f64>,
 }
 
 /// `[network]`, as written (see the module documentation).
@@ -324,6 +326,17 @@ impl Config {
                 });
             }
             p.reweight = r;
+        }
+        p.soft = crate::session::SCAN_SOFTNESS;
+        if let Some(w) = s.soft {
+            if !(w.is_finite() && (0.0..=1e6).contains(&w)) {
+                return Err(ConfigError {
+                    file: file.to_owned(),
+                    key: "surface.soft".into(),
+                    reason: format!("{w} is out of range [0, 1e6] (0: hard constraints)"),
+                });
+            }
+            p.soft = (w > 0.0).then_some(w);
         }
         Ok(Some(p))
     }

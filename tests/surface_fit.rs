@@ -125,3 +125,42 @@ fn the_same_network_gives_the_same_surface() {
     assert_eq!(a.positions, b.positions);
     assert_eq!(a.triangles, b.triangles);
 }
+
+/// The paper's Figure 7: positions and normals along the network perturbed by noise; soft
+/// constraints give a surface closer to the truth than hard ones.
+#[test]
+fn soft_constraints_beat_hard_ones_on_noisy_input() {
+    let mut net = sphere_cube(0.04);
+    let mut s = 0x9E3779B97F4A7C15u64;
+    let mut r = || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    for seg in &mut net.segments {
+        let m = seg.points.len();
+        for k in 1..m - 1 {
+            let d = nalgebra::Vector3::new(r(), r(), r()) * 0.02;
+            seg.points[k] += d;
+            seg.normals[k] =
+                (seg.normals[k] + nalgebra::Vector3::new(r(), r(), r()) * 0.05).normalize();
+        }
+    }
+    let p = SurfaceParams {
+        edge: Some(0.054),
+        ..Default::default()
+    };
+    let hard = surface(&net, &p).unwrap();
+    let mut line = format!("hard {:.5}", mean_distance(&hard));
+    let mut best = f64::MAX;
+    for w in [0.01, 0.1, 1.0] {
+        let soft = surface(&net, &SurfaceParams { soft: Some(w), ..p }).unwrap();
+        check_mesh(&soft, true);
+        let d = mean_distance(&soft);
+        line += &format!(", soft {w}: {d:.5}");
+        best = best.min(d);
+    }
+    eprintln!("{line}");
+    assert!(best < mean_distance(&hard), "{line}");
+}

@@ -17,6 +17,9 @@
 //!   propagated normals, projected onto the propagated normal (so its sign survives: the
 //!   paper's `h(v)·n*` takes the norm, which loses concave regions).
 //!
+//! - The final fit's positional constraints are hard, or soft with a weight ω
+//!   ([`SurfaceParams::soft`]: the whole system is then solved, with its own factorisation).
+//!
 //! Every vertex on the network is a sample of it (shared by the patches on both sides), so
 //! the mesh is watertight along the curves.
 
@@ -41,6 +44,12 @@ pub struct SurfaceParams {
     /// distance from 0.019 to 0.0002 (`cargo run --release --example surface_table`); more
     /// passes measured worse there.
     pub reweight: usize,
+    /// The final fit's positional constraints on the network's samples: `None` hard (they
+    /// are interpolated exactly, for exact input), `Some(ω)` soft (the paper's §4.5 for noisy
+    /// scans: `+ ω' Σ |v_s − v_s*|²`, with `ω' = ω ·` the mean diagonal of the fit's normal
+    /// matrix over the constrained vertices, so that ω is dimensionless). The propagations
+    /// stay hard.
+    pub soft: Option<f64>,
 }
 
 impl Default for SurfaceParams {
@@ -49,6 +58,7 @@ impl Default for SurfaceParams {
             edge: None,
             method: Method::NormalControl,
             reweight: 1,
+            soft: None,
         }
     }
 }
@@ -322,6 +332,54 @@ fn normal_matrix(lc: &SparseRows, m: &[f64], rows: &[bool]) -> SparseRows {
     SparseRows { rows: out }
 }
 
+/// The soft-constrained fit: `(Q + ω' D) X = B + ω' D X*` over every vertex, `D` selecting
+/// the `c` constrained ones and `X*` their data (see [`SurfaceParams::soft`]).
+fn solve_soft(
+    q: &SparseRows,
+    b: &[Vector3<f64>],
+    c: usize,
+    omega: f64,
+    data: &[Vector3<f64>],
+    x: &mut [Vector3<f64>],
+    cache: &mut Option<(Vec<(usize, usize)>, SpdPattern)>,
+) -> Result<(), SolveError> {
+    let n = q.n();
+    let diag_mean = (0..c).map(|i| q.get(i, i)).sum::<f64>() / c.max(1) as f64;
+    let w = omega * diag_mean;
+    let mut entries = Vec::new();
+    let mut vals = Vec::new();
+    for i in 0..n {
+        let mut has_diag = false;
+        for &(j, v) in &q.rows[i] {
+            if j <= i {
+                entries.push((i, j));
+                vals.push(if i == j && i < c { v + w } else { v });
+                has_diag |= i == j;
+            }
+        }
+        if !has_diag {
+            entries.push((i, i));
+            vals.push(if i < c { w } else { 0.0 });
+        }
+    }
+    if !matches!(cache, Some((e, _)) if *e == entries) {
+        let pat = SpdPattern::new(n, &entries)?;
+        *cache = Some((entries, pat));
+    }
+    let f = cache.as_ref().expect("set above").1.factor(&vals)?;
+    let mut rhs: Vec<[f64; 3]> = (0..n)
+        .map(|i| {
+            let r = if i < c { b[i] + data[i] * w } else { b[i] };
+            [r.x, r.y, r.z]
+        })
+        .collect();
+    f.solve(&mut rhs);
+    for (xi, r) in x.iter_mut().zip(&rhs) {
+        *xi = Vector3::new(r[0], r[1], r[2]);
+    }
+    Ok(())
+}
+
 /// Solves `Q_ff X_f = B_f − Q_fc X_c` for the free vertices (indices `c..`), in place in `x`.
 struct FreeSolver {
     c: usize,
@@ -496,6 +554,8 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
     let zero = vec![Vector3::zeros(); nv];
     let mut nstar = asm.normals.clone();
     let mut pattern: Option<(Vec<(usize, usize)>, SpdPattern)> = None;
+    let mut soft_pattern: Option<(Vec<(usize, usize)>, SpdPattern)> = None;
+    let data: Vec<Vector3<f64>> = asm.positions[..c].to_vec();
     for pass in 0..=p.reweight {
         if pass > 0 {
             // The weights from the surface just computed instead of the planar triangulations.
@@ -556,7 +616,18 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
                         b[i] += tk * w;
                     }
                 }
-                solver.solve(&q, &b, &mut asm.positions);
+                match p.soft {
+                    None => solver.solve(&q, &b, &mut asm.positions),
+                    Some(omega) => solve_soft(
+                        &q,
+                        &b,
+                        c,
+                        omega,
+                        &data,
+                        &mut asm.positions,
+                        &mut soft_pattern,
+                    )?,
+                }
             }
         }
     }
