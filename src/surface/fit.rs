@@ -502,6 +502,40 @@ pub const EDGE_PER_DIAGONAL: f64 = 1.0 / 120.0;
 
 /// Surfaces the network (see the module docs). Patches that fail are reported and left open.
 pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, SurfaceError> {
+    Surfacer::new().run(net, p)
+}
+
+type PatternCache = Option<(Vec<(usize, usize)>, SpdPattern)>;
+
+/// Keeps the symbolic factorisations between surfaces (as the daemon runs it after every
+/// curve): when the mesh's pattern is unchanged only the numeric factorisations are redone.
+#[derive(Debug, Default)]
+pub struct Surfacer {
+    pattern: PatternCache,
+    soft_pattern: PatternCache,
+}
+
+impl Surfacer {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Surfaces the network (see the module docs and [`surface`]).
+    pub fn run(
+        &mut self,
+        net: &NetworkSegments,
+        p: &SurfaceParams,
+    ) -> Result<Surfaced, SurfaceError> {
+        surface_with(net, p, &mut self.pattern, &mut self.soft_pattern)
+    }
+}
+
+fn surface_with(
+    net: &NetworkSegments,
+    p: &SurfaceParams,
+    pattern: &mut PatternCache,
+    soft_pattern: &mut PatternCache,
+) -> Result<Surfaced, SurfaceError> {
     let cyc = cycles(net);
     let mut problems = cyc.problems.clone();
     let edge = p.edge.unwrap_or_else(|| default_edge(net));
@@ -553,8 +587,6 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
     }
     let zero = vec![Vector3::zeros(); nv];
     let mut nstar = asm.normals.clone();
-    let mut pattern: Option<(Vec<(usize, usize)>, SpdPattern)> = None;
-    let mut soft_pattern: Option<(Vec<(usize, usize)>, SpdPattern)> = None;
     let data: Vec<Vector3<f64>> = asm.positions[..c].to_vec();
     for pass in 0..=p.reweight {
         if pass > 0 {
@@ -565,7 +597,7 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
         lap("weights", &mut tt);
         let q = normal_matrix(&asm.lc, &asm.mass, &rows);
         lap("normal matrix", &mut tt);
-        let solver = FreeSolver::with_pattern(&q, c, &mut pattern)?;
+        let solver = FreeSolver::with_pattern(&q, c, pattern)?;
         lap("factorisation", &mut tt);
         // 1. Biharmonic positions (the first pass, and the comparison methods) and normals.
         if pass == 0 || p.method != Method::NormalControl {
@@ -618,15 +650,9 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
                 }
                 match p.soft {
                     None => solver.solve(&q, &b, &mut asm.positions),
-                    Some(omega) => solve_soft(
-                        &q,
-                        &b,
-                        c,
-                        omega,
-                        &data,
-                        &mut asm.positions,
-                        &mut soft_pattern,
-                    )?,
+                    Some(omega) => {
+                        solve_soft(&q, &b, c, omega, &data, &mut asm.positions, soft_pattern)?
+                    }
                 }
             }
         }
