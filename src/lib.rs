@@ -15,7 +15,8 @@
 //! - [`network`]: tagged curves → filtered frames (pre-filter, regression on SO(3)) →
 //!   positions of the network (Poisson), with the loop-closure test of the tags;
 //!   [`sparse_llt`]: the sparse Cholesky they share (symbolic factorisation reused).
-//! - [`surface`]: network → surface (cycles from normals; tessellation and the fit to come).
+//! - [`surface`]: network → surface (cycles from normals, tessellation per cycle, cotangent
+//!   Laplacian, biharmonic propagation, the mean-curvature-guided fit).
 //! - [`gltf_out`]: network (and surface) → `network.glb`; [`eval`]: scoring against a truth.
 //! - [`session`]: one run of the pipeline, source → decoder → acquisition → outputs.
 //! - [`report`]: `report.json`; [`atomic`]: atomic replacement of output files.

@@ -1,11 +1,14 @@
-//! Surfacing the curve network with normal control (Stanko et al. 2016).
+//! Surfacing the curve network with normal control (Stanko et al. 2016), in the order the data
+//! flows:
 //!
-//! - [`cotmatrix`]: the cotangent Laplacian and mixed Voronoi areas.
 //! - [`cycles`]: the faces of the network, traced from the node normals, and the checks of
 //!   the cell complex they form.
-//! - [`tessellate`]: each cycle triangulated in its plane (constrained Delaunay, spade).
-//!
-//! The biharmonic propagation and the mean-curvature guided fit follow in this order.
+//! - [`tessellate`]: each cycle triangulated in its plane (constrained Delaunay, spade), with
+//!   the boundary developed when the projection folds or shrinks it.
+//! - [`cotmatrix`]: the cotangent Laplacian and mixed Voronoi areas.
+//! - [`fit`]: biharmonic propagation of positions and normals, the mean-curvature guide and
+//!   the fit (hard or soft constraints), one factorisation shared, reweighting from 3D.
+//! - [`analytic`]: the paper's test networks with exact normals (tests, benches, Table 1).
 
 pub mod analytic;
 pub mod cotmatrix;
