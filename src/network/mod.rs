@@ -1,12 +1,13 @@
 //! Curve-network reconstruction: tagged curves → filtered frames → positions.
 //!
-//! - [`prefilter`]: per-curve outlier removal, duplicates, uniform Gaussian resampling.
+//! - [`prefilter`](mod@prefilter): per-curve outlier removal, duplicates, uniform Gaussian resampling.
 //! - [`closure`]: node tags the network's loops refuse (a mistyped or half-lost index) are
 //!   detached from their node.
 //! - [`regression`]: the frames regressed on SO(3)ᴺ over the whole network.
 //! - [`poisson`]: positions of the whole network from its tangents, nodes shared.
 //!
-//! [`reconstruct`] runs them over a scan, leaving out (with a warning) what cannot be used.
+//! [`Reconstructor::run`] runs them over a scan, leaving out (with a warning) what cannot be
+//! used, and keeps the symbolic factorisations between runs.
 
 pub mod closure;
 pub mod poisson;
