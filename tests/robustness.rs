@@ -133,3 +133,65 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 40, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// Damaged networks (noisy points and normals, segments dropped, node normals flipped or
+    /// missing, points collapsed): the surfacer never panics, and whatever it returns is finite,
+    /// non-degenerate and writes a valid glb.
+    #[test]
+    fn damaged_networks_surface_without_panics(
+        noise in 0.0f64..0.2,
+        normal_noise in 0.0f64..1.0,
+        drop in prop::collection::vec(prop::bool::weighted(0.2), 12),
+        flip in prop::collection::vec(prop::bool::weighted(0.15), 6),
+        collapse in 0usize..4,
+        seed in any::<u64>(),
+    ) {
+        use sfs::surface::fit::{surface, SurfaceParams};
+        let mut net = sfs::surface::analytic::sphere_circles(0.15);
+        let mut s = seed | 1;
+        let mut r = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut k = 0;
+        net.segments.retain(|_| {
+            k += 1;
+            !drop[k - 1]
+        });
+        for seg in &mut net.segments {
+            let m = seg.points.len();
+            for i in 1..m - 1 {
+                seg.points[i] += nalgebra::Vector3::new(r(), r(), r()) * noise;
+                seg.normals[i] = (seg.normals[i] + nalgebra::Vector3::new(r(), r(), r()) * normal_noise)
+                    .try_normalize(1e-9)
+                    .unwrap_or(seg.normals[i]);
+            }
+            for i in 1..(1 + collapse).min(m - 1) {
+                seg.points[i] = seg.points[i - 1];
+            }
+        }
+        for (n, f) in flip.iter().enumerate() {
+            if *f {
+                if n % 2 == 0 {
+                    if let Some(v) = net.normals.get_mut(&(n as u32)) { *v = -*v; }
+                } else {
+                    net.normals.remove(&(n as u32));
+                }
+            }
+        }
+        for soft in [None, Some(0.1)] {
+            let res = surface(&net, &SurfaceParams { soft, ..Default::default() });
+            if let Ok(out) = res {
+                prop_assert!(out.positions.iter().all(|p| p.iter().all(|x| x.is_finite())));
+                prop_assert!(out.normals.iter().all(|n| (n.norm() - 1.0).abs() < 1e-6));
+                let glb = sfs::gltf_out::network_glb(&[], &Default::default(), Some(&out.mesh()));
+                prop_assert!(glb.is_ok(), "{:?}", glb.err());
+            }
+        }
+    }
+}

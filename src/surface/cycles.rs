@@ -87,6 +87,9 @@ pub struct NetworkSegments {
 impl NetworkSegments {
     /// Adds the segment of curve `curve` from node `a` to node `b` through `points` with
     /// surface `normals` (one per point).
+    ///
+    /// Interior points that coincide with the point before them (or with the end) are dropped,
+    /// with their normals: a patch boundary needs distinct points.
     pub fn push(
         &mut self,
         curve: usize,
@@ -96,6 +99,7 @@ impl NetworkSegments {
         normals: Vec<Vector3<f64>>,
     ) {
         let k = self.segments.iter().filter(|s| s.curve == curve).count();
+        let (points, normals) = distinct(points, normals);
         self.segments.push(Segment {
             curve,
             k,
@@ -105,6 +109,21 @@ impl NetworkSegments {
             points,
             normals,
         });
+    }
+
+    /// A copy whose segments have distinct consecutive points (see [`push`](Self::push)),
+    /// whatever was written into the public fields.
+    pub fn cleaned(&self) -> Self {
+        let mut out = self.clone();
+        for s in &mut out.segments {
+            let (p, n) = distinct(
+                std::mem::take(&mut s.points),
+                std::mem::take(&mut s.normals),
+            );
+            s.points = p;
+            s.normals = n;
+        }
+        out
     }
 
     pub fn set_normal(&mut self, node: u32, n: Vector3<f64>) {
@@ -140,6 +159,32 @@ impl NetworkSegments {
         }
         net
     }
+}
+
+/// Drops interior points within a billionth of the segment's length of the previous kept
+/// point or of the last point.
+fn distinct(
+    points: Vec<Vector3<f64>>,
+    normals: Vec<Vector3<f64>>,
+) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
+    let n = points.len();
+    if n <= 2 || normals.len() != n {
+        return (points, normals);
+    }
+    let len: f64 = points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    let eps = 1e-9 * len.max(f64::MIN_POSITIVE);
+    let last = points[n - 1];
+    let (mut p, mut q) = (vec![points[0]], vec![normals[0]]);
+    for i in 1..n - 1 {
+        let prev = *p.last().expect("first kept");
+        if (points[i] - prev).norm() > eps && (points[i] - last).norm() > eps {
+            p.push(points[i]);
+            q.push(normals[i]);
+        }
+    }
+    p.push(last);
+    q.push(normals[n - 1]);
+    (p, q)
 }
 
 /// A segment traversed forwards (`a → b`) or backwards.
@@ -223,11 +268,24 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
     // Rotation system: at each node, the half-edges leaving it, sorted counter-clockwise
     // around the node normal.
     let mut at: BTreeMap<u32, Vec<(f64, HalfEdge)>> = BTreeMap::new();
+    // A node without a normal takes the mean of its segments' end normals.
+    let mut fallback: BTreeMap<u32, Vector3<f64>> = BTreeMap::new();
+    for s in &net.segments {
+        for (node, n) in [(s.a, s.normals.first()), (s.b, s.normals.last())] {
+            if let (false, Some(n)) = (net.normals.contains_key(&node), n) {
+                *fallback.entry(node).or_insert_with(Vector3::zeros) += n;
+            }
+        }
+    }
+    let fallback: BTreeMap<u32, Vector3<f64>> = fallback
+        .into_iter()
+        .filter_map(|(k, v)| v.try_normalize(1e-12).map(|u| (k, u)))
+        .collect();
     for (si, s) in net.segments.iter().enumerate() {
         for (forward, node) in [(true, s.a), (false, s.b)] {
-            let Some(n) = net.normals.get(&node) else {
+            let Some(n) = net.normals.get(&node).or_else(|| fallback.get(&node)) else {
                 out.problems.push(format!(
-                    "node {node} (curve {}) has no normal: its segments are left out",
+                    "node {node} (curve {}) has no normal, nor have its curves there: its segments are left out",
                     s.curve
                 ));
                 continue;

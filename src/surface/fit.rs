@@ -536,6 +536,7 @@ fn surface_with(
     pattern: &mut PatternCache,
     soft_pattern: &mut PatternCache,
 ) -> Result<Surfaced, SurfaceError> {
+    let net = &net.cleaned();
     let cyc = cycles(net);
     let mut problems = cyc.problems.clone();
     let edge = p.edge.unwrap_or_else(|| default_edge(net));
