@@ -516,41 +516,13 @@ fn boundary_normal(net: &NetworkSegments, f: &Cycle) -> Vector3<f64> {
 mod tests {
     use super::*;
 
-    /// The network of a cube's 12 edges pushed onto the unit sphere (arcs of great circles),
-    /// normals radial: six four-sided patches, χ = 8 − 12 + 6 = 2.
+    /// The network of a cube's 12 edges on the unit sphere (great-circle arcs), normals
+    /// radial: six four-sided patches, χ = 8 − 12 + 6 = 2. `boundary_top` tags the four edges
+    /// between the corners with z > 0 (nodes 4–7) as boundary.
     fn sphere_cube(boundary_top: bool) -> NetworkSegments {
-        let corners: Vec<Vector3<f64>> = (0..8)
-            .map(|i| {
-                Vector3::new(
-                    if i & 1 == 0 { -1.0 } else { 1.0 },
-                    if i & 2 == 0 { -1.0 } else { 1.0 },
-                    if i & 4 == 0 { -1.0 } else { 1.0 },
-                )
-                .normalize()
-            })
-            .collect();
-        let mut net = NetworkSegments::default();
-        let mut curve = 0;
-        for a in 0..8u32 {
-            for bit in [1u32, 2, 4] {
-                let b = a | bit;
-                if b == a {
-                    continue;
-                }
-                let pts: Vec<Vector3<f64>> = (0..=20)
-                    .map(|t| {
-                        let t = t as f64 / 20.0;
-                        (corners[a as usize] * (1.0 - t) + corners[b as usize] * t).normalize()
-                    })
-                    .collect();
-                let top = a & 4 != 0 && b & 4 != 0;
-                let normals = pts.clone();
-                net.push(curve, boundary_top && top, (a, b), pts, normals);
-                curve += 1;
-            }
-        }
-        for (i, c) in corners.iter().enumerate() {
-            net.set_normal(i as u32, *c);
+        let mut net = crate::surface::analytic::sphere_cube(0.05);
+        for s in &mut net.segments {
+            s.boundary = boundary_top && s.a >= 4 && s.b >= 4;
         }
         net
     }
