@@ -4,7 +4,7 @@
 //! `cargo bench --bench reconstruction`; targets in BENCHMARKS.md.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use device_protocol::{Decoder, DeviceKind};
+use device_protocol::DeviceKind;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
 use sfs::network::poisson::PoissonSolver;
 use sfs::network::prefilter::{prefilter, PrefilterParams, UniformCurve};
@@ -17,12 +17,7 @@ fn scan(name: &str) -> Scan {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
     let s = scene::load(&scene::find(name, &dir)).expect("scene");
     let sim = simulate::run(&s, DeviceKind::Morphorider, Profile::Default, 1);
-    let mut dec = Decoder::new();
-    let mut acq = Acquisition::new(AcquisitionConfig::default());
-    for e in dec.feed(&sim.bytes) {
-        acq.event(&e);
-    }
-    acq.finish()
+    Acquisition::scan_bytes(&sim.bytes, AcquisitionConfig::default())
 }
 
 fn uniform(scan: &Scan, p: &PrefilterParams) -> Vec<UniformCurve> {

@@ -3,7 +3,7 @@
 //!
 //! `cargo run --release --example orientation_study -- SCENE [phone|morphorider] [default|field] [SEED]`
 
-use device_protocol::{Decoder, DeviceKind};
+use device_protocol::DeviceKind;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
 use sfs::simulate::{self, scene, Profile};
@@ -24,7 +24,6 @@ fn main() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
     let s = scene::load(&scene::find(name, &dir)).expect("scene");
     let sim = simulate::run(&s, device, profile, seed);
-    let mut dec = Decoder::new();
     let mut cfg = AcquisitionConfig::default();
     // Parameter studies: SFS_TAU_MAG, SFS_TAU_BIAS override the phone filter's defaults.
     let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
@@ -40,13 +39,7 @@ fn main() {
     if let Some(v) = env("SFS_TAU_BIAS") {
         cfg.ahrs.tau_bias = v;
     }
-    let mut acq = Acquisition::new(cfg);
-    for chunk in sim.bytes.chunks(4096) {
-        for e in dec.feed(chunk) {
-            acq.event(&e);
-        }
-    }
-    let scan = acq.finish();
+    let scan = Acquisition::scan_bytes(&sim.bytes, cfg);
     let truth = &sim.samples;
     println!("curve  samples  total(median/p90)  tilt(median)  heading(median, mean signed)");
     for c in &scan.curves {

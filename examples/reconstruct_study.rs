@@ -2,7 +2,6 @@
 //! with the given settings and scores it against the truth.
 //! `cargo run --release --example reconstruct_study -- CAPTURE TRUTH [h sigma bend stretch xi]`
 //! (`bend` < 0: pre-filter only).
-use device_protocol::Decoder;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
 use sfs::network::{NetworkParams, Reconstructor};
 fn main() {
@@ -11,7 +10,6 @@ fn main() {
     let bytes = std::fs::read(&a[1]).expect("capture");
     let truth = sfs::simulate::truth::Truth::load(std::path::Path::new(&a[2])).expect("truth");
     let num = |i: usize, d: f64| a.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
-    let mut dec = Decoder::new();
     // SFS_MOUNT="ax,ay,az,deg": a known mounting rotation for the calibration.
     let mut cfg = AcquisitionConfig::default();
     if let Ok(m) = std::env::var("SFS_MOUNT") {
@@ -19,11 +17,7 @@ fn main() {
         let axis = nalgebra::Unit::new_normalize(nalgebra::Vector3::new(v[0], v[1], v[2]));
         cfg.calibration.mounting = nalgebra::Rotation3::from_axis_angle(&axis, v[3].to_radians());
     }
-    let mut acq = Acquisition::new(cfg);
-    for e in dec.feed(&bytes) {
-        acq.event(&e);
-    }
-    let scan = acq.finish();
+    let scan = Acquisition::scan_bytes(&bytes, cfg);
     let mut p = NetworkParams::default();
     p.prefilter.h = num(3, p.prefilter.h);
     p.prefilter.sigma = num(4, p.prefilter.sigma);

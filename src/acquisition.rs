@@ -169,6 +169,17 @@ pub struct Acquisition {
 }
 
 impl Acquisition {
+    /// The scan of a whole capture held in memory (decoder and acquisition in one call; for
+    /// tests, studies and benchmarks; sessions stream through [`event`](Self::event)).
+    pub fn scan_bytes(bytes: &[u8], cfg: AcquisitionConfig) -> Scan {
+        let mut dec = device_protocol::Decoder::new();
+        let mut acq = Acquisition::new(cfg);
+        for e in dec.feed(bytes) {
+            acq.event(&e);
+        }
+        acq.finish()
+    }
+
     pub fn new(cfg: AcquisitionConfig) -> Self {
         let ahrs = Ahrs::new(cfg.ahrs);
         Acquisition {

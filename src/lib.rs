@@ -14,7 +14,8 @@
 //! - [`keypad`], [`acquisition`], [`scan`]: orientations and key presses → tagged curves.
 //! - [`network`]: tagged curves → filtered frames (pre-filter, regression on SO(3)) →
 //!   positions of the network (Poisson), with the loop-closure test of the tags;
-//!   [`sparse_llt`]: the sparse Cholesky they share (symbolic factorisation reused).
+//!   [`sparse_llt`]: the sparse Cholesky they share (symbolic factorisation reused);
+//!   [`union_find`]: connected components.
 //! - [`surface`]: network → surface (cycles from normals, tessellation per cycle, cotangent
 //!   Laplacian, biharmonic propagation, the mean-curvature-guided fit).
 //! - [`gltf_out`]: network (and surface) → `network.glb`; [`eval`]: scoring against a truth.
@@ -46,6 +47,7 @@ pub mod simulate;
 pub mod source;
 pub mod sparse_llt;
 pub mod surface;
+pub mod union_find;
 
 /// Exit codes of the `sfs` binary (a stated policy, also in the README).
 pub mod exit {

@@ -2,7 +2,6 @@
 //! Morphorider while still and while rolling, tag distances, the phone's fusion and segment
 //! rescaling, keypad corrections, and a device reboot mid-session.
 
-use device_protocol::Decoder;
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
 use sfs::orientation::flags;
@@ -18,14 +17,7 @@ fn dome() -> Vec<CurveSpec> {
 }
 
 fn acquire(bytes: &[u8], cfg: AcquisitionConfig) -> Scan {
-    let mut dec = Decoder::new();
-    let mut acq = Acquisition::new(cfg);
-    for chunk in bytes.chunks(4096) {
-        for e in dec.feed(chunk) {
-            acq.event(&e);
-        }
-    }
-    acq.finish()
+    Acquisition::scan_bytes(bytes, cfg)
 }
 
 /// Index of the truth sample at scan time `t` (session time starts at the first sample).

@@ -1,7 +1,7 @@
 //! The reconstruction of simulated scans, end to end through the bytes (simulator → decoder →
 //! acquisition → reconstruction → `eval`), for the failures field sessions bring.
 
-use device_protocol::{Decoder, DeviceKind};
+use device_protocol::DeviceKind;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
 use sfs::network::{NetworkParams, Reconstructor};
 use sfs::scan::Scan;
@@ -9,14 +9,7 @@ use sfs::simulate::{self, scene, Profile};
 use std::path::Path;
 
 fn decode(bytes: &[u8]) -> Scan {
-    let mut dec = Decoder::new();
-    let mut acq = Acquisition::new(AcquisitionConfig::default());
-    for chunk in bytes.chunks(4096) {
-        for e in dec.feed(chunk) {
-            acq.event(&e);
-        }
-    }
-    acq.finish()
+    Acquisition::scan_bytes(bytes, AcquisitionConfig::default())
 }
 
 /// Issue 5: in the seed-1 phone scan of the lilium, the link lost the leading digit of node

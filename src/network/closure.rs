@@ -141,25 +141,10 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
         return None;
     }
     // Components and gauges.
-    let mut parent: Vec<usize> = (0..n).collect();
-    fn find(p: &mut [usize], mut x: usize) -> usize {
-        while p[x] != x {
-            p[x] = p[p[x]];
-            x = p[x];
-        }
-        x
-    }
-    let mut links = 0usize;
-    for s in &segs {
-        let (ra, rb) = (find(&mut parent, s.a), find(&mut parent, s.b));
-        if ra != rb {
-            parent[ra.max(rb)] = ra.min(rb);
-            links += 1;
-        }
-    }
-    let components = n - links;
-    let loops = segs.iter().filter(|s| s.a != s.b).count() + components - n
-        + segs.iter().filter(|s| s.a == s.b).count();
+    let mut sets = crate::union_find::UnionFind::new(n);
+    let links = segs.iter().filter(|s| sets.union(s.a, s.b)).count();
+    // Independent loops: E − V + C, with C = V − links.
+    let loops = segs.len() - links;
     if loops == 0 {
         return None; // a tree of segments: nothing to check against
     }
@@ -180,10 +165,8 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
             rhs[s.a][d] -= s.c * v;
         }
     }
-    for (x, v) in vals.iter_mut().enumerate().take(n) {
-        if find(&mut parent, x) == x {
-            *v += mean_c;
-        }
+    for root in sets.roots() {
+        vals[root] += mean_c;
     }
     let f = SpdPattern::new(n, &entries).ok()?.factor(&vals).ok()?;
     f.solve(&mut rhs);

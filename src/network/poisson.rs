@@ -119,26 +119,12 @@ impl PoissonSolver {
             }
         }
         // Components (union-find) and a gauge per component.
-        let mut parent: Vec<usize> = (0..n).collect();
-        fn find(p: &mut [usize], mut x: usize) -> usize {
-            while p[x] != x {
-                p[x] = p[p[x]];
-                x = p[x];
-            }
-            x
-        }
+        let mut sets = crate::union_find::UnionFind::new(n);
         for e in &edges {
-            let (ra, rb) = (find(&mut parent, e.a), find(&mut parent, e.b));
-            if ra != rb {
-                parent[ra.max(rb)] = ra.min(rb);
-            }
+            sets.union(e.a, e.b);
         }
-        let mut gauges = Vec::new();
-        for x in 0..n {
-            if find(&mut parent, x) == x {
-                gauges.push(x); // the lowest unknown of its component (a node if it has one)
-            }
-        }
+        // The lowest unknown of each component (a node if it has one).
+        let gauges: Vec<usize> = sets.roots().collect();
         let mean_w = edges.iter().map(|e| e.w).sum::<f64>() / edges.len().max(1) as f64;
         // Pattern: diagonal, then one entry per edge (duplicates summed).
         let mut entries: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();

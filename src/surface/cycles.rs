@@ -383,27 +383,15 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
     // Components (over nodes, by segments).
     let nodes: Vec<u32> = at.keys().copied().collect();
     let idx: BTreeMap<u32, usize> = nodes.iter().enumerate().map(|(i, &n)| (n, i)).collect();
-    let mut parent: Vec<usize> = (0..nodes.len()).collect();
-    fn find(p: &mut [usize], mut x: usize) -> usize {
-        while p[x] != x {
-            p[x] = p[p[x]];
-            x = p[x];
-        }
-        x
-    }
+    let mut sets = crate::union_find::UnionFind::new(nodes.len());
     let mut edges_used = 0i64;
     for s in &net.segments {
         if let (Some(&a), Some(&b)) = (idx.get(&s.a), idx.get(&s.b)) {
             edges_used += 1;
-            let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
-            if ra != rb {
-                parent[ra.max(rb)] = ra.min(rb);
-            }
+            sets.union(a, b);
         }
     }
-    out.components = (0..nodes.len())
-        .filter(|&i| find(&mut parent, i) == i)
-        .count();
+    out.components = sets.roots().count();
     out.euler = nodes.len() as i64 - edges_used + (faces.len() + out.rejected.len()) as i64;
     if out.euler > 2 * out.components as i64 || out.euler % 2 != 0 {
         out.problems.push(format!(
@@ -492,7 +480,7 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
 }
 
 /// Vector area of a closed polygon (half the sum of cross products about its centroid).
-fn vector_area(poly: &[Vector3<f64>]) -> Vector3<f64> {
+pub(crate) fn vector_area(poly: &[Vector3<f64>]) -> Vector3<f64> {
     if poly.is_empty() {
         return Vector3::zeros();
     }

@@ -119,10 +119,7 @@ pub fn tessellate(
         return Err(TessellateError::Coincident(i, (i + 1) % n));
     }
     // The plane: the average normal (the paper's), else the polygon's vector area.
-    let mut area = Vector3::zeros();
-    for i in 0..n {
-        area += (boundary[i] - c).cross(&(boundary[(i + 1) % n] - c));
-    }
+    let area = super::cycles::vector_area(boundary);
     let nrm = normals
         .iter()
         .sum::<Vector3<f64>>()
