@@ -12,10 +12,14 @@
 //! assert!((b[0][0] - 1.0 / 11.0).abs() < 1e-12 && (b[1][0] - 7.0 / 11.0).abs() < 1e-12);
 //! ```
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky,
+    SymmetricOrdering,
+};
 use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
-use faer::{Mat, Side};
+use faer::{Conj, MatMut, Side};
+use std::sync::Arc;
 
 /// Why a system cannot be solved.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -34,15 +38,17 @@ pub struct SpdPattern {
     entries: usize,
     symbolic: SymbolicSparseColMat<usize>,
     argsort: Argsort<usize>,
-    llt: SymbolicLlt<usize>,
+    chol: Arc<SymbolicCholesky<usize>>,
 }
 
 impl std::fmt::Debug for SpdPattern {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "SpdPattern {{ n: {}, entries: {} }}",
-            self.n, self.entries
+            "SpdPattern {{ n: {}, entries: {}, fill: {} }}",
+            self.n,
+            self.entries,
+            self.fill()
         )
     }
 }
@@ -50,12 +56,15 @@ impl std::fmt::Debug for SpdPattern {
 /// A numeric factorisation, ready to solve.
 pub struct SpdFactor {
     n: usize,
-    llt: Llt<usize, f64>,
+    chol: Arc<SymbolicCholesky<usize>>,
+    values: Vec<f64>,
 }
 
 impl SpdPattern {
     /// `entries` are `(row, col)` with `row ≥ col` (the lower triangle of an n×n matrix);
-    /// repeated entries are summed when the values are given.
+    /// repeated entries are summed when the values are given. Ordered by approximate minimum
+    /// degree (a level-structure nested dissection measured 30 % more fill on the surfacer's
+    /// systems).
     pub fn new(n: usize, entries: &[(usize, usize)]) -> Result<Self, SolveError> {
         if let Some(&(row, col)) = entries.iter().find(|&&(r, c)| r >= n || c > r) {
             return Err(SolveError::BadEntry { row, col, n });
@@ -64,14 +73,19 @@ impl SpdPattern {
             entries.iter().map(|&(r, c)| Pair::new(r, c)).collect();
         let (symbolic, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
             .map_err(|e| SolveError::Faer(format!("{e:?}")))?;
-        let llt = SymbolicLlt::try_new(symbolic.as_ref(), Side::Lower)
-            .map_err(|e| SolveError::Faer(format!("{e:?}")))?;
+        let chol = factorize_symbolic_cholesky(
+            symbolic.as_ref(),
+            Side::Lower,
+            SymmetricOrdering::Amd,
+            CholeskySymbolicParams::default(),
+        )
+        .map_err(|e| SolveError::Faer(format!("{e:?}")))?;
         Ok(SpdPattern {
             n,
             entries: entries.len(),
             symbolic,
             argsort,
-            llt,
+            chol: Arc::new(chol),
         })
     }
 
@@ -80,21 +94,42 @@ impl SpdPattern {
         self.n
     }
 
+    /// Stored values of the Cholesky factor (its fill, for the logs and benchmarks).
+    pub fn fill(&self) -> usize {
+        self.chol.len_val()
+    }
+
     /// Numeric factorisation with `values[k]` for `entries[k]` (reusing the symbolic one).
     pub fn factor(&self, values: &[f64]) -> Result<SpdFactor, SolveError> {
         assert_eq!(values.len(), self.entries, "one value per pattern entry");
         let a = SparseColMat::new_from_argsort(self.symbolic.clone(), &self.argsort, values)
             .map_err(|e| SolveError::Faer(format!("{e:?}")))?;
-        let llt =
-            Llt::try_new_with_symbolic(self.llt.clone(), a.as_ref(), Side::Lower).map_err(|e| {
-                match e {
-                    faer::sparse::linalg::LltError::Numeric(
-                        faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index },
-                    ) => SolveError::NonPositivePivot { index },
-                    other => SolveError::Faer(format!("{other:?}")),
-                }
+        let par = faer::get_global_parallelism();
+        let mut l = vec![0.0; self.chol.len_val()];
+        let mut mem = MemBuffer::try_new(
+            self.chol
+                .factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+        )
+        .map_err(|e| SolveError::Faer(format!("{e:?}")))?;
+        self.chol
+            .factorize_numeric_llt::<f64>(
+                &mut l,
+                a.as_ref(),
+                Side::Lower,
+                Default::default(),
+                par,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .map_err(|e| {
+                let faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index } = e;
+                SolveError::NonPositivePivot { index }
             })?;
-        Ok(SpdFactor { n: self.n, llt })
+        Ok(SpdFactor {
+            n: self.n,
+            chol: self.chol.clone(),
+            values: l,
+        })
     }
 }
 
@@ -102,13 +137,14 @@ impl SpdFactor {
     /// Solves in place for `K` right-hand sides given row by row (`b[i][k]`).
     pub fn solve<const K: usize>(&self, b: &mut [[f64; K]]) {
         assert_eq!(b.len(), self.n);
-        let mut m = Mat::<f64>::from_fn(self.n, K, |i, k| b[i][k]);
-        self.llt.solve_in_place(m.as_mut());
-        for (i, row) in b.iter_mut().enumerate() {
-            for (k, x) in row.iter_mut().enumerate() {
-                *x = m[(i, k)];
-            }
-        }
+        // Rows of K values are a row-major n×K matrix: its transpose view is column-major
+        // K×n, so the n×K view has row stride K.
+        let flat: &mut [f64] = b.as_flattened_mut();
+        let rhs = MatMut::from_row_major_slice_mut(flat, self.n, K);
+        let par = faer::get_global_parallelism();
+        let llt = LltRef::new(&self.chol, &self.values);
+        let mut mem = MemBuffer::new(self.chol.solve_in_place_scratch::<f64>(K, par));
+        llt.solve_in_place_with_conj(Conj::No, rhs, par, MemStack::new(&mut mem));
     }
 }
 
