@@ -211,26 +211,46 @@ fn assemble(
             inner[si] + k - 1
         }
     };
+    // Each patch's boundary (global ids, points, normals), then the patches tessellated with
+    // their planar weights on worker threads, merged in patch order (deterministic).
+    type Loop = (Vec<usize>, Vec<Vector3<f64>>, Vec<Vector3<f64>>);
+    let loops: Vec<Loop> = cyc
+        .patches
+        .iter()
+        .map(|cyc| {
+            let (mut ids, mut poly, mut pn) = (Vec::new(), Vec::new(), Vec::new());
+            for h in &cyc.edges {
+                let s = &net.segments[h.segment];
+                let m = s.points.len();
+                for j in 0..m - 1 {
+                    let k = if h.forward { j } else { m - 1 - j };
+                    let g = id(h.segment, k);
+                    ids.push(g);
+                    poly.push(s.points[k]);
+                    pn.push(normals[g]);
+                }
+            }
+            (ids, poly, pn)
+        })
+        .collect();
+    let meshes = parallel_map(&loops, |(_, poly, pn)| {
+        tessellate(poly, pn, edge).map(|mesh| {
+            let uv: Vec<Vector3<f64>> = mesh
+                .uv
+                .iter()
+                .map(|p| Vector3::new(p[0], p[1], 0.0))
+                .collect();
+            let l = cotmatrix(&uv, &mesh.triangles);
+            let areas = voronoi_areas(&uv, &mesh.triangles);
+            (mesh, l, areas)
+        })
+    });
     let mut triangles = Vec::new();
     let mut trip = Vec::new();
     let mut mass = vec![0.0; constrained];
     let mut skipped = 0;
-    for cyc in &cyc.patches {
-        let mut ids = Vec::new();
-        let mut poly = Vec::new();
-        let mut pn = Vec::new();
-        for h in &cyc.edges {
-            let s = &net.segments[h.segment];
-            let m = s.points.len();
-            for j in 0..m - 1 {
-                let k = if h.forward { j } else { m - 1 - j };
-                let g = id(h.segment, k);
-                ids.push(g);
-                poly.push(s.points[k]);
-                pn.push(normals[g]);
-            }
-        }
-        let mesh = match tessellate(&poly, &pn, edge) {
+    for ((cyc, (ids, _, _)), result) in cyc.patches.iter().zip(&loops).zip(meshes) {
+        let (mesh, l, areas) = match result {
             Ok(m) => m,
             Err(e) => {
                 problems.push(format!(
@@ -263,18 +283,12 @@ fn assemble(
             normals.push(Vector3::zeros());
             mass.push(0.0);
         }
-        let uv: Vec<Vector3<f64>> = mesh
-            .uv
-            .iter()
-            .map(|p| Vector3::new(p[0], p[1], 0.0))
-            .collect();
-        let l = cotmatrix(&uv, &mesh.triangles);
         for (i, row) in l.rows.iter().enumerate() {
             for &(j, w) in row {
                 trip.push((g[i], g[j], w));
             }
         }
-        for (i, a) in voronoi_areas(&uv, &mesh.triangles).into_iter().enumerate() {
+        for (i, a) in areas.into_iter().enumerate() {
             mass[g[i]] += a;
         }
         triangles.extend(mesh.triangles.iter().map(|t| t.map(|i| g[i])));
@@ -292,6 +306,42 @@ fn assemble(
         skipped,
     )
 }
+
+/// `f` over `items` on up to [`WORKERS`] threads, results in the order of `items`.
+fn parallel_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let workers = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(WORKERS)
+        .min(items.len());
+    if workers <= 1 {
+        return items.iter().map(f).collect();
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut out: Vec<(usize, R)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..workers)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut mine = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(item) = items.get(i) else { break };
+                        mine.push((i, f(item)));
+                    }
+                    mine
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().expect("a surfacing worker panicked"))
+            .collect()
+    });
+    out.sort_unstable_by_key(|&(i, _)| i);
+    out.into_iter().map(|(_, r)| r).collect()
+}
+
+/// Threads that tessellate patches at the same time (the machine's cores, at most this).
+pub const WORKERS: usize = 4;
 
 /// `Σ_k∈rows Lc_kᵀ Lc_k / m_k` and the rows' right-hand side `Σ_k Lc_kᵀ t_k`.
 fn normal_matrix(lc: &SparseRows, m: &[f64], rows: &[bool]) -> SparseRows {
@@ -407,6 +457,11 @@ impl FreeSolver {
         }
         if !matches!(cache, Some((e, _)) if *e == entries) {
             let pat = SpdPattern::new(nf, &entries)?;
+            tracing::debug!(
+                "surface: symbolic factorisation of {nf} free unknowns, {} entries, fill {}",
+                entries.len(),
+                pat.fill()
+            );
             *cache = Some((entries, pat));
         }
         let pat = &cache.as_ref().expect("set above").1;
@@ -414,6 +469,28 @@ impl FreeSolver {
             c,
             factor: pat.factor(&vals)?,
         })
+    }
+
+    /// Two biharmonic fields at once (`b = 0`, one pass over the factor for both).
+    fn solve_pair(&self, q: &SparseRows, x: &mut [Vector3<f64>], y: &mut [Vector3<f64>]) {
+        let c = self.c;
+        let mut rhs: Vec<[f64; 6]> = (c..q.n())
+            .map(|i| {
+                let (mut r, mut s) = (Vector3::zeros(), Vector3::zeros());
+                for &(j, w) in &q.rows[i] {
+                    if j < c {
+                        r -= x[j] * w;
+                        s -= y[j] * w;
+                    }
+                }
+                [r.x, r.y, r.z, s.x, s.y, s.z]
+            })
+            .collect();
+        self.factor.solve(&mut rhs);
+        for (i, r) in rhs.iter().enumerate() {
+            x[c + i] = Vector3::new(r[0], r[1], r[2]);
+            y[c + i] = Vector3::new(r[3], r[4], r[5]);
+        }
     }
 
     fn solve(&self, q: &SparseRows, b: &[Vector3<f64>], x: &mut [Vector3<f64>]) {
@@ -601,11 +678,12 @@ fn surface_with(
         let solver = FreeSolver::with_pattern(&q, c, pattern)?;
         lap("factorisation", &mut tt);
         // 1. Biharmonic positions (the first pass, and the comparison methods) and normals.
-        if pass == 0 || p.method != Method::NormalControl {
-            solver.solve(&q, &zero, &mut asm.positions);
-        }
         nstar.clone_from(&asm.normals);
-        solver.solve(&q, &zero, &mut nstar);
+        if pass == 0 || p.method != Method::NormalControl {
+            solver.solve_pair(&q, &mut asm.positions, &mut nstar);
+        } else {
+            solver.solve(&q, &zero, &mut nstar);
+        }
         for (i, n) in nstar.iter_mut().enumerate() {
             *n = n.try_normalize(1e-12).unwrap_or_else(|| {
                 if i < c {

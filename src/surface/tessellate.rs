@@ -1,6 +1,7 @@
 //! Tessellation of one cycle (Stanko et al. 2016, §3.3): the closed boundary polyline is
 //! projected onto the plane of its average position and average normal and triangulated there
-//! by a constrained Delaunay triangulation refined to a target edge length (spade). The
+//! by a constrained Delaunay triangulation (spade) of the boundary and a triangular lattice of
+//! the target edge length inside it, refined where the lattice meets the boundary. The
 //! boundary vertices are kept exactly (the constraint edges are never split), so patches that
 //! share a segment share its vertices and the mesh is watertight along the curves.
 //!
@@ -241,6 +242,13 @@ fn triangulate(
         }
         cdt.add_constraint(a, b);
     }
+    // Seed the interior with a triangular lattice of the target edge (bulk insertion is far
+    // cheaper than refining from the boundary alone), then let the refinement fix whatever
+    // the lattice left too big or too thin near the boundary.
+    for p in interior_lattice(poly, target_edge) {
+        cdt.insert(Point2::new(p[0], p[1]))
+            .map_err(|e| TessellateError::Spade(format!("{e:?}")))?;
+    }
     // Equilateral triangles of the target edge; a budget of four times the expected count.
     let area: f64 = 0.5
         * (0..n)
@@ -312,6 +320,91 @@ fn triangulate(
     }
     Ok(m)
 }
+
+/// Points of a triangular lattice of spacing `edge` strictly inside the closed polygon and at
+/// least [`LATTICE_CLEARANCE`]` · edge` from its boundary, row by row (scanlines: each row's
+/// crossings with the boundary, paired by the even-odd rule; the clearance from a grid of the
+/// boundary's edges), so the cost is linear in the points and the boundary.
+fn interior_lattice(poly: &[[f64; 2]], edge: f64) -> Vec<[f64; 2]> {
+    let n = poly.len();
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    for p in poly {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let dy = edge * 3f64.sqrt() / 2.0;
+    let rows = ((hi[1] - lo[1]) / dy).floor() as usize + 1;
+    if rows >= 1 << 24 {
+        return Vec::new();
+    }
+    let row_y =
+        |j: usize| lo[1] + (j as f64 + 0.5) * dy - 0.5 * (rows as f64 * dy - (hi[1] - lo[1]));
+    let mut crossings: Vec<Vec<f64>> = vec![Vec::new(); rows];
+    for i in 0..n {
+        let (a, b) = (poly[i], poly[(i + 1) % n]);
+        let (p, q) = if a[1] <= b[1] { (a, b) } else { (b, a) };
+        // Rows with p.y <= y < q.y (half-open: a vertex on a row counts once).
+        let first = (((p[1] - row_y(0)) / dy).ceil().max(0.0)) as usize;
+        let mut j = first;
+        while j < rows && row_y(j) < q[1] {
+            let y = row_y(j);
+            if y >= p[1] {
+                crossings[j].push(p[0] + (y - p[1]) / (q[1] - p[1]) * (q[0] - p[0]));
+            }
+            j += 1;
+        }
+    }
+    let clearance = LATTICE_CLEARANCE * edge;
+    let cell = clearance;
+    let key = |x: f64| (x / cell).floor() as i64;
+    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
+    for i in 0..n {
+        let (a, b) = (poly[i], poly[(i + 1) % n]);
+        for x in key(a[0].min(b[0])) - 1..=key(a[0].max(b[0])) + 1 {
+            for y in key(a[1].min(b[1])) - 1..=key(a[1].max(b[1])) + 1 {
+                grid.entry((x, y)).or_default().push(i);
+            }
+        }
+    }
+    let near_boundary = |p: [f64; 2]| {
+        grid.get(&(key(p[0]), key(p[1]))).is_some_and(|list| {
+            list.iter().any(|&i| {
+                let (a, b) = (poly[i], poly[(i + 1) % n]);
+                let (ab, ap) = ([b[0] - a[0], b[1] - a[1]], [p[0] - a[0], p[1] - a[1]]);
+                let l2 = ab[0] * ab[0] + ab[1] * ab[1];
+                let t = if l2 > 0.0 {
+                    ((ap[0] * ab[0] + ap[1] * ab[1]) / l2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let d = [ap[0] - t * ab[0], ap[1] - t * ab[1]];
+                d[0] * d[0] + d[1] * d[1] < clearance * clearance
+            })
+        })
+    };
+    let mut out = Vec::new();
+    for (j, xs) in crossings.iter_mut().enumerate() {
+        xs.sort_unstable_by(f64::total_cmp);
+        let y = row_y(j);
+        let offset = if j % 2 == 0 { 0.0 } else { 0.5 * edge };
+        for pair in xs.chunks_exact(2) {
+            let k0 = ((pair[0] - lo[0] - offset) / edge).ceil() as i64;
+            let k1 = ((pair[1] - lo[0] - offset) / edge).floor() as i64;
+            for k in k0..=k1 {
+                let p = [lo[0] + offset + k as f64 * edge, y];
+                if p[0] > pair[0] && p[0] < pair[1] && !near_boundary(p) {
+                    out.push(p);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Lattice points closer than this many target edges to the boundary are left out.
+pub const LATTICE_CLEARANCE: f64 = 0.6;
 
 /// Whether the closed polygon is simple (no two non-adjacent edges meet) and turns
 /// counter-clockwise. Edges are bucketed in a uniform grid, so the cost is linear in the
@@ -461,6 +554,63 @@ mod tests {
         // Developed, the boundary keeps its lengths: a 0.5 × 1.5π rectangle.
         let area: f64 = m.triangles.iter().map(|t| m.area(t)).sum();
         assert!((area - 0.75 * std::f64::consts::PI).abs() < 0.05, "{area}");
+    }
+
+    #[test]
+    fn the_lattice_is_inside_clear_of_the_boundary_and_as_dense_as_the_target() {
+        // An L-shaped polygon (concave), sampled every 0.1, with edge 0.05.
+        let corners = [
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 1.0],
+            [1.0, 1.0],
+            [1.0, 2.0],
+            [0.0, 2.0],
+        ];
+        let mut poly = Vec::new();
+        for k in 0..corners.len() {
+            let (a, b): ([f64; 2], [f64; 2]) = (corners[k], corners[(k + 1) % corners.len()]);
+            let m = (((b[0] - a[0]).abs() + (b[1] - a[1]).abs()) / 0.1).round() as usize;
+            for i in 0..m {
+                let t = i as f64 / m as f64;
+                poly.push([a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]);
+            }
+        }
+        let edge = 0.05;
+        let pts = interior_lattice(&poly, edge);
+        let clear = LATTICE_CLEARANCE * edge;
+        for p in &pts {
+            let inside_l =
+                p[0] > 0.0 && p[1] > 0.0 && p[0] < 2.0 && p[1] < 2.0 && (p[0] < 1.0 || p[1] < 1.0);
+            assert!(inside_l, "{p:?} outside");
+            let d = (0..corners.len())
+                .map(|k| {
+                    let (a, b) = (corners[k], corners[(k + 1) % corners.len()]);
+                    let (ab, ap) = ([b[0] - a[0], b[1] - a[1]], [p[0] - a[0], p[1] - a[1]]);
+                    let t = ((ap[0] * ab[0] + ap[1] * ab[1]) / (ab[0] * ab[0] + ab[1] * ab[1]))
+                        .clamp(0.0, 1.0);
+                    ((ap[0] - t * ab[0]).powi(2) + (ap[1] - t * ab[1]).powi(2)).sqrt()
+                })
+                .fold(f64::MAX, f64::min);
+            assert!(d >= clear - 1e-12, "{p:?} is {d} from the boundary");
+        }
+        // Area 3 less a clearance band of length 8: about (3 − 8·0.6·0.05) / (√3/2 · 0.05²).
+        let expected = (3.0 - 8.0 * clear) / (3f64.sqrt() / 2.0 * edge * edge);
+        let ratio = pts.len() as f64 / expected;
+        assert!(
+            (0.95..1.05).contains(&ratio),
+            "{} points, expected {expected:.0}",
+            pts.len()
+        );
+        // Neighbours at the lattice spacing: no two points closer than the edge.
+        let mut sorted = pts.clone();
+        sorted.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        for (i, a) in sorted.iter().enumerate() {
+            for b in sorted[i + 1..].iter().take_while(|b| b[0] - a[0] < edge) {
+                let d = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+                assert!(d > edge * (1.0 - 1e-9), "{a:?} and {b:?} are {d} apart");
+            }
+        }
     }
 
     #[test]
