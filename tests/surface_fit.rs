@@ -2,7 +2,9 @@
 //! finite, no degenerate triangle, valid glb; accuracy on the unit sphere against the paper's
 //! Table 1 target; bad input (an open network, a dangling curve) surfaces what it can.
 
-use sfs::surface::analytic::{sphere_circles, sphere_cube, sphere_distance};
+use sfs::surface::analytic::{
+    sphere_circles, sphere_cube, sphere_distance, torus, torus_distance, torus_with_parallels,
+};
 use sfs::surface::cycles::NetworkSegments;
 use sfs::surface::fit::{surface, Method, SurfaceParams, Surfaced};
 use std::collections::BTreeMap;
@@ -75,6 +77,44 @@ fn sphere_networks_meet_the_paper_target_and_beat_biharmonic() {
             .map(|p| p.norm())
             .fold(f64::MAX, f64::min);
         assert!(far > 0.97, "{name}: a free vertex at radius {far}");
+    }
+}
+
+/// Table 1's torus (R = 4, r = 2, four meridians and two parallels), the parallels on the top
+/// and bottom circles and on the equators. On the first, the patches outside the tube span
+/// its whole outer half: seen along their average normal they are edge-on at the parallels,
+/// and their projected triangulation lifted to slivers (mean 0.68 before the projection
+/// was refused there, see `tessellate::MAX_SHRINK`).
+#[test]
+fn torus_networks_meet_the_paper_target_and_beat_biharmonic() {
+    for (name, net) in [
+        ("top and bottom parallels", torus(0.2)),
+        ("equator parallels", torus_with_parallels(0.2, 0.0)),
+    ] {
+        let p = SurfaceParams {
+            edge: Some(0.27),
+            ..Default::default()
+        };
+        let ours = surface(&net, &p).unwrap();
+        check_mesh(&ours, true);
+        let bih = surface(
+            &net,
+            &SurfaceParams {
+                method: Method::Biharmonic,
+                reweight: 0,
+                ..p
+            },
+        )
+        .unwrap();
+        let mean = |s: &Surfaced| {
+            let free = &s.positions[s.constrained..];
+            free.iter().map(torus_distance).sum::<f64>() / free.len() as f64
+        };
+        let (m, b) = (mean(&ours), mean(&bih));
+        eprintln!("{name}: ours {m:.5}, biharmonic {b:.5}");
+        // Paper, Table 1: ours 0.1260, biharmonic 0.4122; issue target ≤ 0.04.
+        assert!(m <= 0.04, "{name}: mean distance {m}");
+        assert!(m < b / 4.0, "{name}: {m} vs biharmonic {b}");
     }
 }
 

@@ -8,7 +8,8 @@
 //! The projection is not always injective (a patch that wraps around more than a half-space
 //! overlaps itself in the plane). That is detected — the projected boundary must be a simple
 //! polygon turning counter-clockwise around the normal — and so is a projection that shrinks
-//! part of the boundary to less than half its length (its triangles would lift to slivers):
+//! part of the boundary to less than half its length, or sees the surface at a boundary point
+//! more than 60° from face-on (its triangles would lift to slivers):
 //! the fallback develops the boundary into the plane from its lengths and its turning in the
 //! tangent planes of its normals, and the last resort maps it by arc length onto a circle (a
 //! convex, always simple polygon). Never a folded triangulation. See [`Embedding`].
@@ -83,14 +84,16 @@ pub enum Embedding {
     /// The boundary developed into the plane: its edge lengths and its turning angles in the
     /// tangent planes of its normals (the holonomy spread evenly, the closure gap by arc
     /// length). Used when the projection shrinks part of the boundary below
-    /// [`MAX_SHRINK`] of its length (a strongly curved patch, e.g. half a torus' tube,
-    /// whose projected triangles would lift to slivers) or is not injective.
+    /// [`MAX_SHRINK`] of its length or sees a boundary normal more than 60° from the plane's
+    /// normal (a strongly curved patch, e.g. half a torus' tube, whose projected triangles
+    /// would lift to slivers), or is not injective.
     Development,
     /// The boundary by arc length on a circle: the last resort, always injective.
     Circle,
 }
 
-/// Projected edges shorter than this fraction of their length reject the projection.
+/// Projected edges shorter than this fraction of their length, or boundary normals tilted from
+/// the plane's normal by more than its arc-cosine (60°), reject the projection.
 pub const MAX_SHRINK: f64 = 0.5;
 
 /// Triangulates the closed polyline `boundary` (last point not repeated) with unit surface
@@ -144,7 +147,11 @@ pub fn tessellate(
             ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt() / lens[i]
         })
         .fold(f64::MAX, f64::min);
-    if shrink >= MAX_SHRINK && is_simple_ccw(&projected) {
+    // The surface at a boundary point shrinks by the cosine of its normal's tilt from the
+    // plane's normal: a patch seen edge-on somewhere (half a torus' tube seen from outside)
+    // projects its triangles there to slivers, even when its boundary's edges do not shrink.
+    let steepest = normals.iter().map(|m| m.dot(&nrm)).fold(f64::MAX, f64::min);
+    if shrink >= MAX_SHRINK && steepest >= MAX_SHRINK && is_simple_ccw(&projected) {
         if let Ok(m) = triangulate(&projected, target_edge, Embedding::Projection) {
             return Ok(m);
         }
