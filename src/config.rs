@@ -7,7 +7,7 @@
 //! path = "/dev/ttyUSB0"    # serial port, or capture file for "replay"
 //! baud = 115200
 //! watchdog_ms = 3000       # silence that counts as a disconnect
-//! pace = "fast"            # replay only: "fast" | "realtime"
+//! pace = "fast"            # replay only: "fast" | "realtime" | "x10" (10× real time)
 //! ```
 //!
 //! A relative `path` of a capture file is relative to the configuration file's directory.
@@ -50,7 +50,11 @@
 //! enabled = true                     # false: write the network only
 //! edge = 0.01                        # target edge length inside patches, m (default: h)
 //! reweight = 1                       # passes with cotangent weights from the 3D surface
-//! soft = 0.1                         # soft positional constraints of weight ω; 0: hard
+//! soft = 0.3                         # soft positional constraints of weight ω; 0: hard
+//!
+//! [output]                           # what `sfs run` writes into the session directory
+//! live = true                        # rebuild network.glb and report.json after every curve
+//! snapshots = false                  # also keep snapshots/curve-NNN.glb per curve
 //! ```
 
 use crate::acquisition::AcquisitionConfig;
@@ -91,6 +95,16 @@ pub struct Config {
     pub network: NetworkToml,
     #[serde(default)]
     pub surface: SurfaceToml,
+    #[serde(default)]
+    pub output: OutputToml,
+}
+
+/// `[output]`, as written (see the module documentation).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputToml {
+    pub live: Option<bool>,
+    pub snapshots: Option<bool>,
 }
 
 /// `[surface]`, as written (see the module documentation).

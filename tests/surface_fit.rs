@@ -193,14 +193,19 @@ fn soft_constraints_beat_hard_ones_on_noisy_input() {
     };
     let hard = surface(&net, &p).unwrap();
     let mut line = format!("hard {:.5}", mean_distance(&hard));
-    let mut best = f64::MAX;
-    for w in [0.01, 0.1, 1.0] {
+    let sessions = sfs::session::SCAN_SOFTNESS.expect("sessions use soft constraints");
+    let mut at_default = f64::MAX;
+    for w in [0.01, 0.1, sessions, 1.0] {
         let soft = surface(&net, &SurfaceParams { soft: Some(w), ..p }).unwrap();
         check_mesh(&soft, true);
         let d = mean_distance(&soft);
         line += &format!(", soft {w}: {d:.5}");
-        best = best.min(d);
+        assert!(d < mean_distance(&hard), "{line}");
+        if w == sessions {
+            at_default = d;
+        }
     }
     eprintln!("{line}");
-    assert!(best < mean_distance(&hard), "{line}");
+    // The sessions' weight removes a good part of the noise.
+    assert!(at_default < 0.6 * mean_distance(&hard), "{line}");
 }

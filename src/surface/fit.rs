@@ -17,8 +17,8 @@
 //!   propagated normals, projected onto the propagated normal (so its sign survives: the
 //!   paper's `h(v)·n*` takes the norm, which loses concave regions).
 //!
-//! - The final fit's positional constraints are hard, or soft with a weight ω
-//!   ([`SurfaceParams::soft`]: the whole system is then solved, with its own factorisation).
+//! - The positional constraints are hard, or soft with a weight ω ([`SurfaceParams::soft`]:
+//!   the whole system `Q + ω'D` is then factorised, once per pass, for every solve).
 //!
 //! Every vertex on the network is a sample of it (shared by the patches on both sides), so
 //! the mesh is watertight along the curves.
@@ -44,11 +44,12 @@ pub struct SurfaceParams {
     /// distance from 0.019 to 0.0002 (`cargo run --release --example surface_table`); more
     /// passes measured worse there.
     pub reweight: usize,
-    /// The final fit's positional constraints on the network's samples: `None` hard (they
-    /// are interpolated exactly, for exact input), `Some(ω)` soft (the paper's §4.5 for noisy
-    /// scans: `+ ω' Σ |v_s − v_s*|²`, with `ω' = ω ·` the mean diagonal of the fit's normal
-    /// matrix over the constrained vertices, so that ω is dimensionless). The propagations
-    /// stay hard.
+    /// The positional constraints on the network's samples: `None` hard (they are
+    /// interpolated exactly, for exact input), `Some(ω)` soft (the paper's §4.5 for noisy
+    /// scans: `+ ω' Σ |v_s − v_s*|²`, with `ω' = ω ·` the mean diagonal of the normal matrix
+    /// over the constrained vertices, so that ω is dimensionless). Soft, the propagations are
+    /// soft too (the normals' data term has the same weight), so that one factorisation per
+    /// pass serves all solves; the curves keep their measured normals for the guide.
     pub soft: Option<f64>,
 }
 
@@ -382,52 +383,65 @@ fn normal_matrix(lc: &SparseRows, m: &[f64], rows: &[bool]) -> SparseRows {
     SparseRows { rows: out }
 }
 
-/// The soft-constrained fit: `(Q + ω' D) X = B + ω' D X*` over every vertex, `D` selecting
-/// the `c` constrained ones and `X*` their data (see [`SurfaceParams::soft`]).
-fn solve_soft(
-    q: &SparseRows,
-    b: &[Vector3<f64>],
+/// Soft positional constraints: `(Q + ω' D) X = B + ω' D X*` over every vertex, `D`
+/// selecting the `c` constrained ones and `X*` their data (see [`SurfaceParams::soft`]).
+struct SoftSolver {
     c: usize,
-    omega: f64,
-    data: &[Vector3<f64>],
-    x: &mut [Vector3<f64>],
-    cache: &mut Option<(Vec<(usize, usize)>, SpdPattern)>,
-) -> Result<(), SolveError> {
-    let n = q.n();
-    let diag_mean = (0..c).map(|i| q.get(i, i)).sum::<f64>() / c.max(1) as f64;
-    let w = omega * diag_mean;
-    let mut entries = Vec::new();
-    let mut vals = Vec::new();
-    for i in 0..n {
-        let mut has_diag = false;
-        for &(j, v) in &q.rows[i] {
-            if j <= i {
-                entries.push((i, j));
-                vals.push(if i == j && i < c { v + w } else { v });
-                has_diag |= i == j;
+    w: f64,
+    factor: crate::sparse_llt::SpdFactor,
+}
+
+impl SoftSolver {
+    fn with_pattern(
+        q: &SparseRows,
+        c: usize,
+        omega: f64,
+        cache: &mut Option<(Vec<(usize, usize)>, SpdPattern)>,
+    ) -> Result<Self, SolveError> {
+        let n = q.n();
+        let diag_mean = (0..c).map(|i| q.get(i, i)).sum::<f64>() / c.max(1) as f64;
+        let w = omega * diag_mean;
+        let mut entries = Vec::new();
+        let mut vals = Vec::new();
+        for i in 0..n {
+            let mut has_diag = false;
+            for &(j, v) in &q.rows[i] {
+                if j <= i {
+                    entries.push((i, j));
+                    vals.push(if i == j && i < c { v + w } else { v });
+                    has_diag |= i == j;
+                }
+            }
+            if !has_diag {
+                entries.push((i, i));
+                vals.push(if i < c { w } else { 0.0 });
             }
         }
-        if !has_diag {
-            entries.push((i, i));
-            vals.push(if i < c { w } else { 0.0 });
+        if !matches!(cache, Some((e, _)) if *e == entries) {
+            let pat = SpdPattern::new(n, &entries)?;
+            *cache = Some((entries, pat));
+        }
+        let factor = cache.as_ref().expect("set above").1.factor(&vals)?;
+        Ok(SoftSolver { c, w, factor })
+    }
+
+    /// `x ← (Q + ω'D)⁻¹ (b + ω' D data)`, `data` the first `c` entries of `x` on entry
+    /// (`b = 0` when `None`).
+    fn solve(&self, b: Option<&[Vector3<f64>]>, x: &mut [Vector3<f64>]) {
+        let mut rhs: Vec<[f64; 3]> = (0..x.len())
+            .map(|i| {
+                let mut r = b.map_or(Vector3::zeros(), |b| b[i]);
+                if i < self.c {
+                    r += x[i] * self.w;
+                }
+                [r.x, r.y, r.z]
+            })
+            .collect();
+        self.factor.solve(&mut rhs);
+        for (xi, r) in x.iter_mut().zip(&rhs) {
+            *xi = Vector3::new(r[0], r[1], r[2]);
         }
     }
-    if !matches!(cache, Some((e, _)) if *e == entries) {
-        let pat = SpdPattern::new(n, &entries)?;
-        *cache = Some((entries, pat));
-    }
-    let f = cache.as_ref().expect("set above").1.factor(&vals)?;
-    let mut rhs: Vec<[f64; 3]> = (0..n)
-        .map(|i| {
-            let r = if i < c { b[i] + data[i] * w } else { b[i] };
-            [r.x, r.y, r.z]
-        })
-        .collect();
-    f.solve(&mut rhs);
-    for (xi, r) in x.iter_mut().zip(&rhs) {
-        *xi = Vector3::new(r[0], r[1], r[2]);
-    }
-    Ok(())
 }
 
 /// Solves `Q_ff X_f = B_f − Q_fc X_c` for the free vertices (indices `c..`), in place in `x`.
@@ -675,14 +689,39 @@ fn surface_with(
         lap("weights", &mut tt);
         let q = normal_matrix(&asm.lc, &asm.mass, &rows);
         lap("normal matrix", &mut tt);
-        let solver = FreeSolver::with_pattern(&q, c, pattern)?;
+        // Soft constraints (normal control only): one factorisation of the whole system serves
+        // the propagations and the fit, the normals constrained as softly as the positions.
+        let soft = match (p.soft, p.method) {
+            (Some(omega), Method::NormalControl) => {
+                Some(SoftSolver::with_pattern(&q, c, omega, soft_pattern)?)
+            }
+            _ => None,
+        };
+        let solver = match soft {
+            Some(_) => None,
+            None => Some(FreeSolver::with_pattern(&q, c, pattern)?),
+        };
         lap("factorisation", &mut tt);
         // 1. Biharmonic positions (the first pass, and the comparison methods) and normals.
         nstar.clone_from(&asm.normals);
-        if pass == 0 || p.method != Method::NormalControl {
-            solver.solve_pair(&q, &mut asm.positions, &mut nstar);
-        } else {
-            solver.solve(&q, &zero, &mut nstar);
+        match (&solver, &soft) {
+            (Some(solver), _) => {
+                if pass == 0 || p.method != Method::NormalControl {
+                    solver.solve_pair(&q, &mut asm.positions, &mut nstar);
+                } else {
+                    solver.solve(&q, &zero, &mut nstar);
+                }
+            }
+            (None, Some(soft)) => {
+                if pass == 0 {
+                    asm.positions[..c].copy_from_slice(&data);
+                    soft.solve(None, &mut asm.positions);
+                }
+                soft.solve(None, &mut nstar);
+                // The curves keep their measured normals (the free ones are propagated).
+                nstar[..c].copy_from_slice(&asm.normals[..c]);
+            }
+            (None, None) => unreachable!("one of the two solvers is made"),
         }
         for (i, n) in nstar.iter_mut().enumerate() {
             *n = n.try_normalize(1e-12).unwrap_or_else(|| {
@@ -727,11 +766,13 @@ fn surface_with(
                         b[i] += tk * w;
                     }
                 }
-                match p.soft {
-                    None => solver.solve(&q, &b, &mut asm.positions),
-                    Some(omega) => {
-                        solve_soft(&q, &b, c, omega, &data, &mut asm.positions, soft_pattern)?
+                match (&solver, &soft) {
+                    (_, Some(soft)) => {
+                        asm.positions[..c].copy_from_slice(&data);
+                        soft.solve(Some(&b), &mut asm.positions);
                     }
+                    (Some(solver), None) => solver.solve(&q, &b, &mut asm.positions),
+                    (None, None) => unreachable!("one of the two solvers is made"),
                 }
             }
         }
