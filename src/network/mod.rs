@@ -18,7 +18,9 @@ use crate::scan::Scan;
 use poisson::{PoissonSolver, Positions};
 use prefilter::{prefilter, PrefilterParams, UniformCurve};
 use regression::{RegressionParams, RegressionReport, RegressionSolver};
+use nalgebra::UnitQuaternion;
 use serde::Serialize;
+use std::collections::HashMap;
 use std::time::Instant;
 
 /// Settings of the reconstruction.
@@ -65,11 +67,49 @@ pub struct Network {
     pub warnings: Vec<String>,
 }
 
-/// Holds what is reused between reconstructions (symbolic factorisations).
+/// Holds what is reused between reconstructions of a growing scan: the pre-filtered curves
+/// (a curve is pre-filtered again only when it changed), the symbolic factorisations, and the
+/// last regressed frames (for [`Reconstructor::run_warm`]).
 #[derive(Debug, Default)]
 pub struct Reconstructor {
     poisson: PoissonSolver,
     regression: RegressionSolver,
+    prefiltered: HashMap<usize, (CurveKey, Result<UniformCurve, prefilter::PrefilterError>)>,
+    regressed: HashMap<usize, Vec<UnitQuaternion<f64>>>,
+    /// Curves pre-filtered by the last run (not taken from the cache).
+    pub prefiltered_last: usize,
+}
+
+/// What identifies a curve's content for the pre-filter cache: a curve that gained samples,
+/// tags or segment lengths (a late SEGMENT_LENGTH) is pre-filtered again.
+#[derive(Debug, Clone, PartialEq)]
+struct CurveKey {
+    samples: usize,
+    last: Option<(u64, u64)>,
+    tags: Vec<(u32, u64, bool)>,
+    segment_lengths: Vec<Option<u64>>,
+    params: PrefilterParams,
+}
+
+impl CurveKey {
+    fn of(c: &crate::scan::Curve, p: &PrefilterParams) -> Self {
+        CurveKey {
+            samples: c.samples.len(),
+            last: c
+                .samples
+                .t
+                .last()
+                .zip(c.samples.d.last())
+                .map(|(t, d)| (t.to_bits(), d.to_bits())),
+            tags: c
+                .tags
+                .iter()
+                .map(|t| (t.node, t.d.to_bits(), t.uncertain))
+                .collect(),
+            segment_lengths: c.segment_lengths.iter().map(|l| l.map(f64::to_bits)).collect(),
+            params: *p,
+        }
+    }
 }
 
 impl Reconstructor {
@@ -77,14 +117,39 @@ impl Reconstructor {
         Self::default()
     }
 
-    /// Reconstructs the accepted curves of `scan`; `None` when no curve can be used.
+    /// Reconstructs the accepted curves of `scan`; `None` when no curve can be used. The
+    /// result depends only on `scan` and `p` (the caches change the time it takes, not the
+    /// bits).
     pub fn run(&mut self, scan: &Scan, p: &NetworkParams) -> Option<Network> {
+        self.run_inner(scan, p, false)
+    }
+
+    /// As [`run`](Self::run), with the regression warm-started from the previous run's
+    /// frames (curves unchanged since). For live updates: the optimum is the same, but not
+    /// to the last bit, so final outputs use [`run`](Self::run).
+    pub fn run_warm(&mut self, scan: &Scan, p: &NetworkParams) -> Option<Network> {
+        self.run_inner(scan, p, true)
+    }
+
+    fn run_inner(&mut self, scan: &Scan, p: &NetworkParams, warm: bool) -> Option<Network> {
         let mut warnings = Vec::new();
         let t0 = Instant::now();
         let mut uniform: Vec<UniformCurve> = Vec::new();
+        let live: std::collections::HashSet<usize> = scan.curves.iter().map(|c| c.index).collect();
+        self.prefiltered.retain(|k, _| live.contains(k));
+        self.regressed.retain(|k, _| live.contains(k));
+        self.prefiltered_last = 0;
         for c in &scan.curves {
-            match prefilter(c, &p.prefilter) {
-                Ok(u) => uniform.push(u),
+            let key = CurveKey::of(c, &p.prefilter);
+            let fresh = !matches!(self.prefiltered.get(&c.index), Some((k, _)) if *k == key);
+            if fresh {
+                self.prefiltered_last += 1;
+                self.regressed.remove(&c.index);
+                self.prefiltered
+                    .insert(c.index, (key, prefilter(c, &p.prefilter)));
+            }
+            match &self.prefiltered[&c.index].1 {
+                Ok(u) => uniform.push(u.clone()),
                 Err(e) => warnings.push(format!("{e}; left out of the network")),
             }
         }
@@ -118,9 +183,22 @@ impl Reconstructor {
         warnings.extend(closure.warnings.iter().cloned());
         let regression = if p.no_regression {
             RegressionReport::default()
+        } else if warm {
+            let init: Vec<Vec<UnitQuaternion<f64>>> = uniform
+                .iter()
+                .map(|u| self.regressed.get(&u.index).cloned().unwrap_or_default())
+                .collect();
+            let init: Vec<Option<&[UnitQuaternion<f64>]>> =
+                init.iter().map(|v| Some(v.as_slice())).collect();
+            self.regression.run_from(&mut uniform, &p.regression, &init)
         } else {
             self.regression.run(&mut uniform, &p.regression)
         };
+        if !p.no_regression {
+            for u in &uniform {
+                self.regressed.insert(u.index, u.q.clone());
+            }
+        }
         let t2 = Instant::now();
         let positions = match self.poisson.solve(&uniform) {
             Ok(p) => p,

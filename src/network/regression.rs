@@ -293,11 +293,24 @@ impl RegressionSolver {
         Self::default()
     }
 
-    /// Regresses the frames of `curves` in place.
+    /// Regresses the frames of `curves` in place, starting from their own frames (the data).
     pub fn run(
         &mut self,
         curves: &mut [UniformCurve],
         params: &RegressionParams,
+    ) -> RegressionReport {
+        self.run_from(curves, params, &[])
+    }
+
+    /// As [`run`](Self::run), warm-started: `init[k]`, when it has one frame per sample of
+    /// `curves[k]`, is where curve `k`'s frames start (e.g. the previous solution, when a new
+    /// curve joined the network); the data term still pulls towards `curves[k].q`. The optimum
+    /// is the same; fewer iterations reach it.
+    pub fn run_from(
+        &mut self,
+        curves: &mut [UniformCurve],
+        params: &RegressionParams,
+        init: &[Option<&[UnitQuaternion<f64>]>],
     ) -> RegressionReport {
         let pb = problem(curves);
         let p = &Resolved {
@@ -310,6 +323,13 @@ impl RegressionSolver {
             return RegressionReport::default();
         }
         let mut x = pb.a.clone();
+        for ((c, vars), start) in curves.iter().zip(&pb.var_of).zip(init) {
+            if let Some(q0) = start.filter(|q0| q0.len() == c.q.len()) {
+                for (q, &v) in q0.iter().zip(vars) {
+                    x[v] = *q.to_rotation_matrix().matrix();
+                }
+            }
+        }
         // Block pattern (lower triangle of 3×3 blocks) from the residual structure.
         let mut block_keys: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
         let mut add = |a: usize, b: usize| {
