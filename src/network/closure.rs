@@ -38,6 +38,10 @@ pub const RATIO: f64 = 50.0;
 /// At most this many tags are detached (a network that needs more has a worse problem).
 pub const MAX_DETACHED: usize = 4;
 
+/// A refused tag whose misfit another tag explains to this fraction is not located (see
+/// [`detach_outlier_tags`]).
+pub const LOCATED: f64 = 0.99;
+
 /// A tag detached from its node.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Detached {
@@ -254,10 +258,19 @@ pub fn detach_outlier_tags(
     let mut out = ClosureReport::default();
     while out.detached.len() < MAX_DETACHED {
         let Some(d) = drops(curves) else { break };
+        // A refused tag is located only if no other tag explains the misfit as well: on a
+        // single loop (a closed curve alone, early in a live session) every tag does, and
+        // the misfit is the loop's drift, not any one tag's.
+        let located = |c: &&Candidate| {
+            !d.tags
+                .iter()
+                .any(|o| !std::ptr::eq(o, *c) && o.drop >= LOCATED * c.drop)
+        };
         let worst = d
             .tags
             .iter()
             .filter(|c| d.refuses(c))
+            .filter(located)
             .max_by(|a, b| a.drop.total_cmp(&b.drop));
         let evidenced = d
             .tags
@@ -266,6 +279,7 @@ pub fn detach_outlier_tags(
                 uncertain(curves[c.curve].index, c.tag) || repeats_in_curve(&curves[c.curve], c.tag)
             })
             .filter(|c| d.refuses(c))
+            .filter(located)
             .max_by(|a, b| a.drop.total_cmp(&b.drop));
         if let Some(w) = worst {
             tracing::debug!(
@@ -364,6 +378,34 @@ mod tests {
             }
         }
         curves
+    }
+
+    /// A closed curve alone (the first curve of a live session) has one loop: its drift shows
+    /// as a misfit that every tag on it explains, so none is blamed.
+    #[test]
+    fn a_single_loop_blames_no_tag() {
+        let n = 300;
+        let h = 0.01;
+        // A circle whose heading turns 2% too far: it misses its start by ~12 cm.
+        let q: Vec<UnitQuaternion<f64>> = (0..=n)
+            .map(|j| {
+                let yaw = 1.02 * std::f64::consts::TAU * j as f64 / n as f64;
+                UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw)
+            })
+            .collect();
+        let mut curves = vec![UniformCurve {
+            index: 0,
+            boundary: true,
+            d: (0..=n).map(|s| s as f64 * h).collect(),
+            q,
+            nodes: vec![(0, 0), (100, 1), (200, 2), (300, 0)],
+            h: vec![h; 3],
+            w: vec![1.0; n + 1],
+            outliers: 0,
+        }];
+        let r = detach_outlier_tags(&mut curves, |_, _| true);
+        assert_eq!(r, ClosureReport::default());
+        assert_eq!(curves[0].nodes[3].1, 0);
     }
 
     #[test]
