@@ -106,8 +106,9 @@ pub struct ReplayArgs {
     /// Output directory (created if missing).
     #[arg(long, short)]
     pub out: PathBuf,
-    /// Replay as fast as possible, or paced by the device timestamps.
-    #[arg(long, default_value = "fast", value_parser = ["fast", "realtime"])]
+    /// Replay as fast as possible ("fast"), paced by the device timestamps ("realtime"), or
+    /// paced N times faster ("x10").
+    #[arg(long, default_value = "fast")]
     pub pace: String,
     /// Configuration file for calibration and processing settings (its `[source]` is ignored).
     #[arg(long, short)]
@@ -115,6 +116,7 @@ pub struct ReplayArgs {
 }
 
 #[derive(Debug, Args)]
+#[command(group(clap::ArgGroup::new("dir").required(true).args(["session", "resume"])))]
 pub struct RunArgs {
     /// Configuration file (TOML). Flags below override it.
     #[arg(long, short)]
@@ -131,9 +133,15 @@ pub struct RunArgs {
     /// Read the device stream from standard input.
     #[arg(long)]
     pub stdin: bool,
-    /// Session directory (created if missing; an existing capture.bin is appended to).
+    /// Session directory of a new session (created if missing; refused if it already holds
+    /// a capture: continue that one with --resume).
     #[arg(long, short)]
-    pub session: PathBuf,
+    pub session: Option<PathBuf>,
+    /// Continue the session in this directory: its capture.bin is decoded first (the curves so
+    /// far are rebuilt), then the device's bytes are appended to it. Without --config, the
+    /// configuration the session started with (SESSION/config.toml) is used.
+    #[arg(long, value_name = "SESSION")]
+    pub resume: Option<PathBuf>,
 }
 
 #[derive(Debug, Subcommand)]

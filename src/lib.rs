@@ -19,7 +19,8 @@
 //! - [`surface`]: network → surface (cycles from normals, tessellation per cycle, cotangent
 //!   Laplacian, biharmonic propagation, the mean-curvature-guided fit).
 //! - [`gltf_out`]: network (and surface) → `network.glb`; [`eval`]: scoring against a truth.
-//! - [`session`]: one run of the pipeline, source → decoder → acquisition → outputs.
+//! - [`session`]: one run of the pipeline, source → decoder → acquisition → outputs;
+//!   [`live`]: the worker that rebuilds the outputs after every curve (coalescing).
 //! - [`report`]: `report.json`; [`atomic`]: atomic replacement of output files.
 //! - [`calibrate`]: `sfs calibrate` (ellipsoid and static-pose fits).
 //! - [`simulate`]: captures of known shapes (operator timeline, device models).
@@ -36,6 +37,7 @@ pub mod eval;
 pub mod gltf_out;
 pub mod keypad;
 pub mod link;
+pub mod live;
 pub mod network;
 pub mod orientation;
 pub mod report;

@@ -108,7 +108,12 @@ fn replay(a: ReplayArgs) -> i32 {
         },
         None => session::Options::default(),
     };
-    run_session(spec, &a.out, &options)
+    // Offline: the outputs once, at the end (no live updates).
+    let options = session::Options {
+        live: false,
+        ..options
+    };
+    run_session(spec, &a.out, &options, session::Start::New)
 }
 
 /// Session options from a configuration file.
@@ -117,36 +122,72 @@ fn options(cfg: &Config, file: &Path) -> Result<session::Options, ConfigError> {
         acquisition: cfg.acquisition_config(file)?,
         network: cfg.network_params(file)?,
         surface: cfg.surface_params(file)?,
+        live: cfg.output.live.unwrap_or(true),
+        snapshots: cfg.output.snapshots.unwrap_or(false),
     })
 }
 
 fn run(a: RunArgs) -> i32 {
-    let (spec, options) = match resolve_run(&a) {
+    let (dir, resume) = match (&a.session, &a.resume) {
+        (Some(d), None) => (d.clone(), false),
+        (None, Some(d)) => (d.clone(), true),
+        _ => {
+            complain!("sfs: give either --session DIR (a new session) or --resume SESSION");
+            return exit::USAGE;
+        }
+    };
+    // A resumed session keeps the configuration it started with.
+    let saved = dir.join(session::CONFIG_COPY);
+    let config = match (&a.config, resume) {
+        (None, true) if saved.is_file() => Some(saved.clone()),
+        (c, _) => c.clone(),
+    };
+    if let (Some(given), true, Ok(kept)) = (&a.config, resume, std::fs::read(&saved)) {
+        if std::fs::read(given).ok().as_ref() != Some(&kept) {
+            tracing::warn!(
+                "{} differs from the configuration the session started with ({}): the curves so far are rebuilt with the new one",
+                given.display(),
+                saved.display()
+            );
+        }
+    }
+    let (spec, options) = match resolve_run(&a, config.as_deref()) {
         Ok(s) => s,
         Err(e) => {
             complain!("sfs: {e}");
             return exit::USAGE;
         }
     };
-    run_session(spec, &a.session, &options)
+    let start = if resume {
+        session::Start::Resume
+    } else {
+        match config.as_deref().map(std::fs::read_to_string) {
+            Some(Ok(text)) => session::Start::NewWithConfig(text),
+            _ => session::Start::New,
+        }
+    };
+    run_session(spec, &dir, &options, start)
 }
 
 /// Flags over the configuration file over the defaults.
-fn resolve_run(a: &RunArgs) -> Result<(SourceSpec, session::Options), ConfigError> {
+fn resolve_run(
+    a: &RunArgs,
+    config: Option<&Path>,
+) -> Result<(SourceSpec, session::Options), ConfigError> {
     let cli_err = |key: &str, reason: &str| ConfigError {
         file: "command line".into(),
         key: key.into(),
         reason: reason.into(),
     };
-    let (cfg, file) = match &a.config {
-        Some(f) => (Config::load(f)?, f.clone()),
+    let (cfg, file) = match config {
+        Some(f) => (Config::load(f)?, f.to_owned()),
         None => (Config::default(), "command line".into()),
     };
     let mut spec = if a.stdin {
         SourceSpec::Stdin
     } else if let Some(p) = &a.serial {
         SourceSpec::Serial(SerialSpec::new(p, cfg.source.baud))
-    } else if a.config.is_some() {
+    } else if config.is_some() {
         cfg.source_spec(&file)?
     } else {
         return Err(cli_err(
@@ -161,7 +202,7 @@ fn resolve_run(a: &RunArgs) -> Result<(SourceSpec, session::Options), ConfigErro
             }
             s.baud = b;
         }
-        if a.config.is_some() && a.serial.is_some() {
+        if config.is_some() && a.serial.is_some() {
             s.watchdog = Duration::from_millis(cfg.source.watchdog_ms);
         }
         if let Some(w) = a.watchdog_ms {
@@ -347,7 +388,12 @@ fn config_check(file: &Path) -> i32 {
     }
 }
 
-fn run_session(spec: SourceSpec, out: &Path, options: &session::Options) -> i32 {
+fn run_session(
+    spec: SourceSpec,
+    out: &Path,
+    options: &session::Options,
+    start: session::Start,
+) -> i32 {
     let rt = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -362,7 +408,7 @@ fn run_session(spec: SourceSpec, out: &Path, options: &session::Options) -> i32 
     rt.block_on(async {
         let shutdown = Shutdown::new();
         tokio::spawn(signals(shutdown.clone()));
-        match session::run(spec, out, options, shutdown).await {
+        match session::run(spec, out, options, start, shutdown).await {
             Ok(o) => {
                 print_summary(&o);
                 exit::OK
@@ -373,6 +419,7 @@ fn run_session(spec: SourceSpec, out: &Path, options: &session::Options) -> i32 
                     SessionError::Source(SourceError::Thread(_)) => exit::INTERNAL,
                     SessionError::Source(_) => exit::INPUT,
                     SessionError::Output { .. } => exit::OUTPUT,
+                    SessionError::CaptureExists { .. } | SessionError::Resume(_) => exit::USAGE,
                 }
             }
         }

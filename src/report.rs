@@ -32,6 +32,8 @@ pub struct Report {
     pub network: Option<crate::network::NetworkReport>,
     /// What the surfacer did (patches, holes, problems naming nodes and curves).
     pub surface: Option<crate::surface::fit::SurfaceReport>,
+    /// What the live updates measured (latency from the E key to `network.glb`, memory).
+    pub live: Option<crate::live::LiveReport>,
 }
 
 /// A curve in `report.json`.

@@ -29,6 +29,10 @@ pub struct Options {
     pub network: crate::network::NetworkParams,
     /// Surfacing settings; `None` writes the network only.
     pub surface: Option<crate::surface::fit::SurfaceParams>,
+    /// Reconstruct after every finished curve ([`crate::live`]), not only at the end.
+    pub live: bool,
+    /// Keep a copy of `network.glb` per curve (`snapshots/curve-NNN.glb`), live updates only.
+    pub snapshots: bool,
 }
 
 /// The soft-constraint weight ω of the surface fit for scans (measured data). On a noisy
@@ -48,8 +52,106 @@ impl Default for Options {
                 soft: SCAN_SOFTNESS,
                 ..Default::default()
             }),
+            live: true,
+            snapshots: false,
         }
     }
+}
+
+/// Name of the folder of per-curve snapshots in a session directory.
+pub const SNAPSHOT_DIR: &str = "snapshots";
+
+/// What one reconstruction of a scan produced (network, surface, the glb bytes), before it is
+/// written: shared by the live updates and the session's final outputs.
+#[derive(Debug, Default)]
+pub struct Products {
+    pub network: Option<crate::network::Network>,
+    pub surface: Option<crate::surface::fit::SurfaceReport>,
+    /// Node positions in the glb's frame (y up), by node index.
+    pub nodes: std::collections::BTreeMap<String, [f32; 3]>,
+    /// The reconstruction's and the surfacer's warnings (naming curves and nodes).
+    pub warnings: Vec<String>,
+    /// `network.glb`, when there is a network and it could be encoded.
+    pub glb: Option<Vec<u8>>,
+    pub network_ms: f64,
+    pub surface_ms: f64,
+}
+
+impl Products {
+    /// Replaces `dir/network.glb` atomically (nothing when there is no network).
+    pub fn write_glb(&self, dir: &Path) -> Result<(), SessionError> {
+        match &self.glb {
+            Some(bytes) => {
+                let path = dir.join(NETWORK_FILE);
+                crate::atomic::write_atomic(&path, bytes)
+                    .map_err(|source| SessionError::Output { path, source })
+            }
+            None => Ok(()),
+        }
+    }
+
+    /// Writes `dir/snapshots/curve-NNN.glb`.
+    pub fn write_snapshot(&self, dir: &Path, curve: usize) -> Result<(), SessionError> {
+        let Some(bytes) = &self.glb else {
+            return Ok(());
+        };
+        let folder = dir.join(SNAPSHOT_DIR);
+        let path = folder.join(format!("curve-{curve:03}.glb"));
+        std::fs::create_dir_all(&folder)
+            .and_then(|_| crate::atomic::write_atomic(&path, bytes))
+            .map_err(|source| SessionError::Output { path, source })
+    }
+}
+
+/// Reconstructs the network of `scan` (and its surface, if `options` ask for it) with the
+/// caches in `rec` and `surfacer` (which change the time it takes, not the result).
+pub fn reconstruct(
+    scan: &crate::scan::Scan,
+    options: &Options,
+    rec: &mut crate::network::Reconstructor,
+    surfacer: &mut crate::surface::fit::Surfacer,
+) -> Products {
+    let t0 = Instant::now();
+    let network = rec.run(scan, &options.network);
+    let mut out = Products {
+        network_ms: t0.elapsed().as_secs_f64() * 1e3,
+        ..Default::default()
+    };
+    let Some(net) = network else {
+        return out;
+    };
+    out.warnings.extend(net.warnings.iter().cloned());
+    let surfaced = options.surface.as_ref().and_then(|sp| {
+        let t1 = Instant::now();
+        let segs = crate::surface::cycles::NetworkSegments::from_positions(&net.positions);
+        let result = surfacer.run(&segs, sp);
+        out.surface_ms = t1.elapsed().as_secs_f64() * 1e3;
+        match result {
+            Ok(s) => {
+                out.warnings
+                    .extend(s.problems.iter().map(|p| format!("surface: {p}")));
+                out.surface = Some(s.report(out.surface_ms));
+                Some(s)
+            }
+            Err(e) => {
+                tracing::warn!("no surface: {e}");
+                out.warnings.push(format!("no surface: {e}"));
+                None
+            }
+        }
+    });
+    match network_glb(&net, surfaced.as_ref()) {
+        Ok(bytes) => out.glb = Some(bytes),
+        Err(e) => {
+            tracing::error!("network.glb not written: {e}");
+            out.warnings.push(format!("network.glb not written: {e}"));
+        }
+    }
+    for (k, p) in &net.positions.nodes {
+        out.nodes.insert(k.to_string(), crate::gltf_out::to_gltf(p));
+    }
+    out.network = Some(net);
+    out
 }
 
 /// How often a running session logs its link statistics (when they changed).
@@ -58,9 +160,32 @@ const STATS_LOG_INTERVAL: Duration = Duration::from_secs(10);
 /// How long the pipeline keeps draining a source after shutdown was asked for.
 const SHUTDOWN_GRACE: Duration = Duration::from_millis(300);
 
+/// Name of the copy of the configuration a session started with (used by `--resume`).
+pub const CONFIG_COPY: &str = "config.toml";
+
+/// How a session with a live source starts in its directory.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum Start {
+    /// A new session. Refused when the directory already holds a capture: appending to it
+    /// without its curves would lose them from the outputs. `config`, the text of the
+    /// configuration file, is kept as `config.toml` for a later `--resume`.
+    #[default]
+    New,
+    NewWithConfig(String),
+    /// Continue a session: its capture is decoded first (the curves, tags and counters are
+    /// rebuilt exactly as they were), then the source's bytes are appended to it.
+    Resume,
+}
+
 /// Why a session could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum SessionError {
+    /// A new session in a directory that already holds a capture.
+    #[error("{} already holds a capture ({bytes} bytes): continue it with `sfs run --resume {}`, or choose another directory", path.display(), path.parent().unwrap_or(path).display())]
+    CaptureExists { path: PathBuf, bytes: u64 },
+    /// `--resume` where there is nothing to resume, or with a source that is not captured.
+    #[error("cannot resume: {0}")]
+    Resume(String),
     /// The input (capture file, serial port, stdin) is unavailable.
     #[error(transparent)]
     Source(#[from] SourceError),
@@ -88,6 +213,7 @@ pub async fn run(
     spec: SourceSpec,
     out_dir: &Path,
     options: &Options,
+    start: Start,
     shutdown: Shutdown,
 ) -> Result<Outcome, SessionError> {
     let output_err = |path: &Path| {
@@ -96,6 +222,43 @@ pub async fn run(
     };
     std::fs::create_dir_all(out_dir).map_err(output_err(out_dir))?;
     let capture_path = spec.is_live().then(|| out_dir.join(CAPTURE_FILE));
+    // Raw bytes of the session so far (resume), read before the source appends anything.
+    let prior = match (&capture_path, &start) {
+        (Some(p), Start::New | Start::NewWithConfig(_)) => match std::fs::metadata(p) {
+            Ok(m) if m.len() > 0 => {
+                return Err(SessionError::CaptureExists {
+                    path: p.clone(),
+                    bytes: m.len(),
+                })
+            }
+            _ => None,
+        },
+        (Some(p), Start::Resume) => match std::fs::read(p) {
+            Ok(b) => Some(b),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Err(SessionError::Resume(format!(
+                    "{} has no {CAPTURE_FILE}",
+                    out_dir.display()
+                )))
+            }
+            Err(source) => {
+                return Err(SessionError::Output {
+                    path: p.clone(),
+                    source,
+                })
+            }
+        },
+        (None, Start::Resume) => {
+            return Err(SessionError::Resume(
+                "only a live source (serial port, standard input) has a capture to continue".into(),
+            ))
+        }
+        (None, _) => None,
+    };
+    if let (Some(_), Start::NewWithConfig(text)) = (&capture_path, &start) {
+        let p = out_dir.join(CONFIG_COPY);
+        crate::atomic::write_atomic(&p, text.as_bytes()).map_err(output_err(&p))?;
+    }
     let capture = match &capture_path {
         Some(p) => Some(CaptureWriter::open_append(p).map_err(output_err(p))?),
         None => None,
@@ -108,6 +271,37 @@ pub async fn run(
     let mut decoder = Decoder::new();
     let mut stats = LinkStats::default();
     let mut acq = Acquisition::new(options.acquisition.clone());
+    let mut live = if options.live {
+        Some(
+            crate::live::Live::spawn(crate::live::LiveSettings {
+                out_dir: out_dir.to_owned(),
+                options: options.clone(),
+                source: description.clone(),
+                started,
+            })
+            .map_err(|e| SessionError::Source(SourceError::Thread(e)))?,
+        )
+    } else {
+        None
+    };
+    if let Some(bytes) = prior {
+        // Resume: the same decoder and acquisition state as if the session had not stopped.
+        stats.bytes += bytes.len() as u64;
+        for e in decoder.feed(&bytes) {
+            stats.observe(&e);
+            acq.event(&e);
+        }
+        tracing::info!(
+            bytes = bytes.len(),
+            curves = acq.scan().curves.len(),
+            "resumed: the capture so far is decoded"
+        );
+        if let Some(l) = &mut live {
+            for c in &acq.scan().curves {
+                l.post(c, None, snapshot(&acq, &stats));
+            }
+        }
+    }
     let mut end = EndReason::Shutdown;
     let mut deadline: Option<tokio::time::Instant> = None;
     let mut tick = tokio::time::interval_at(
@@ -140,8 +334,8 @@ pub async fn run(
                 stats.bytes += bytes.len() as u64;
                 for e in decoder.feed(&bytes) {
                     stats.observe(&e);
-                    match acq.event(&e) {
-                        Some(Update::CurveEnded(_)) | Some(Update::CurveUpdated(_)) | None => {}
+                    if let Some(Update::CurveEnded(i) | Update::CurveUpdated(i)) = acq.event(&e) {
+                        post(&mut live, &acq, i, &stats);
                     }
                 }
             }
@@ -167,47 +361,39 @@ pub async fn run(
         tracing::debug!(bytes = decoder.buffered(), "stream ended inside a frame");
     }
     log_stats("session ended", &stats);
+    // The live worker brings in what is pending and stops; its last reconstruction is the
+    // final one (the same bits a fresh one would give) when it saw every curve.
+    let live = live.map(|l| l.finish());
     let mut scan = acq.finish();
     let scan_path = out_dir.join(SCAN_FILE);
     crate::atomic::write_json(&scan_path, &scan, false).map_err(output_err(&scan_path))?;
-    let mut reconstructor = crate::network::Reconstructor::new();
-    let network = reconstructor.run(&scan, &options.network);
-    let mut nodes = std::collections::BTreeMap::new();
-    let mut surface_report = None;
-    if let Some(net) = &network {
-        scan.warnings.extend(net.warnings.iter().cloned());
-        let surfaced = options.surface.as_ref().and_then(|sp| {
-            let t0 = Instant::now();
-            let segs = crate::surface::cycles::NetworkSegments::from_positions(&net.positions);
-            match crate::surface::fit::surface(&segs, sp) {
-                Ok(s) => {
-                    let r = s.report(t0.elapsed().as_secs_f64() * 1e3);
-                    scan.warnings
-                        .extend(s.problems.iter().map(|p| format!("surface: {p}")));
-                    surface_report = Some(r);
-                    Some(s)
-                }
-                Err(e) => {
-                    tracing::warn!("no surface: {e}");
-                    scan.warnings.push(format!("no surface: {e}"));
-                    None
-                }
-            }
-        });
-        let glb_path = out_dir.join(NETWORK_FILE);
-        match network_glb(net, surfaced.as_ref()) {
-            Ok(bytes) => {
-                crate::atomic::write_atomic(&glb_path, &bytes).map_err(output_err(&glb_path))?
-            }
-            Err(e) => {
-                tracing::error!("network.glb not written: {e}");
-                scan.warnings.push(format!("network.glb not written: {e}"));
-            }
-        }
-        for (k, p) in &net.positions.nodes {
-            nodes.insert(k.to_string(), crate::gltf_out::to_gltf(p));
-        }
+    let (products, mut live_report) = match live {
+        Some(crate::live::LiveOutcome {
+            report,
+            products: Some(p),
+            curves,
+        }) if curves == scan.curves.len() => (p, Some(report)),
+        other => (
+            reconstruct(
+                &scan,
+                options,
+                &mut crate::network::Reconstructor::new(),
+                &mut crate::surface::fit::Surfacer::new(),
+            ),
+            other.map(|o| o.report),
+        ),
+    };
+    scan.warnings.extend(products.warnings.iter().cloned());
+    products.write_glb(out_dir)?;
+    if let Some(l) = &mut live_report {
+        (l.rss_mb, l.peak_rss_mb) = crate::live::rss_mb();
     }
+    let Products {
+        network,
+        surface: surface_report,
+        nodes,
+        ..
+    } = products;
     let report = Report {
         sfs_version: env!("CARGO_PKG_VERSION"),
         source: description,
@@ -226,6 +412,7 @@ pub async fn run(
         timings_ms: network.as_ref().map(|n| n.report.timings_ms.clone()),
         network: network.map(|n| n.report),
         surface: surface_report,
+        live: live_report,
     };
     let report_path = out_dir.join(REPORT_FILE);
     report
@@ -255,6 +442,24 @@ fn network_glb(
         &net.positions.nodes,
         mesh.as_ref(),
     )
+}
+
+/// Sends curve `index` (just ended or changed) to the live worker.
+fn post(live: &mut Option<crate::live::Live>, acq: &Acquisition, index: usize, stats: &LinkStats) {
+    let Some(live) = live else { return };
+    if let Some(c) = acq.scan().curves.iter().find(|c| c.index == index) {
+        live.post(c, Some(Instant::now()), snapshot(acq, stats));
+    }
+}
+
+/// The session's counters for a live update.
+fn snapshot(acq: &Acquisition, stats: &LinkStats) -> crate::live::Snapshot {
+    let scan = acq.scan();
+    crate::live::Snapshot {
+        link: stats.clone(),
+        counts: scan.counts.clone(),
+        warnings: scan.warnings.clone(),
+    }
 }
 
 fn log_stats(msg: &str, s: &LinkStats) {

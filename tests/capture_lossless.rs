@@ -80,14 +80,35 @@ fn stdin_session_capture_replays_to_the_same_statistics() {
 #[test]
 fn resumed_session_appends_to_its_capture() {
     let dir = tmpdir("capture-resume");
-    let (bytes, _) = fault_stream(300);
+    let (bytes, exp) = fault_stream(300);
     let (a, b) = bytes.split_at(bytes.len() / 3);
-    for part in [a, b] {
-        let mut child = run_stdin("off", &dir);
-        child.stdin.take().unwrap().write_all(part).unwrap();
-        assert!(child.wait().unwrap().success());
-    }
+    let mut child = run_stdin("off", &dir);
+    child.stdin.take().unwrap().write_all(a).unwrap();
+    assert!(child.wait().unwrap().success());
+    // A new session in the same directory is refused (its curves would be lost), naming
+    // --resume; the capture is untouched.
+    let out = sfs()
+        .args(["--log", "off", "run", "--stdin", "--session"])
+        .arg(&dir)
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let msg = String::from_utf8_lossy(&out.stderr);
+    assert!(msg.contains("--resume") && msg.contains("capture"), "{msg}");
+    assert_eq!(std::fs::read(dir.join("capture.bin")).unwrap(), a);
+    let mut child = sfs()
+        .args(["--log", "off", "run", "--stdin", "--resume"])
+        .arg(&dir)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(b).unwrap();
+    assert!(child.wait().unwrap().success());
     assert_eq!(std::fs::read(dir.join("capture.bin")).unwrap(), bytes);
+    // The report counts the whole capture, as one uninterrupted session would.
+    assert_link(&report(&dir)["link"], bytes.len(), &exp);
 }
 
 #[test]

@@ -91,6 +91,7 @@ fn start_session(
                 spec,
                 &dir,
                 &session::Options::default(),
+                session::Start::New,
                 shutdown,
             ))
     })

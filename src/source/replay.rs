@@ -17,14 +17,28 @@ pub enum Pace {
     Fast,
     /// At the speed the device sent it, from its timestamps.
     Realtime,
+    /// Paced like `Realtime`, N times faster (`"x10"`): a session's timing, compressed.
+    Times(u16),
+}
+
+impl Pace {
+    /// How many times faster than the device's clock; `None` for [`Pace::Fast`].
+    fn speed(self) -> Option<u64> {
+        match self {
+            Pace::Fast => None,
+            Pace::Realtime => Some(1),
+            Pace::Times(n) => Some(n.max(1) as u64),
+        }
+    }
 }
 
 impl std::fmt::Display for Pace {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Pace::Fast => "fast",
-            Pace::Realtime => "realtime",
-        })
+        match self {
+            Pace::Fast => f.write_str("fast"),
+            Pace::Realtime => f.write_str("realtime"),
+            Pace::Times(n) => write!(f, "x{n}"),
+        }
     }
 }
 
@@ -34,9 +48,12 @@ impl std::str::FromStr for Pace {
         match s {
             "fast" => Ok(Pace::Fast),
             "realtime" => Ok(Pace::Realtime),
-            _ => Err(format!(
-                "unknown pace {s:?}: expected \"fast\" or \"realtime\""
-            )),
+            _ => match s.strip_prefix('x').map(str::parse::<u16>) {
+                Some(Ok(n)) if (1..=1000).contains(&n) => Ok(Pace::Times(n)),
+                _ => Err(format!(
+                    "unknown pace {s:?}: expected \"fast\", \"realtime\" or \"xN\" (N times real time, 1 to 1000)"
+                )),
+            },
         }
     }
 }
@@ -86,9 +103,9 @@ fn run(path: PathBuf, mut file: File, pace: Pace, mut out: Out, shutdown: Shutdo
                 break EndReason::ReadError;
             }
         };
-        let sent = match pace {
-            Pace::Fast => out.bytes(&buf[..n]).map_err(|s| s.reason()),
-            Pace::Realtime => pacer.send_paced(&buf[..n], &mut out, &shutdown),
+        let sent = match pace.speed() {
+            None => out.bytes(&buf[..n]).map_err(|s| s.reason()),
+            Some(speed) => pacer.send_paced(&buf[..n], speed, &mut out, &shutdown),
         };
         if let Err(reason) = sent {
             break reason;
@@ -116,8 +133,9 @@ impl Pacer {
         }
     }
 
-    /// The instant at which the frame holding a packet stamped `t` is due.
-    fn due(&mut self, t: u32) -> Instant {
+    /// The instant at which the frame holding a packet stamped `t` is due, replaying `speed`
+    /// times faster than the device's clock.
+    fn due(&mut self, t: u32, speed: u64) -> Instant {
         let start = *self.start.get_or_insert_with(Instant::now);
         if let Some(last) = self.last_t {
             let d = t.wrapping_sub(last);
@@ -126,12 +144,13 @@ impl Pacer {
             }
         }
         self.last_t = Some(t);
-        start + Duration::from_micros(self.device_elapsed_us)
+        start + Duration::from_micros(self.device_elapsed_us / speed)
     }
 
     fn send_paced(
         &mut self,
         chunk: &[u8],
+        speed: u64,
         out: &mut Out,
         shutdown: &Shutdown,
     ) -> Result<(), EndReason> {
@@ -145,7 +164,7 @@ impl Pacer {
                     stamp = packet.t_us().or(stamp);
                 }
             }
-            if let Some(due) = stamp.map(|t| self.due(t)) {
+            if let Some(due) = stamp.map(|t| self.due(t, speed)) {
                 let now = Instant::now();
                 if due > now {
                     if pending < pos {

@@ -425,6 +425,25 @@ impl SoftSolver {
         Ok(SoftSolver { c, w, factor })
     }
 
+    /// Two propagations at once (`b = 0`), as [`solve`](Self::solve).
+    fn solve_pair(&self, x: &mut [Vector3<f64>], y: &mut [Vector3<f64>]) {
+        let mut rhs: Vec<[f64; 6]> = (0..x.len())
+            .map(|i| {
+                if i < self.c {
+                    let (r, s) = (x[i] * self.w, y[i] * self.w);
+                    [r.x, r.y, r.z, s.x, s.y, s.z]
+                } else {
+                    [0.0; 6]
+                }
+            })
+            .collect();
+        self.factor.solve(&mut rhs);
+        for (i, r) in rhs.iter().enumerate() {
+            x[i] = Vector3::new(r[0], r[1], r[2]);
+            y[i] = Vector3::new(r[3], r[4], r[5]);
+        }
+    }
+
     /// `x ← (Q + ω'D)⁻¹ (b + ω' D data)`, `data` the first `c` entries of `x` on entry
     /// (`b = 0` when `None`).
     fn solve(&self, b: Option<&[Vector3<f64>]>, x: &mut [Vector3<f64>]) {
@@ -715,9 +734,10 @@ fn surface_with(
             (None, Some(soft)) => {
                 if pass == 0 {
                     asm.positions[..c].copy_from_slice(&data);
-                    soft.solve(None, &mut asm.positions);
+                    soft.solve_pair(&mut asm.positions, &mut nstar);
+                } else {
+                    soft.solve(None, &mut nstar);
                 }
-                soft.solve(None, &mut nstar);
                 // The curves keep their measured normals (the free ones are propagated).
                 nstar[..c].copy_from_slice(&asm.normals[..c]);
             }
