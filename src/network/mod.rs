@@ -15,10 +15,10 @@ pub mod prefilter;
 pub mod regression;
 
 use crate::scan::Scan;
+use nalgebra::UnitQuaternion;
 use poisson::{PoissonSolver, Positions};
 use prefilter::{prefilter, PrefilterParams, UniformCurve};
 use regression::{RegressionParams, RegressionReport, RegressionSolver};
-use nalgebra::UnitQuaternion;
 use serde::Serialize;
 use std::collections::HashMap;
 use std::time::Instant;
@@ -106,7 +106,11 @@ impl CurveKey {
                 .iter()
                 .map(|t| (t.node, t.d.to_bits(), t.uncertain))
                 .collect(),
-            segment_lengths: c.segment_lengths.iter().map(|l| l.map(f64::to_bits)).collect(),
+            segment_lengths: c
+                .segment_lengths
+                .iter()
+                .map(|l| l.map(f64::to_bits))
+                .collect(),
             params: *p,
         }
     }
@@ -125,8 +129,10 @@ impl Reconstructor {
     }
 
     /// As [`run`](Self::run), with the regression warm-started from the previous run's
-    /// frames (curves unchanged since). For live updates: the optimum is the same, but not
-    /// to the last bit, so final outputs use [`run`](Self::run).
+    /// frames (curves unchanged since): the optimum is the same, but not to the last bit.
+    /// Measured on a growing scan it starts lower but takes as many iterations (Gauss–Newton
+    /// needs about three either way), so the live worker uses [`run`](Self::run), whose
+    /// result depends on the curves alone.
     pub fn run_warm(&mut self, scan: &Scan, p: &NetworkParams) -> Option<Network> {
         self.run_inner(scan, p, true)
     }
