@@ -79,6 +79,7 @@ fn main() {
                         0
                     },
                     soft: None,
+                    ..Default::default()
                 },
             );
             let ms = t0.elapsed().as_secs_f64() * 1e3;

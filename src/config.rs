@@ -48,7 +48,9 @@
 //!
 //! [surface]                          # surfacing with normal control
 //! enabled = true                     # false: write the network only
-//! edge = 0.01                        # target edge length inside patches, m (default: h)
+//! edge = 0.01                        # target edge inside patches, m (default: the samples'
+//!                                    # spacing, at least 1/120 of the network's diagonal)
+//! max_vertices = 20000               # the default edge grows to keep about this many vertices
 //! reweight = 1                       # passes with cotangent weights from the 3D surface
 //! soft = 0.3                         # soft positional constraints of weight ω; 0: hard
 //!
@@ -113,6 +115,7 @@ pub struct OutputToml {
 pub struct SurfaceToml {
     pub enabled: Option<bool>,
     pub edge: Option<f64>,
+    pub max_vertices: Option<usize>,
     pub reweight: Option<usize>,
     pub soft: Option<f64>,
 }
@@ -265,6 +268,7 @@ impl Config {
         cfg.source_spec(file)?;
         cfg.acquisition_config(file)?;
         cfg.network_params(file)?;
+        cfg.surface_params(file)?;
         Ok(cfg)
     }
 
@@ -330,6 +334,16 @@ impl Config {
                 });
             }
             p.edge = Some(e);
+        }
+        if let Some(m) = s.max_vertices {
+            if !(100..=10_000_000).contains(&m) {
+                return Err(ConfigError {
+                    file: file.to_owned(),
+                    key: "surface.max_vertices".into(),
+                    reason: format!("{m} is out of range [100, 10000000]"),
+                });
+            }
+            p.max_vertices = m;
         }
         if let Some(r) = s.reweight {
             if r > 10 {
@@ -599,6 +613,43 @@ mod tests {
         let e =
             parse("[source]\nkind = \"replay\"\npath = \"a.bin\"\npace = \"slow\"\n").unwrap_err();
         assert_eq!(e.key, "source.pace", "{e}");
+    }
+
+    #[test]
+    fn surface_and_output_errors_name_the_key() {
+        let base = "[source]\nkind = \"stdin\"\n";
+        let cases = [
+            ("[surface]\nedge = 0.0\n", "surface.edge", "out of range"),
+            (
+                "[surface]\nmax_vertices = 10\n",
+                "surface.max_vertices",
+                "out of range",
+            ),
+            (
+                "[surface]\nreweight = 11\n",
+                "surface.reweight",
+                "more than 10",
+            ),
+            ("[surface]\nsoft = -1.0\n", "surface.soft", "out of range"),
+            (
+                "[output]\nsnapshot = true\n",
+                "output.snapshot",
+                "unknown field",
+            ),
+            ("[output]\nlive = \"yes\"\n", "output.live", "bool"),
+        ];
+        for (text, key, reason) in cases {
+            let e = parse(&format!("{base}{text}")).unwrap_err();
+            assert_eq!(e.key, key, "{text}: {e}");
+            assert!(e.reason.contains(reason), "{text}: {e}");
+        }
+        let ok = parse(&format!(
+            "{base}[surface]\nmax_vertices = 5000\nsoft = 0\n[output]\nsnapshots = true\n"
+        ))
+        .unwrap();
+        let s = ok.surface_params(Path::new("x")).unwrap().unwrap();
+        assert_eq!((s.max_vertices, s.soft), (5000, None));
+        assert_eq!(ok.output.snapshots, Some(true));
     }
 
     #[test]

@@ -209,3 +209,26 @@ fn soft_constraints_beat_hard_ones_on_noisy_input() {
     // The sessions' weight removes a good part of the noise.
     assert!(at_default < 0.6 * mean_distance(&hard), "{line}");
 }
+
+/// A network sampled ten times finer than the surface's edge: the patch rims keep samples
+/// about half an edge apart (`NetworkSegments::decimated`), so the vertex count follows the
+/// edge, not the sampling (without it: a band of graded triangles along every curve), and the
+/// mesh stays closed and accurate.
+#[test]
+fn a_finely_sampled_network_keeps_a_light_rim() {
+    let fine = sphere_cube(0.004);
+    let a = surface(&fine, &SurfaceParams::default()).unwrap();
+    check_mesh(&a, true);
+    assert!(a.problems.is_empty(), "{:?}", a.problems);
+    let m = mean_distance(&a);
+    assert!(m <= 0.008, "mean distance {m}");
+    // The default edge here is at least 1/120 of the diagonal (0.029): the fine network gives
+    // about the vertices of a lattice of that edge, not of its 4 mm sampling.
+    let budget = 4.0 * std::f64::consts::PI / (3f64.sqrt() / 2.0 * 0.029f64.powi(2));
+    assert!(
+        (a.positions.len() as f64) < 1.5 * budget,
+        "{} vertices, lattice {budget:.0}",
+        a.positions.len()
+    );
+    assert!(a.constrained < fine.segments.iter().map(|s| s.points.len()).sum::<usize>() / 3);
+}

@@ -126,6 +126,41 @@ impl NetworkSegments {
         out
     }
 
+    /// A copy whose segments keep, of their interior samples, only those at least `step`
+    /// (arc length) after the last one kept and before the end: the patch boundaries of a
+    /// surface whose triangles are much larger than the network's sampling. Deterministic per
+    /// segment, so the patches on both sides still share every boundary vertex.
+    pub fn decimated(&self, step: f64) -> Self {
+        let mut out = self.clone();
+        for s in &mut out.segments {
+            let m = s.points.len();
+            if m <= 2 {
+                continue;
+            }
+            let total: f64 = s.points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+            let mut keep = vec![0];
+            let (mut run, mut along) = (0.0, 0.0);
+            for k in 1..m - 1 {
+                let l = (s.points[k] - s.points[k - 1]).norm();
+                run += l;
+                along += l;
+                if run >= step && total - along >= 0.5 * step {
+                    keep.push(k);
+                    run = 0.0;
+                }
+            }
+            keep.push(m - 1);
+            if keep.len() < m {
+                s.points = keep.iter().map(|&k| s.points[k]).collect();
+                s.normals = keep
+                    .iter()
+                    .filter_map(|&k| s.normals.get(k).copied())
+                    .collect();
+            }
+        }
+        out
+    }
+
     pub fn set_normal(&mut self, node: u32, n: Vector3<f64>) {
         self.normals.insert(node, n);
     }

@@ -33,8 +33,12 @@ use std::collections::BTreeMap;
 /// Settings of the surfacer.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SurfaceParams {
-    /// Target edge length inside the patches, m. `None`: [`default_edge`].
+    /// Target edge length inside the patches, m. `None`: [`default_edge`], lengthened if
+    /// needed so that the surface has about `max_vertices` vertices at most.
     pub edge: Option<f64>,
+    /// Vertex budget of the default edge (memory and time are linear in it; a given `edge`
+    /// is not limited). Default [`MAX_VERTICES`].
+    pub max_vertices: usize,
     /// What to solve for.
     pub method: Method,
     /// Passes that recompute the cotangent weights and areas from the surface of the previous
@@ -57,6 +61,7 @@ impl Default for SurfaceParams {
     fn default() -> Self {
         SurfaceParams {
             edge: None,
+            max_vertices: MAX_VERTICES,
             method: Method::NormalControl,
             reweight: 1,
             soft: None,
@@ -610,6 +615,41 @@ pub fn default_edge(net: &NetworkSegments) -> f64 {
 /// See [`default_edge`].
 pub const EDGE_PER_DIAGONAL: f64 = 1.0 / 120.0;
 
+/// Patch boundaries keep network samples at least this many target edges apart
+/// ([`NetworkSegments::decimated`]).
+pub const BOUNDARY_STEP: f64 = 0.5;
+
+/// Default vertex budget ([`SurfaceParams::max_vertices`]): about 200 MB and 0.2 s per surface
+/// on this project's reference machine (BENCHMARKS.md).
+pub const MAX_VERTICES: usize = 20_000;
+
+/// The edge at which the patches of `cyc` take about `max_vertices` vertices: their area is
+/// estimated by fans from each boundary's centroid (a lattice of edge `e` has one vertex
+/// per `√3/2 e²`).
+pub fn budget_edge(net: &NetworkSegments, cyc: &Cycles, max_vertices: usize) -> f64 {
+    let mut area = 0.0;
+    for c in &cyc.patches {
+        let mut pts = Vec::new();
+        for h in &c.edges {
+            let s = &net.segments[h.segment];
+            if h.forward {
+                pts.extend(s.points[..s.points.len() - 1].iter().copied());
+            } else {
+                pts.extend(s.points[1..].iter().rev().copied());
+            }
+        }
+        if pts.len() < 3 {
+            continue;
+        }
+        let centroid = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
+        for k in 0..pts.len() {
+            let (a, b) = (pts[k] - centroid, pts[(k + 1) % pts.len()] - centroid);
+            area += 0.5 * a.cross(&b).norm();
+        }
+    }
+    (area / (3f64.sqrt() / 2.0 * max_vertices.max(1) as f64)).sqrt()
+}
+
 /// Surfaces the network (see the module docs). Patches that fail are reported and left open.
 pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, SurfaceError> {
     Surfacer::new().run(net, p)
@@ -649,9 +689,25 @@ fn surface_with(
     let net = &net.cleaned();
     let cyc = cycles(net);
     let mut problems = cyc.problems.clone();
-    let edge = p.edge.unwrap_or_else(|| default_edge(net));
+    let edge = p
+        .edge
+        .unwrap_or_else(|| default_edge(net).max(budget_edge(net, &cyc, p.max_vertices)));
+    // Boundary vertices about half an edge apart at least: a network sampled far more finely
+    // than the surface would otherwise fill each patch's rim with a band of graded triangles.
+    let decimated = net.decimated(BOUNDARY_STEP * edge);
+    let net = &decimated;
     let t0 = std::time::Instant::now();
-    let (mut asm, skipped) = assemble(net, &cyc, edge, &mut problems);
+    let (mut asm, mut skipped) = assemble(net, &cyc, edge, &mut problems);
+    // The budget's area is an estimate (a developed patch can take more room in the plane
+    // than on the surface): over it by a quarter, tessellate once more at the edge the count
+    // asks for.
+    let nv = asm.positions.len() as f64;
+    if p.edge.is_none() && nv > 1.25 * p.max_vertices as f64 {
+        let edge = edge * (nv / p.max_vertices as f64).sqrt();
+        tracing::debug!("surface: {nv} vertices over the budget; edge {edge:.4}");
+        problems = cyc.problems.clone();
+        (asm, skipped) = assemble(net, &cyc, edge, &mut problems);
+    }
     let lap = |what: &str, t: &mut std::time::Instant| {
         tracing::debug!("surface: {what} {:.1} ms", t.elapsed().as_secs_f64() * 1e3);
         *t = std::time::Instant::now();
