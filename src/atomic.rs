@@ -7,6 +7,15 @@ use std::path::Path;
 
 /// Replaces `path` with `bytes` atomically.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    write_atomic_with(path, |w| w.write_all(bytes))
+}
+
+/// Replaces `path` atomically with what `fill` writes (streamed through a buffer: a large
+/// output is never held in memory whole).
+pub fn write_atomic_with(
+    path: &Path,
+    fill: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+) -> io::Result<()> {
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
     let name = path
         .file_name()
@@ -19,8 +28,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
         None => tmp_name.into(),
     };
     let result = (|| {
-        let mut f = File::create(&tmp)?;
-        f.write_all(bytes)?;
+        let mut w = io::BufWriter::with_capacity(1 << 16, File::create(&tmp)?);
+        fill(&mut w)?;
+        let f = w.into_inner().map_err(|e| e.into_error())?;
         f.sync_data()?;
         std::fs::rename(&tmp, path)
     })();
@@ -32,14 +42,15 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
 
 /// Writes `value` as JSON (indented when `pretty`), atomically.
 pub fn write_json<T: serde::Serialize>(path: &Path, value: &T, pretty: bool) -> io::Result<()> {
-    let mut json = if pretty {
-        serde_json::to_vec_pretty(value)
-    } else {
-        serde_json::to_vec(value)
-    }
-    .map_err(io::Error::other)?;
-    json.push(b'\n');
-    write_atomic(path, &json)
+    write_atomic_with(path, |w| {
+        if pretty {
+            serde_json::to_writer_pretty(&mut *w, value)
+        } else {
+            serde_json::to_writer(&mut *w, value)
+        }
+        .map_err(io::Error::other)?;
+        w.write_all(b"\n")
+    })
 }
 
 #[cfg(test)]

@@ -386,6 +386,7 @@ pub async fn run(
     scan.warnings.extend(products.warnings.iter().cloned());
     products.write_glb(out_dir)?;
     if let Some(l) = &mut live_report {
+        crate::live::release_free_memory();
         (l.rss_mb, l.peak_rss_mb) = crate::live::rss_mb();
     }
     let Products {
