@@ -264,6 +264,7 @@ pub async fn run(
         None => None,
     };
     let description = spec.describe();
+    let progress = replay_progress(&spec);
     tracing::info!(source = %description, out = %out_dir.display(), "session started");
     let started = Instant::now();
     let mut src = source::spawn(spec, capture, shutdown.clone())?;
@@ -332,6 +333,9 @@ pub async fn run(
         match ev {
             Some(SourceEvent::Bytes(bytes)) => {
                 stats.bytes += bytes.len() as u64;
+                if let Some(p) = &progress {
+                    p.inc(bytes.len() as u64);
+                }
                 for e in decoder.feed(&bytes) {
                     stats.observe(&e);
                     if let Some(Update::CurveEnded(i) | Update::CurveUpdated(i)) = acq.event(&e) {
@@ -359,6 +363,9 @@ pub async fn run(
     }
     if decoder.buffered() > 0 {
         tracing::debug!(bytes = decoder.buffered(), "stream ended inside a frame");
+    }
+    if let Some(p) = progress {
+        p.finish_and_clear();
     }
     log_stats("session ended", &stats);
     // The live worker brings in what is pending and stops; its last reconstruction is the
@@ -443,6 +450,29 @@ fn network_glb(
         &net.positions.nodes,
         mesh.as_ref(),
     )
+}
+
+/// A progress bar on standard error for a replayed capture, when standard error is a terminal
+/// (never in logs piped to a file).
+fn replay_progress(spec: &SourceSpec) -> Option<indicatif::ProgressBar> {
+    use std::io::IsTerminal;
+    let SourceSpec::Replay { path, .. } = spec else {
+        return None;
+    };
+    if !std::io::stderr().is_terminal() {
+        return None;
+    }
+    let len = std::fs::metadata(path).ok()?.len();
+    let bar = indicatif::ProgressBar::with_draw_target(
+        Some(len),
+        indicatif::ProgressDrawTarget::stderr_with_hz(4),
+    );
+    if let Ok(style) =
+        indicatif::ProgressStyle::with_template("{bar:40} {bytes}/{total_bytes} ({eta} left)")
+    {
+        bar.set_style(style);
+    }
+    Some(bar)
 }
 
 /// Sends curve `index` (just ended or changed) to the live worker.
