@@ -221,3 +221,74 @@ fn curves_that_end_during_a_reconstruction_coalesce() {
     assert_eq!(net.report.curves_used, n);
     assert!(dir.join("network.glb").exists());
 }
+
+#[test]
+fn a_second_signal_exits_at_once_and_leaves_every_file_whole() {
+    let dir = tmpdir("live-second-signal");
+    // A long session, so that the first signal's finishing (the final reconstruction of
+    // 14 curves and a 20 k-vertex surface) is still running when the second arrives.
+    let (bytes, _) = simulated("torus-hour", &dir);
+    let session = dir.join("session");
+    let mut child = sfs()
+        .args(["--log", "off", "run", "--stdin", "--session"])
+        .arg(&session)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    stdin.write_all(&bytes).unwrap();
+    stdin.flush().unwrap();
+    wait_for("everything captured", Duration::from_secs(30), || {
+        file_len(&session.join("capture.bin")) == bytes.len() as u64
+    });
+    signal(child.id(), "-INT");
+    std::thread::sleep(Duration::from_millis(30));
+    let t0 = Instant::now();
+    signal(child.id(), "-INT");
+    let status = child.wait().unwrap();
+    drop(stdin);
+    assert_eq!(status.code(), Some(130), "{status:?}");
+    assert!(t0.elapsed() < Duration::from_secs(2), "{:?}", t0.elapsed());
+    // Nothing half-written: the capture is whole, and whatever outputs exist parse.
+    assert_eq!(std::fs::read(session.join("capture.bin")).unwrap(), bytes);
+    if let Ok(r) = std::fs::read(session.join("report.json")) {
+        serde_json::from_slice::<serde_json::Value>(&r).expect("report.json parses");
+    }
+    if let Ok(g) = std::fs::read(session.join("network.glb")) {
+        sfs::gltf_out::read_glb(&g).expect("network.glb reads");
+    }
+}
+
+#[test]
+fn snapshots_keep_the_network_of_every_curve() {
+    let dir = tmpdir("live-snapshots");
+    let (bytes, _) = simulated("cone", &dir);
+    let capture = dir.join("cone.bin");
+    std::fs::write(&capture, &bytes).unwrap();
+    let config = dir.join("snap.toml");
+    std::fs::write(
+        &config,
+        "[source]\nkind = \"replay\"\npath = \"cone.bin\"\n[output]\nsnapshots = true\n",
+    )
+    .unwrap();
+    let session = dir.join("session");
+    let st = sfs()
+        .args(["--log", "off", "run", "--config"])
+        .arg(&config)
+        .arg("--session")
+        .arg(&session)
+        .stdout(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let curves = report(&session)["curves"].as_array().unwrap().len();
+    assert!(curves >= 5);
+    for i in 0..curves {
+        let p = session.join(format!("snapshots/curve-{i:03}.glb"));
+        let g = std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        let net = sfs::gltf_out::read_glb(&g).unwrap();
+        assert!(!net.curves.is_empty(), "{}", p.display());
+    }
+}
