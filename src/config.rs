@@ -54,6 +54,18 @@
 //! reweight = 1                       # passes with cotangent weights from the 3D surface
 //! soft = 0.3                         # soft positional constraints of weight ω; 0: hard
 //!
+//! [monitor]                          # instrumented structures (sensor arrays)
+//! epoch_hz = 5.0                     # shapes per second
+//! anchor = 0                         # the node at the origin (default: curve 0's first)
+//! [[monitor.curve]]                  # curve 0, 1, … in order
+//! nodes = [0, 1]                     # nodes along it
+//! node_s = [0.0, 20.0]               # their rest arc lengths, m
+//! length = 20.0
+//! [[monitor.sensor]]
+//! sensor = 0                         # the id in ARRAY_SAMPLE packets
+//! curve = 0
+//! s = 0.0                            # rest arc length on the curve, m
+//!
 //! [output]                           # what `sfs run` writes into the session directory
 //! live = true                        # rebuild network.glb and report.json after every curve
 //! snapshots = false                  # also keep snapshots/curve-NNN.glb per curve
@@ -99,6 +111,40 @@ pub struct Config {
     pub surface: SurfaceToml,
     #[serde(default)]
     pub output: OutputToml,
+    /// Monitoring of an instrumented structure (see the module documentation).
+    pub monitor: Option<MonitorToml>,
+}
+
+/// `[monitor]`, as written (see the module documentation).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MonitorToml {
+    pub epoch_hz: Option<f64>,
+    /// The node placed at the origin (the structure's fixed point, e.g. a riser's foot).
+    pub anchor: Option<u32>,
+    #[serde(default)]
+    pub curve: Vec<MonitorCurveToml>,
+    #[serde(default)]
+    pub sensor: Vec<crate::monitor::layout::LayoutSensor>,
+}
+
+/// `[[monitor.curve]]`: its index is its place in the list.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MonitorCurveToml {
+    pub nodes: Vec<u32>,
+    pub node_s: Vec<f64>,
+    pub length: f64,
+}
+
+/// The resolved `[monitor]` section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MonitorConfig {
+    pub layout: crate::monitor::layout::Layout,
+    /// Epochs per second. Default 5.
+    pub epoch_hz: f64,
+    /// The node at the origin; default the first curve's first node.
+    pub anchor: u32,
 }
 
 /// `[output]`, as written (see the module documentation).
@@ -269,7 +315,72 @@ impl Config {
         cfg.acquisition_config(file)?;
         cfg.network_params(file)?;
         cfg.surface_params(file)?;
+        cfg.monitor_config(file)?;
         Ok(cfg)
+    }
+
+    /// The monitoring layout and settings (`None` without a `[monitor]` section).
+    pub fn monitor_config(&self, file: &Path) -> Result<Option<MonitorConfig>, ConfigError> {
+        let Some(m) = &self.monitor else {
+            return Ok(None);
+        };
+        let err = |key: String, reason: String| ConfigError {
+            file: file.to_owned(),
+            key,
+            reason,
+        };
+        let layout = crate::monitor::layout::Layout {
+            curves: m
+                .curve
+                .iter()
+                .enumerate()
+                .map(|(index, c)| crate::monitor::layout::LayoutCurve {
+                    index,
+                    nodes: c.nodes.clone(),
+                    node_s: c.node_s.clone(),
+                    length: c.length,
+                })
+                .collect(),
+            sensors: m.sensor.clone(),
+        };
+        if layout.curves.is_empty() {
+            return Err(err(
+                "monitor.curve".into(),
+                "a monitoring layout needs at least one [[monitor.curve]]".into(),
+            ));
+        }
+        layout.validate().map_err(|e| match &e {
+            crate::monitor::layout::LayoutError::Curve { curve, .. } => {
+                err(format!("monitor.curve[{curve}]"), e.to_string())
+            }
+            crate::monitor::layout::LayoutError::Sensor { sensor, .. } => {
+                let k = m
+                    .sensor
+                    .iter()
+                    .position(|s| s.sensor == *sensor)
+                    .unwrap_or(0);
+                err(format!("monitor.sensor[{k}]"), e.to_string())
+            }
+        })?;
+        let epoch_hz = m.epoch_hz.unwrap_or(5.0);
+        if !(epoch_hz.is_finite() && (0.01..=100.0).contains(&epoch_hz)) {
+            return Err(err(
+                "monitor.epoch_hz".into(),
+                format!("{epoch_hz} is out of range [0.01, 100]"),
+            ));
+        }
+        let anchor = m.anchor.unwrap_or(layout.curves[0].nodes[0]);
+        if !layout.curves.iter().any(|c| c.nodes.contains(&anchor)) {
+            return Err(err(
+                "monitor.anchor".into(),
+                format!("node {anchor} is on no curve of the layout"),
+            ));
+        }
+        Ok(Some(MonitorConfig {
+            layout,
+            epoch_hz,
+            anchor,
+        }))
     }
 
     /// The reconstruction settings this configuration describes.
@@ -613,6 +724,46 @@ mod tests {
         let e =
             parse("[source]\nkind = \"replay\"\npath = \"a.bin\"\npace = \"slow\"\n").unwrap_err();
         assert_eq!(e.key, "source.pace", "{e}");
+    }
+
+    #[test]
+    fn monitor_layout_errors_name_the_key() {
+        let base = "[source]\nkind = \"stdin\"\n";
+        let curve = "[[monitor.curve]]\nnodes = [0, 1]\nnode_s = [0.0, 20.0]\nlength = 20.0\n";
+        let sensor = |id: u16, c: usize, s: f64| {
+            format!("[[monitor.sensor]]\nsensor = {id}\ncurve = {c}\ns = {s}\n")
+        };
+        let ok = parse(&format!(
+            "{base}[monitor]\nepoch_hz = 2.0\n{curve}{}{}",
+            sensor(0, 0, 0.0),
+            sensor(1, 0, 20.0)
+        ))
+        .unwrap();
+        let m = ok.monitor_config(Path::new("x")).unwrap().unwrap();
+        assert_eq!((m.layout.sensors.len(), m.epoch_hz, m.anchor), (2, 2.0, 0));
+        let cases = [
+            (format!("[monitor]\n{curve}{}", sensor(0, 1, 0.0)), "monitor.sensor[0]", "curve 1"),
+            (
+                format!("[monitor]\n{curve}{}{}", sensor(0, 0, 0.0), sensor(0, 0, 1.0)),
+                "monitor.sensor[0]",
+                "twice",
+            ),
+            (format!("[monitor]\n{curve}{}", sensor(3, 0, 25.0)), "monitor.sensor[0]", "outside"),
+            (
+                "[monitor]\n[[monitor.curve]]\nnodes = [0, 1]\nnode_s = [5.0, 1.0]\nlength = 20.0\n"
+                    .to_string(),
+                "monitor.curve[0]",
+                "increase",
+            ),
+            (format!("[monitor]\nepoch_hz = 0.0\n{curve}"), "monitor.epoch_hz", "out of range"),
+            (format!("[monitor]\nanchor = 7\n{curve}"), "monitor.anchor", "node 7"),
+            ("[monitor]\nepoch_hz = 1.0\n".to_string(), "monitor.curve", "at least one"),
+        ];
+        for (text, key, reason) in cases {
+            let e = parse(&format!("{base}{text}")).unwrap_err();
+            assert_eq!(e.key, key, "{text}: {e}");
+            assert!(e.reason.contains(reason), "{text}: {e}");
+        }
     }
 
     #[test]

@@ -22,6 +22,7 @@
 //! - [`session`]: one run of the pipeline, source → decoder → acquisition → outputs;
 //!   [`live`]: the worker that rebuilds the outputs after every curve (coalescing).
 //! - [`report`]: `report.json`; [`atomic`]: atomic replacement of output files.
+//! - [`monitor`]: instrumented structures (sensor arrays): layout, shape per epoch.
 //! - [`calibrate`]: `sfs calibrate` (ellipsoid and static-pose fits).
 //! - [`simulate`]: captures of known shapes (operator timeline, device models).
 //! - [`config`]: the resolved configuration (`config/*.toml`); [`cli`]: raw flags.
@@ -38,6 +39,7 @@ pub mod gltf_out;
 pub mod keypad;
 pub mod link;
 pub mod live;
+pub mod monitor;
 pub mod network;
 pub mod orientation;
 pub mod report;

@@ -35,24 +35,7 @@ impl std::str::FromStr for StructureKind {
     }
 }
 
-/// A sensor's place in the layout.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct LayoutSensor {
-    pub sensor: u16,
-    pub curve: usize,
-    /// Rest arc length from the curve's first node, m.
-    pub s: f64,
-}
-
-/// A curve of the layout: its node sequence and rest length.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct LayoutCurve {
-    pub index: usize,
-    pub nodes: Vec<u32>,
-    /// Rest arc length of each node along the curve, m.
-    pub node_s: Vec<f64>,
-    pub length: f64,
-}
+pub use crate::monitor::layout::{LayoutCurve, LayoutSensor};
 
 /// The truth at one instant.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -1,0 +1,9 @@
+//! Monitoring mode: fixed arrays of accelerometer + magnetometer sensors on a structure
+//! (a riser, a sail, a panel) stream continuously; the shape is reconstructed epoch by epoch
+//! with the scanning engine (frames on SO(3), Poisson network).
+//!
+//! - [`layout`]: where the sensors are (curve, rest arc length) and where the curves cross.
+//! - [`epoch`]: one epoch's orientations → the shape.
+
+pub mod epoch;
+pub mod layout;

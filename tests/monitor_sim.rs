@@ -1,0 +1,106 @@
+//! Issue 8, monitoring: the simulator's deforming structures streamed by a sensor array,
+//! decoded and averaged per epoch by acquisition, reconstructed epoch by epoch
+//! (`sfs::monitor::epoch`), against the simulator's truth.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use sfs::acquisition::{Acquisition, AcquisitionConfig};
+use sfs::monitor::epoch::{EpochParams, EpochReconstructor};
+use sfs::monitor::layout::Layout;
+use sfs::simulate::structure::{run, StructureKind};
+use std::collections::BTreeMap;
+
+/// The epochs of acquisition grouped by window (every sensor's window closes within one
+/// sampling period of the others): `(window end, orientation by sensor)`.
+fn epochs(scan: &sfs::scan::Scan) -> Vec<(f64, BTreeMap<u16, UnitQuaternion<f64>>)> {
+    let mut by: BTreeMap<i64, (f64, BTreeMap<u16, UnitQuaternion<f64>>)> = BTreeMap::new();
+    for e in &scan.array {
+        let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            e.q[0], e.q[1], e.q[2], e.q[3],
+        ));
+        let slot = by
+            .entry(e.t.round() as i64)
+            .or_insert((e.t, BTreeMap::new()));
+        slot.1.insert(e.sensor, q);
+    }
+    by.into_values().collect()
+}
+
+/// The truth's tip displacement at time `t`, linearly between its 1 s epochs.
+fn truth_tip(truth: &sfs::simulate::structure::StructureTruth, t: f64) -> f64 {
+    let k = truth
+        .epochs
+        .partition_point(|e| e.t <= t)
+        .clamp(1, truth.epochs.len() - 1);
+    let (a, b) = (&truth.epochs[k - 1], &truth.epochs[k]);
+    let u = ((t - a.t) / (b.t - a.t)).clamp(0.0, 1.0);
+    a.tip_displacement.unwrap() * (1.0 - u) + b.tip_displacement.unwrap() * u
+}
+
+#[test]
+fn the_bending_riser_tip_is_within_2_percent_of_its_length() {
+    let (bytes, truth) = run(StructureKind::Riser, 1, 120.0, 10.0);
+    let layout = Layout {
+        sensors: truth.sensors.clone(),
+        curves: truth.curves.clone(),
+    };
+    layout.validate().unwrap();
+    let scan = Acquisition::scan_bytes(&bytes, AcquisitionConfig::default());
+    let mut rec = EpochReconstructor::new();
+    let (mut worst, mut checked, mut swing) = (0.0f64, 0, 0.0f64);
+    for (t, q) in epochs(&scan) {
+        if q.len() < layout.sensors.len() {
+            continue; // a window the stream's start or end cut short
+        }
+        let shape = rec.run(&layout, &q, &EpochParams::default()).unwrap();
+        assert!(shape.missing.is_empty() && shape.left_out.is_empty());
+        let d: Vector3<f64> = shape.positions.nodes[&1] - shape.positions.nodes[&0];
+        let tip = (d.x * d.x + d.y * d.y).sqrt();
+        // A window averages the samples of the second before its end (10 Hz): its middle.
+        let expected = truth_tip(&truth, t - 0.55);
+        worst = worst.max((tip - expected).abs());
+        swing = swing.max(expected);
+        checked += 1;
+    }
+    eprintln!("{checked} epochs, tip swing {swing:.2} m, worst error {worst:.3} m");
+    assert!(checked >= 100, "{checked} epochs");
+    assert!(swing > 1.5, "the riser barely moved: {swing} m");
+    // Issue 8: within 2 % of the riser's length.
+    assert!(worst <= 0.02 * truth.size, "worst tip error {worst} m");
+}
+
+#[test]
+fn missing_sensors_are_interpolated_and_a_curve_without_any_is_left_out() {
+    let (bytes, truth) = run(StructureKind::Panel, 2, 5.0, 10.0);
+    let layout = Layout {
+        sensors: truth.sensors.clone(),
+        curves: truth.curves.clone(),
+    };
+    layout.validate().unwrap();
+    let scan = Acquisition::scan_bytes(&bytes, AcquisitionConfig::default());
+    let (_, mut q) = epochs(&scan)
+        .into_iter()
+        .find(|(_, q)| q.len() == layout.sensors.len())
+        .unwrap();
+    // Two sensors of curve 0 drop out, and every sensor of curve 5.
+    let gone: Vec<u16> = layout
+        .sensors
+        .iter()
+        .filter(|s| s.curve == 5 || (s.curve == 0 && (s.sensor == 3 || s.sensor == 4)))
+        .map(|s| s.sensor)
+        .collect();
+    for s in &gone {
+        q.remove(s);
+    }
+    let shape = EpochReconstructor::new()
+        .run(&layout, &q, &EpochParams::default())
+        .unwrap();
+    assert_eq!(shape.missing, gone);
+    assert_eq!(shape.left_out.len(), 1, "{:?}", shape.left_out);
+    assert!(shape.left_out[0].starts_with("curve 5"));
+    assert_eq!(shape.positions.curves.len(), 5);
+    assert!(shape
+        .positions
+        .curves
+        .iter()
+        .all(|c| c.points.iter().all(|p| p.iter().all(|x| x.is_finite()))));
+}
