@@ -104,3 +104,84 @@ fn missing_sensors_are_interpolated_and_a_curve_without_any_is_left_out() {
         .iter()
         .all(|c| c.points.iter().all(|p| p.iter().all(|x| x.is_finite()))));
 }
+
+/// The truth's top (sensor at the riser's top) at time `t`, linearly between epochs.
+fn truth_top(truth: &sfs::simulate::structure::StructureTruth, t: f64) -> Vector3<f64> {
+    let k = truth
+        .epochs
+        .partition_point(|e| e.t <= t)
+        .clamp(1, truth.epochs.len() - 1);
+    let (a, b) = (&truth.epochs[k - 1], &truth.epochs[k]);
+    let u = ((t - a.t) / (b.t - a.t)).clamp(0.0, 1.0);
+    let (pa, pb) = (a.positions.last().unwrap(), b.positions.last().unwrap());
+    Vector3::from(*pa) * (1.0 - u) + Vector3::from(*pb) * u
+}
+
+/// Issue 8: displacement from the reference shape (the first epoch) follows the truth, and an
+/// alarm on it fires when, and only when, the truth crosses the threshold.
+#[test]
+fn displacement_follows_the_truth_and_the_alarm_fires_when_and_only_when_crossed() {
+    use sfs::monitor::alarm::{Alarm, Transition};
+    use sfs::monitor::metrics::{compare, ReferenceBuilder, Shape};
+    let (bytes, truth) = run(StructureKind::Riser, 1, 120.0, 10.0);
+    let layout = Layout {
+        sensors: truth.sensors.clone(),
+        curves: truth.curves.clone(),
+    };
+    let scan = Acquisition::scan_bytes(&bytes, AcquisitionConfig::default());
+    let mut rec = EpochReconstructor::new();
+    let mut reference = ReferenceBuilder::new();
+    let mut t_ref = None;
+    let (threshold, hysteresis, tol) = (1.5, 0.2, 0.2);
+    let mut alarm = Alarm::new("max_displacement", threshold, hysteresis);
+    let (mut raised, mut episodes, mut below) = (0, 0, true);
+    let mut worst = 0.0f64;
+    for (t, q) in epochs(&scan) {
+        if q.len() < layout.sensors.len() {
+            continue;
+        }
+        let shape = rec.run(&layout, &q, &EpochParams::default()).unwrap();
+        let now = Shape::anchored(&shape.positions, 0).unwrap();
+        let mid = t - 0.55;
+        if reference.count() == 0 {
+            assert!(reference.add(&now));
+            t_ref = Some(mid);
+            continue;
+        }
+        let m = compare(&reference.reference().unwrap(), &now);
+        let expected = (truth_top(&truth, mid) - truth_top(&truth, t_ref.unwrap())).norm();
+        worst = worst.max((m.max_displacement - expected).abs());
+        if alarm.update(m.max_displacement) == Some(Transition::Raised) {
+            raised += 1;
+        }
+        // The truth's episodes above the threshold, counted with the same hysteresis.
+        if below && expected > threshold + tol {
+            episodes += 1;
+            below = false;
+        } else if expected < threshold - hysteresis - tol {
+            below = true;
+        }
+        if expected > threshold + tol {
+            assert!(
+                alarm.is_raised(),
+                "t = {t:.1}: truth {expected:.2} m, alarm down"
+            );
+        }
+        if expected < threshold - hysteresis - tol {
+            assert!(
+                !alarm.is_raised(),
+                "t = {t:.1}: truth {expected:.2} m, alarm up"
+            );
+        }
+    }
+    eprintln!("displacement worst error {worst:.3} m; {raised} alarms, {episodes} episodes");
+    assert!(
+        worst <= 0.02 * truth.size,
+        "worst displacement error {worst} m"
+    );
+    assert!(
+        episodes >= 2,
+        "the riser crossed the threshold {episodes} times"
+    );
+    assert_eq!(raised, episodes);
+}

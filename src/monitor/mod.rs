@@ -4,6 +4,10 @@
 //!
 //! - [`layout`]: where the sensors are (curve, rest arc length) and where the curves cross.
 //! - [`epoch`]: one epoch's orientations → the shape.
+//! - [`metrics`]: displacement and curvature change from a reference shape.
+//! - [`alarm`]: thresholds with hysteresis on the metrics.
 
+pub mod alarm;
 pub mod epoch;
 pub mod layout;
+pub mod metrics;
