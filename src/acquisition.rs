@@ -138,7 +138,8 @@ impl Clock {
 
 #[derive(Debug, Clone, Default)]
 struct ArraySensor {
-    start: f64,
+    /// The window being averaged: `[window · W, (window + 1) · W)` of session time.
+    window: i64,
     acc: Vector3<f64>,
     mag: Vector3<f64>,
     n: u32,
@@ -206,6 +207,12 @@ impl Acquisition {
     /// The scan so far (accepted curves only).
     pub fn scan(&self) -> &Scan {
         &self.scan
+    }
+
+    /// Takes the sensor-array epochs gathered so far (monitoring consumes them as they come,
+    /// so that a month-long session does not keep them all).
+    pub fn take_array(&mut self) -> Vec<ArrayEpoch> {
+        std::mem::take(&mut self.scan.array)
     }
 
     fn warn(&mut self, msg: String) {
@@ -672,13 +679,24 @@ impl Acquisition {
         mag: Vector3<f64>,
         sat: bool,
     ) {
+        // Windows on a grid of session time shared by every sensor, so that the epochs of
+        // all sensors of one window carry the same time (the window's end).
         let window = self.cfg.array_window;
         let th = self.cfg.thresholds;
+        let k = (t / window).floor() as i64;
         let st = self.array.entry(sensor).or_insert_with(|| ArraySensor {
-            start: t,
+            window: k,
             ..Default::default()
         });
-        if t - st.start >= window && st.n > 0 {
+        if k != st.window && st.n == 0 {
+            // Nothing usable in the last window (every sample saturated): no epoch.
+            *st = ArraySensor {
+                window: k,
+                ..Default::default()
+            };
+        }
+        if k != st.window {
+            let t = (st.window + 1) as f64 * window;
             let q = triad(&(st.acc / st.n as f64), &(st.mag / st.n as f64));
             let mut f = st.flags;
             let q = match q {
@@ -696,7 +714,7 @@ impl Acquisition {
                 flags: f,
             });
             *st = ArraySensor {
-                start: t,
+                window: k,
                 ..Default::default()
             };
         }

@@ -57,6 +57,14 @@
 //! [monitor]                          # instrumented structures (sensor arrays)
 //! epoch_hz = 5.0                     # shapes per second
 //! anchor = 0                         # the node at the origin (default: curve 0's first)
+//! reference_s = 10.0                 # the mean shape of the first seconds is the reference
+//! latest_every = 5                   # latest.glb replaced every this many epochs
+//! metrics_max_mb = 64.0              # metrics.csv rotated past this size …
+//! metrics_keep = 4                   # … keeping this many old files
+//! [[monitor.alarm]]                  # any number; metric: max_displacement,
+//! metric = "max_displacement"        #   mean_displacement or max_curvature_change
+//! threshold = 0.5                    # m (rad/m for curvature): raised above it …
+//! hysteresis = 0.05                  # … cleared below threshold − hysteresis
 //! [[monitor.curve]]                  # curve 0, 1, … in order
 //! nodes = [0, 1]                     # nodes along it
 //! node_s = [0.0, 20.0]               # their rest arc lengths, m
@@ -122,11 +130,41 @@ pub struct MonitorToml {
     pub epoch_hz: Option<f64>,
     /// The node placed at the origin (the structure's fixed point, e.g. a riser's foot).
     pub anchor: Option<u32>,
+    pub reference_s: Option<f64>,
+    pub latest_every: Option<usize>,
+    pub metrics_max_mb: Option<f64>,
+    pub metrics_keep: Option<usize>,
+    #[serde(default)]
+    pub alarm: Vec<AlarmToml>,
     #[serde(default)]
     pub curve: Vec<MonitorCurveToml>,
     #[serde(default)]
     pub sensor: Vec<crate::monitor::layout::LayoutSensor>,
 }
+
+/// `[[monitor.alarm]]`.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AlarmToml {
+    pub metric: String,
+    pub threshold: f64,
+    pub hysteresis: Option<f64>,
+}
+
+/// An alarm of the resolved `[monitor]` section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AlarmSpec {
+    pub metric: String,
+    pub threshold: f64,
+    pub hysteresis: f64,
+}
+
+/// The metrics an alarm can watch.
+pub const ALARM_METRICS: [&str; 3] = [
+    "max_displacement",
+    "mean_displacement",
+    "max_curvature_change",
+];
 
 /// `[[monitor.curve]]`: its index is its place in the list.
 #[derive(Debug, Clone, Default, Deserialize)]
@@ -145,6 +183,15 @@ pub struct MonitorConfig {
     pub epoch_hz: f64,
     /// The node at the origin; default the first curve's first node.
     pub anchor: u32,
+    /// Seconds at the start whose mean shape is the reference. Default 10.
+    pub reference_s: f64,
+    /// `latest.glb` is replaced every this many epochs. Default 5.
+    pub latest_every: usize,
+    /// `metrics.csv` is rotated past this size (default 64 MB), keeping `metrics_keep` old
+    /// files (default 4).
+    pub metrics_max_bytes: u64,
+    pub metrics_keep: usize,
+    pub alarms: Vec<AlarmSpec>,
 }
 
 /// `[output]`, as written (see the module documentation).
@@ -376,10 +423,64 @@ impl Config {
                 format!("node {anchor} is on no curve of the layout"),
             ));
         }
+        let reference_s = m.reference_s.unwrap_or(10.0);
+        if !(reference_s.is_finite() && (0.0..=86_400.0).contains(&reference_s)) {
+            return Err(err(
+                "monitor.reference_s".into(),
+                format!("{reference_s} is out of range [0, 86400] s"),
+            ));
+        }
+        let latest_every = m.latest_every.unwrap_or(5);
+        if latest_every == 0 {
+            return Err(err(
+                "monitor.latest_every".into(),
+                "must be at least 1".into(),
+            ));
+        }
+        let max_mb = m.metrics_max_mb.unwrap_or(64.0);
+        if !(max_mb.is_finite() && (0.01..=1e6).contains(&max_mb)) {
+            return Err(err(
+                "monitor.metrics_max_mb".into(),
+                format!("{max_mb} is out of range [0.01, 1e6] MB"),
+            ));
+        }
+        let mut alarms = Vec::new();
+        for (k, a) in m.alarm.iter().enumerate() {
+            let key = |f: &str| format!("monitor.alarm[{k}].{f}");
+            if !ALARM_METRICS.contains(&a.metric.as_str()) {
+                return Err(err(
+                    key("metric"),
+                    format!("{:?} is not one of {ALARM_METRICS:?}", a.metric),
+                ));
+            }
+            if !(a.threshold.is_finite() && a.threshold > 0.0) {
+                return Err(err(
+                    key("threshold"),
+                    format!("{} is not positive", a.threshold),
+                ));
+            }
+            let h = a.hysteresis.unwrap_or(0.1 * a.threshold);
+            if !(h.is_finite() && (0.0..a.threshold).contains(&h)) {
+                return Err(err(
+                    key("hysteresis"),
+                    format!("{h} is not in [0, threshold = {})", a.threshold),
+                ));
+            }
+            alarms.push(AlarmSpec {
+                metric: a.metric.clone(),
+                threshold: a.threshold,
+                hysteresis: h,
+            });
+        }
         Ok(Some(MonitorConfig {
             layout,
             epoch_hz,
             anchor,
+            reference_s,
+            latest_every,
+            metrics_max_bytes: (max_mb * 1e6) as u64,
+            metrics_keep: m.metrics_keep.unwrap_or(4).min(1000),
+            alarms,
         }))
     }
 

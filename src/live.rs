@@ -300,6 +300,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
             network: products.network.as_ref().map(|n| n.report.clone()),
             surface: products.surface.clone(),
             live: Some(report.clone()),
+            monitor: None,
         };
         let path = settings.out_dir.join(session::REPORT_FILE);
         if let Err(e) = live_report.write(&path) {

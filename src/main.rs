@@ -118,11 +118,18 @@ fn replay(a: ReplayArgs) -> i32 {
 
 /// Session options from a configuration file.
 fn options(cfg: &Config, file: &Path) -> Result<session::Options, ConfigError> {
+    let monitor = cfg.monitor_config(file)?;
+    let mut acquisition = cfg.acquisition_config(file)?;
+    if let Some(m) = &monitor {
+        // One window of the sensors' orientations per epoch.
+        acquisition.array_window = 1.0 / m.epoch_hz;
+    }
     Ok(session::Options {
-        acquisition: cfg.acquisition_config(file)?,
+        acquisition,
+        monitor,
         network: cfg.network_params(file)?,
         surface: cfg.surface_params(file)?,
-        live: cfg.output.live.unwrap_or(true),
+        live: cfg.output.live.unwrap_or(true) && cfg.monitor.is_none(),
         snapshots: cfg.output.snapshots.unwrap_or(false),
     })
 }

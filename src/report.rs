@@ -34,6 +34,8 @@ pub struct Report {
     pub surface: Option<crate::surface::fit::SurfaceReport>,
     /// What the live updates measured (latency from the E key to `network.glb`, memory).
     pub live: Option<crate::live::LiveReport>,
+    /// What monitoring did (epochs, alarms, the last metrics).
+    pub monitor: Option<crate::monitor::run::MonitorReport>,
 }
 
 /// A curve in `report.json`.

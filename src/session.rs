@@ -33,6 +33,8 @@ pub struct Options {
     pub live: bool,
     /// Keep a copy of `network.glb` per curve (`snapshots/curve-NNN.glb`), live updates only.
     pub snapshots: bool,
+    /// Monitoring of an instrumented structure ([`crate::monitor::run`]).
+    pub monitor: Option<crate::config::MonitorConfig>,
 }
 
 /// The soft-constraint weight ω of the surface fit for scans (measured data). On a noisy
@@ -54,6 +56,7 @@ impl Default for Options {
             }),
             live: true,
             snapshots: false,
+            monitor: None,
         }
     }
 }
@@ -269,6 +272,12 @@ pub async fn run(
     let started = Instant::now();
     let mut src = source::spawn(spec, capture, shutdown.clone())?;
 
+    let mut monitor = match &options.monitor {
+        Some(m) => Some(
+            crate::monitor::run::Monitor::new(m.clone(), out_dir).map_err(output_err(out_dir))?,
+        ),
+        None => None,
+    };
     let mut decoder = Decoder::new();
     let mut stats = LinkStats::default();
     let mut acq = Acquisition::new(options.acquisition.clone());
@@ -342,6 +351,11 @@ pub async fn run(
                         post(&mut live, &acq, i, &stats);
                     }
                 }
+                if let Some(m) = &mut monitor {
+                    for e in acq.take_array() {
+                        m.feed(&e);
+                    }
+                }
             }
             Some(SourceEvent::Connected { .. }) => stats.connects += 1,
             Some(SourceEvent::Disconnected { .. }) => stats.disconnects += 1,
@@ -370,6 +384,10 @@ pub async fn run(
     log_stats("session ended", &stats);
     // The live worker brings in what is pending and stops; its last reconstruction is the
     // final one (the same bits a fresh one would give) when it saw every curve.
+    let monitor_report = monitor.map(|mut m| {
+        m.finish();
+        m.report
+    });
     let live = live.map(|l| l.finish());
     let mut scan = acq.finish();
     let scan_path = out_dir.join(SCAN_FILE);
@@ -421,6 +439,7 @@ pub async fn run(
         network: network.map(|n| n.report),
         surface: surface_report,
         live: live_report,
+        monitor: monitor_report,
     };
     let report_path = out_dir.join(REPORT_FILE);
     report

@@ -185,3 +185,70 @@ fn displacement_follows_the_truth_and_the_alarm_fires_when_and_only_when_crossed
     );
     assert_eq!(raised, episodes);
 }
+
+/// The monitoring daemon end to end: the riser's stream on standard input, `sfs run` with a
+/// `[monitor]` layout and an alarm: a metrics line per epoch, the alarm's transitions in
+/// events.log, latest.glb, and the metrics files rotated within their retention.
+#[test]
+fn the_monitoring_daemon_writes_metrics_events_and_the_latest_shape() {
+    use std::io::Write;
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("monitor-daemon-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let (bytes, truth) = run(StructureKind::Riser, 1, 120.0, 10.0);
+    let mut cfg = String::from(
+        "[source]\nkind = \"stdin\"\n[monitor]\nepoch_hz = 5.0\nanchor = 0\nreference_s = 1.0\n\
+         metrics_max_mb = 0.01\nmetrics_keep = 1\n\
+         [[monitor.alarm]]\nmetric = \"max_displacement\"\nthreshold = 1.5\nhysteresis = 0.2\n\
+         [[monitor.curve]]\nnodes = [0, 1]\nnode_s = [0.0, 20.0]\nlength = 20.0\n",
+    );
+    for s in &truth.sensors {
+        cfg += &format!(
+            "[[monitor.sensor]]\nsensor = {}\ncurve = {}\ns = {}\n",
+            s.sensor, s.curve, s.s
+        );
+    }
+    std::fs::write(dir.join("riser.toml"), cfg).unwrap();
+    let session = dir.join("session");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "off", "run", "--stdin", "--config"])
+        .arg(dir.join("riser.toml"))
+        .arg("--session")
+        .arg(&session)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(&bytes).unwrap();
+    assert!(child.wait().unwrap().success());
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(session.join("report.json")).unwrap()).unwrap();
+    let m = &report["monitor"];
+    // 120 s at 5 epochs per second (the last window closes at the end of input).
+    let epochs = m["epochs"].as_u64().unwrap();
+    assert!((599..=601).contains(&epochs), "{epochs} epochs");
+    assert_eq!(m["failed"], 0);
+    assert_eq!(m["alarms_raised"], 4);
+    let events = std::fs::read_to_string(session.join("events.log")).unwrap();
+    assert_eq!(events.matches("alarm raised").count(), 4, "{events}");
+    assert_eq!(events.matches("alarm cleared").count(), 4, "{events}");
+    let glb = std::fs::read(session.join("latest.glb")).unwrap();
+    let net = sfs::gltf_out::read_glb(&glb).unwrap();
+    assert_eq!(net.curves.len(), 1);
+    // Retention: 10 kB per file, the current one and one old one; every line complete, and
+    // no sensor missing (the windows of all sensors are aligned).
+    let mut lines = 0;
+    for name in ["metrics.csv", "metrics.1.csv"] {
+        let text = std::fs::read_to_string(session.join(name)).unwrap();
+        assert!(text.len() <= 10_000, "{name}: {} bytes", text.len());
+        for l in text.lines().filter(|l| !l.starts_with("t_s")) {
+            let f: Vec<&str> = l.split(',').collect();
+            assert_eq!(f.len(), 8, "{name}: {l}");
+            assert_eq!(f[4], "0", "{name}: sensors missing: {l}");
+            lines += 1;
+        }
+    }
+    assert!(!session.join("metrics.2.csv").exists());
+    assert!(lines > 100 && lines < epochs as usize, "{lines} lines kept");
+}

@@ -6,8 +6,10 @@
 //! - [`epoch`]: one epoch's orientations → the shape.
 //! - [`metrics`]: displacement and curvature change from a reference shape.
 //! - [`alarm`]: thresholds with hysteresis on the metrics.
+//! - [`run`]: the monitoring loop of a session (epochs → shape → metrics → alarms → files).
 
 pub mod alarm;
 pub mod epoch;
 pub mod layout;
 pub mod metrics;
+pub mod run;

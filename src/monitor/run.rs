@@ -1,0 +1,265 @@
+//! The monitoring loop of a session: sensor-array epochs (per-sensor orientations averaged by
+//! acquisition over windows of `1 / epoch_hz`) grouped by window → the shape
+//! ([`super::epoch`]) → the reference (mean of the first `reference_s` seconds) → metrics and
+//! alarms → outputs in the session directory:
+//!
+//! - `metrics.csv`: one line per epoch (time, displacement, curvature change, sensors missing,
+//!   saturated, magnetically disturbed, alarms raised), rotated to `metrics.1.csv`, … when it
+//!   passes `metrics_max_mb`, keeping `metrics_keep` files;
+//! - `events.log`: one line per alarm raised or cleared (also a warning in the log);
+//! - `latest.glb`: the network of the latest shape, replaced atomically every `latest_every`
+//!   epochs.
+
+use super::alarm::{Alarm, Transition};
+use super::epoch::{EpochParams, EpochReconstructor};
+use super::metrics::{compare, Metrics, ReferenceBuilder, Shape};
+use crate::config::MonitorConfig;
+use crate::orientation::flags;
+use crate::scan::ArrayEpoch;
+use nalgebra::{Quaternion, UnitQuaternion};
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Name of the metrics time series in a session directory.
+pub const METRICS_FILE: &str = "metrics.csv";
+/// Name of the alarm events file.
+pub const EVENTS_FILE: &str = "events.log";
+/// Name of the latest shape.
+pub const LATEST_FILE: &str = "latest.glb";
+
+const CSV_HEADER: &str = "t_s,max_displacement_m,mean_displacement_m,max_curvature_change_rad_m,missing,saturated,disturbed,alarms\n";
+
+/// What a monitoring session did, for `report.json`.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct MonitorReport {
+    pub epochs: u64,
+    /// Epochs that could not be reconstructed (no curve with a sensor), each also a warning.
+    pub failed: u64,
+    pub reference_epochs: usize,
+    pub alarms_raised: u64,
+    pub last: Option<Metrics>,
+}
+
+/// The monitoring state of a session.
+pub struct Monitor {
+    cfg: MonitorConfig,
+    dir: PathBuf,
+    rec: EpochReconstructor,
+    reference: ReferenceBuilder,
+    reference_epochs: usize,
+    alarms: Vec<Alarm>,
+    /// Orientations (and flags) by sensor of the windows not yet closed, by window number.
+    open: BTreeMap<i64, BTreeMap<u16, (UnitQuaternion<f64>, u8)>>,
+    csv: Option<std::fs::File>,
+    csv_bytes: u64,
+    pub report: MonitorReport,
+}
+
+impl Monitor {
+    /// Starts monitoring into `dir` (the metrics file is appended to).
+    pub fn new(cfg: MonitorConfig, dir: &Path) -> std::io::Result<Monitor> {
+        let alarms = cfg
+            .alarms
+            .iter()
+            .map(|a| Alarm::new(a.metric.clone(), a.threshold, a.hysteresis))
+            .collect();
+        let reference_epochs = ((cfg.reference_s * cfg.epoch_hz).round() as usize).max(1);
+        let mut m = Monitor {
+            cfg,
+            dir: dir.to_owned(),
+            rec: EpochReconstructor::new(),
+            reference: ReferenceBuilder::new(),
+            reference_epochs,
+            alarms,
+            open: BTreeMap::new(),
+            csv: None,
+            csv_bytes: 0,
+            report: MonitorReport::default(),
+        };
+        m.open_csv()?;
+        Ok(m)
+    }
+
+    fn open_csv(&mut self) -> std::io::Result<()> {
+        let path = self.dir.join(METRICS_FILE);
+        let mut f = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)?;
+        self.csv_bytes = f.metadata()?.len();
+        if self.csv_bytes == 0 {
+            f.write_all(CSV_HEADER.as_bytes())?;
+            self.csv_bytes = CSV_HEADER.len() as u64;
+        }
+        self.csv = Some(f);
+        Ok(())
+    }
+
+    /// Rotates `metrics.csv` → `metrics.1.csv` → … keeping `metrics_keep` old files.
+    fn rotate(&mut self) -> std::io::Result<()> {
+        self.csv = None;
+        let name = |k: usize| self.dir.join(format!("metrics.{k}.csv"));
+        let keep = self.cfg.metrics_keep;
+        let _ = std::fs::remove_file(name(keep));
+        for k in (1..keep).rev() {
+            let _ = std::fs::rename(name(k), name(k + 1));
+        }
+        if keep > 0 {
+            std::fs::rename(self.dir.join(METRICS_FILE), name(1))?;
+        } else {
+            std::fs::remove_file(self.dir.join(METRICS_FILE))?;
+        }
+        self.open_csv()
+    }
+
+    /// Feeds one sensor's epoch; windows older than the newest one seen are closed.
+    pub fn feed(&mut self, e: &ArrayEpoch) {
+        let key = (e.t * self.cfg.epoch_hz).round() as i64;
+        let q = UnitQuaternion::from_quaternion(Quaternion::new(e.q[0], e.q[1], e.q[2], e.q[3]));
+        self.open
+            .entry(key)
+            .or_default()
+            .insert(e.sensor, (q, e.flags));
+        while self.open.len() > 1 {
+            let (&k, _) = self.open.iter().next().expect("two windows");
+            if k >= key {
+                break;
+            }
+            let window = self.open.remove(&k).expect("present");
+            self.close(k as f64 / self.cfg.epoch_hz, window);
+        }
+    }
+
+    /// Closes the windows still open (end of the session).
+    pub fn finish(&mut self) {
+        for (k, w) in std::mem::take(&mut self.open) {
+            self.close(k as f64 / self.cfg.epoch_hz, w);
+        }
+        if let Some(f) = &mut self.csv {
+            let _ = f.sync_data();
+        }
+    }
+
+    fn close(&mut self, t: f64, window: BTreeMap<u16, (UnitQuaternion<f64>, u8)>) {
+        self.report.epochs += 1;
+        let usable: BTreeMap<u16, UnitQuaternion<f64>> = window
+            .iter()
+            .filter(|(_, (_, f))| f & (flags::INVALID | flags::SATURATED) == 0)
+            .map(|(s, (q, _))| (*s, *q))
+            .collect();
+        let saturated = window
+            .values()
+            .filter(|(_, f)| f & flags::SATURATED != 0)
+            .count();
+        let disturbed = window
+            .values()
+            .filter(|(_, f)| f & flags::MAG_DISTURBED != 0)
+            .count();
+        let shape = match self
+            .rec
+            .run(&self.cfg.layout, &usable, &EpochParams::default())
+        {
+            Ok(s) => s,
+            Err(e) => {
+                self.report.failed += 1;
+                tracing::warn!("monitor: epoch at t = {t:.2} s: {e}");
+                return;
+            }
+        };
+        for w in &shape.left_out {
+            tracing::debug!("monitor: t = {t:.2} s: {w}");
+        }
+        let Some(now) = Shape::anchored(&shape.positions, self.cfg.anchor) else {
+            self.report.failed += 1;
+            tracing::warn!(
+                "monitor: epoch at t = {t:.2} s: the anchor node {} is on no curve with a sensor",
+                self.cfg.anchor
+            );
+            return;
+        };
+        if self.reference.count() < self.reference_epochs && self.reference.add(&now) {
+            self.report.reference_epochs = self.reference.count();
+        }
+        let metrics = self
+            .reference
+            .reference()
+            .map(|r| compare(&r, &now))
+            .unwrap_or_default();
+        let mut raised = Vec::new();
+        for a in &mut self.alarms {
+            let value = match a.metric.as_str() {
+                "max_displacement" => metrics.max_displacement,
+                "mean_displacement" => metrics.mean_displacement,
+                "max_curvature_change" => metrics.max_curvature_change,
+                _ => f64::NAN,
+            };
+            if let Some(tr) = a.update(value) {
+                let what = match tr {
+                    Transition::Raised => {
+                        self.report.alarms_raised += 1;
+                        "raised"
+                    }
+                    Transition::Cleared => "cleared",
+                };
+                tracing::warn!(
+                    metric = a.metric,
+                    value,
+                    threshold = a.threshold,
+                    "monitor: alarm {what} at t = {t:.2} s"
+                );
+                let line = format!(
+                    "t={t:.3} alarm {what} {}={value:.4} threshold={}\n",
+                    a.metric, a.threshold
+                );
+                let path = self.dir.join(EVENTS_FILE);
+                let written = std::fs::OpenOptions::new()
+                    .create(true)
+                    .append(true)
+                    .open(&path)
+                    .and_then(|mut f| f.write_all(line.as_bytes()).and_then(|_| f.sync_data()));
+                if let Err(e) = written {
+                    tracing::error!("monitor: cannot append to {}: {e}", path.display());
+                }
+            }
+            if a.is_raised() {
+                raised.push(a.metric.clone());
+            }
+        }
+        let line = format!(
+            "{t:.3},{:.6},{:.6},{:.6},{},{saturated},{disturbed},{}\n",
+            metrics.max_displacement,
+            metrics.mean_displacement,
+            metrics.max_curvature_change,
+            shape.missing.len(),
+            raised.join(";")
+        );
+        if self.csv_bytes + line.len() as u64 > self.cfg.metrics_max_bytes {
+            if let Err(e) = self.rotate() {
+                tracing::error!("monitor: rotating {METRICS_FILE}: {e}");
+            }
+        }
+        if let Some(f) = &mut self.csv {
+            match f.write_all(line.as_bytes()) {
+                Ok(()) => self.csv_bytes += line.len() as u64,
+                Err(e) => tracing::error!("monitor: cannot append to {METRICS_FILE}: {e}"),
+            }
+        }
+        self.report.last = Some(metrics);
+        if self.report.epochs % self.cfg.latest_every as u64 == 0 {
+            let glb = crate::gltf_out::network_glb(
+                &shape.positions.network_curves(),
+                &shape.positions.nodes,
+                None,
+            );
+            let path = self.dir.join(LATEST_FILE);
+            match glb
+                .map_err(|e| e.to_string())
+                .and_then(|b| crate::atomic::write_atomic(&path, &b).map_err(|e| e.to_string()))
+            {
+                Ok(()) => {}
+                Err(e) => tracing::error!("monitor: {}: {e}", path.display()),
+            }
+        }
+    }
+}
