@@ -61,6 +61,8 @@
 //! latest_every = 5                   # latest.glb replaced every this many epochs
 //! metrics_max_mb = 64.0              # metrics.csv rotated past this size …
 //! metrics_keep = 4                   # … keeping this many old files
+//! http_port = 9464                   # Prometheus metrics at http://127.0.0.1:9464/metrics
+//! http_address = "127.0.0.1"         #   (off without http_port; 0.0.0.0 to serve others)
 //! [[monitor.alarm]]                  # any number; metric: max_displacement,
 //! metric = "max_displacement"        #   mean_displacement or max_curvature_change
 //! threshold = 0.5                    # m (rad/m for curvature): raised above it …
@@ -134,6 +136,10 @@ pub struct MonitorToml {
     pub latest_every: Option<usize>,
     pub metrics_max_mb: Option<f64>,
     pub metrics_keep: Option<usize>,
+    /// Serve the metrics over HTTP (Prometheus text format) on this port; off when absent.
+    pub http_port: Option<u16>,
+    /// The address to bind; default 127.0.0.1 (this machine only).
+    pub http_address: Option<String>,
     #[serde(default)]
     pub alarm: Vec<AlarmToml>,
     #[serde(default)]
@@ -192,6 +198,8 @@ pub struct MonitorConfig {
     pub metrics_max_bytes: u64,
     pub metrics_keep: usize,
     pub alarms: Vec<AlarmSpec>,
+    /// Where the Prometheus endpoint listens (`None`: off).
+    pub http: Option<std::net::SocketAddr>,
 }
 
 /// `[output]`, as written (see the module documentation).
@@ -472,7 +480,27 @@ impl Config {
                 hysteresis: h,
             });
         }
+        let http = match m.http_port {
+            None => None,
+            Some(0) => {
+                return Err(err(
+                    "monitor.http_port".into(),
+                    "0 is not a port; leave the key out to serve no metrics".into(),
+                ))
+            }
+            Some(port) => {
+                let address = m.http_address.as_deref().unwrap_or("127.0.0.1");
+                let ip: std::net::IpAddr = address.parse().map_err(|e| {
+                    err(
+                        "monitor.http_address".into(),
+                        format!("{address:?} is not an IP address: {e}"),
+                    )
+                })?;
+                Some(std::net::SocketAddr::new(ip, port))
+            }
+        };
         Ok(Some(MonitorConfig {
+            http,
             layout,
             epoch_hz,
             anchor,
@@ -842,6 +870,7 @@ mod tests {
         .unwrap();
         let m = ok.monitor_config(Path::new("x")).unwrap().unwrap();
         assert_eq!((m.layout.sensors.len(), m.epoch_hz, m.anchor), (2, 2.0, 0));
+        assert_eq!(m.http, None, "no endpoint unless asked for");
         let cases = [
             (format!("[monitor]\n{curve}{}", sensor(0, 1, 0.0)), "monitor.sensor[0]", "curve 1"),
             (
@@ -859,6 +888,17 @@ mod tests {
             (format!("[monitor]\nepoch_hz = 0.0\n{curve}"), "monitor.epoch_hz", "out of range"),
             (format!("[monitor]\nanchor = 7\n{curve}"), "monitor.anchor", "node 7"),
             ("[monitor]\nepoch_hz = 1.0\n".to_string(), "monitor.curve", "at least one"),
+            (format!("[monitor]\nhttp_port = 0\n{curve}"), "monitor.http_port", "not a port"),
+            (
+                format!("[monitor]\nhttp_port = 9464\nhttp_address = \"localhost\"\n{curve}"),
+                "monitor.http_address",
+                "not an IP",
+            ),
+            (
+                format!("[monitor]\n{curve}[[monitor.alarm]]\nmetric = \"tip\"\nthreshold = 1.0\n"),
+                "monitor.alarm[0].metric",
+                "not one of",
+            ),
         ];
         for (text, key, reason) in cases {
             let e = parse(&format!("{base}{text}")).unwrap_err();

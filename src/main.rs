@@ -425,7 +425,7 @@ fn run_session(
                 match e {
                     SessionError::Source(SourceError::Thread(_)) => exit::INTERNAL,
                     SessionError::Source(_) => exit::INPUT,
-                    SessionError::Output { .. } => exit::OUTPUT,
+                    SessionError::Output { .. } | SessionError::Metrics { .. } => exit::OUTPUT,
                     SessionError::CaptureExists { .. } | SessionError::Resume(_) => exit::USAGE,
                 }
             }

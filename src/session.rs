@@ -189,6 +189,13 @@ pub enum SessionError {
     /// `--resume` where there is nothing to resume, or with a source that is not captured.
     #[error("cannot resume: {0}")]
     Resume(String),
+    /// The monitoring metrics endpoint cannot listen (address in use, not this machine's).
+    #[error("cannot serve the metrics on {addr}: {source}")]
+    Metrics {
+        addr: std::net::SocketAddr,
+        #[source]
+        source: std::io::Error,
+    },
     /// The input (capture file, serial port, stdin) is unavailable.
     #[error(transparent)]
     Source(#[from] SourceError),
@@ -277,6 +284,14 @@ pub async fn run(
             crate::monitor::run::Monitor::new(m.clone(), out_dir).map_err(output_err(out_dir))?,
         ),
         None => None,
+    };
+    let _http = match (&monitor, options.monitor.as_ref().and_then(|m| m.http)) {
+        (Some(m), Some(addr)) => Some(
+            crate::monitor::http::serve(addr, m.exposition.clone(), shutdown.clone())
+                .await
+                .map_err(|source| SessionError::Metrics { addr, source })?,
+        ),
+        _ => None,
     };
     let mut decoder = Decoder::new();
     let mut stats = LinkStats::default();

@@ -252,3 +252,73 @@ fn the_monitoring_daemon_writes_metrics_events_and_the_latest_shape() {
     assert!(!session.join("metrics.2.csv").exists());
     assert!(lines > 100 && lines < epochs as usize, "{lines} lines kept");
 }
+
+/// The Prometheus endpoint: off unless configured, on 127.0.0.1, serving the latest epoch's
+/// gauges and the session's counters while the session runs.
+#[test]
+fn metrics_are_served_for_a_scraper_while_the_session_runs() {
+    use std::io::{Read, Write};
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("monitor-http-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let (bytes, truth) = run(StructureKind::Riser, 1, 30.0, 10.0);
+    let mut cfg = format!(
+        "[source]\nkind = \"stdin\"\n[monitor]\nhttp_port = {port}\nreference_s = 1.0\n\
+         [[monitor.alarm]]\nmetric = \"max_displacement\"\nthreshold = 1.0\n\
+         [[monitor.curve]]\nnodes = [0, 1]\nnode_s = [0.0, 20.0]\nlength = 20.0\n"
+    );
+    for s in &truth.sensors {
+        cfg += &format!(
+            "[[monitor.sensor]]\nsensor = {}\ncurve = 0\ns = {}\n",
+            s.sensor, s.s
+        );
+    }
+    std::fs::write(dir.join("m.toml"), cfg).unwrap();
+    let session = dir.join("session");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "off", "run", "--stdin", "--config"])
+        .arg(dir.join("m.toml"))
+        .arg("--session")
+        .arg(&session)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    stdin.write_all(&bytes).unwrap();
+    stdin.flush().unwrap();
+    let get = || -> Option<String> {
+        let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).ok()?;
+        s.write_all(b"GET /metrics HTTP/1.0\r\n\r\n").ok()?;
+        let mut out = String::new();
+        s.read_to_string(&mut out).ok()?;
+        Some(out)
+    };
+    let t0 = std::time::Instant::now();
+    let page = loop {
+        if let Some(p) = get().filter(|p| p.contains("sfs_epochs_total 1")) {
+            break p;
+        }
+        assert!(t0.elapsed().as_secs() < 20, "no metrics served");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    assert!(page.starts_with("HTTP/1.0 200 OK"), "{page}");
+    assert!(
+        page.contains("# TYPE sfs_max_displacement_meters gauge"),
+        "{page}"
+    );
+    assert!(
+        page.contains("sfs_alarm{metric=\"max_displacement\",threshold=\"1\"} "),
+        "{page}"
+    );
+    assert!(page.contains("sfs_sensors_missing 0"), "{page}");
+    drop(stdin); // end of input: the session finishes and the endpoint closes
+    assert!(child.wait().unwrap().success());
+    assert!(get().is_none(), "still serving after the session ended");
+}

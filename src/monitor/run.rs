@@ -54,6 +54,8 @@ pub struct Monitor {
     csv: Option<std::fs::File>,
     csv_bytes: u64,
     pub report: MonitorReport,
+    /// The Prometheus exposition of the latest epoch ([`super::http`]).
+    pub exposition: super::http::Exposition,
 }
 
 impl Monitor {
@@ -76,6 +78,7 @@ impl Monitor {
             csv: None,
             csv_bytes: 0,
             report: MonitorReport::default(),
+            exposition: Default::default(),
         };
         m.open_csv()?;
         Ok(m)
@@ -138,6 +141,88 @@ impl Monitor {
         }
         if let Some(f) = &mut self.csv {
             let _ = f.sync_data();
+        }
+    }
+
+    /// Updates the Prometheus text (gauges of the latest epoch, counters of the session).
+    fn expose(&self, t: f64, m: &Metrics, missing: usize, saturated: usize, disturbed: usize) {
+        let mut s = String::new();
+        let mut put = |name: &str, kind: &str, help: &str, value: String| {
+            s += &format!("# HELP sfs_{name} {help}\n# TYPE sfs_{name} {kind}\n");
+            s += &format!("sfs_{name} {value}\n");
+        };
+        put(
+            "epoch_time_seconds",
+            "gauge",
+            "Session time of the latest epoch.",
+            format!("{t}"),
+        );
+        put(
+            "epochs_total",
+            "counter",
+            "Epochs closed.",
+            self.report.epochs.to_string(),
+        );
+        put(
+            "epochs_failed_total",
+            "counter",
+            "Epochs that could not be reconstructed.",
+            self.report.failed.to_string(),
+        );
+        put(
+            "max_displacement_meters",
+            "gauge",
+            "Largest displacement from the reference shape.",
+            format!("{}", m.max_displacement),
+        );
+        put(
+            "mean_displacement_meters",
+            "gauge",
+            "Mean displacement from the reference shape.",
+            format!("{}", m.mean_displacement),
+        );
+        put(
+            "max_curvature_change_radians_per_meter",
+            "gauge",
+            "Largest change of curvature from the reference shape.",
+            format!("{}", m.max_curvature_change),
+        );
+        put(
+            "sensors_missing",
+            "gauge",
+            "Sensors without an orientation.",
+            missing.to_string(),
+        );
+        put(
+            "sensors_saturated",
+            "gauge",
+            "Sensors saturated.",
+            saturated.to_string(),
+        );
+        put(
+            "sensors_disturbed",
+            "gauge",
+            "Sensors in a disturbed magnetic field.",
+            disturbed.to_string(),
+        );
+        put(
+            "alarms_raised_total",
+            "counter",
+            "Alarms raised.",
+            self.report.alarms_raised.to_string(),
+        );
+        s +=
+            "# HELP sfs_alarm Whether an alarm is raised (1) or not (0).\n# TYPE sfs_alarm gauge\n";
+        for a in &self.alarms {
+            s += &format!(
+                "sfs_alarm{{metric=\"{}\",threshold=\"{}\"}} {}\n",
+                a.metric,
+                a.threshold,
+                u8::from(a.is_raised())
+            );
+        }
+        if let Ok(mut e) = self.exposition.lock() {
+            *e = s;
         }
     }
 
@@ -246,6 +331,7 @@ impl Monitor {
             }
         }
         self.report.last = Some(metrics);
+        self.expose(t, &metrics, shape.missing.len(), saturated, disturbed);
         if self.report.epochs % self.cfg.latest_every as u64 == 0 {
             let glb = crate::gltf_out::network_glb(
                 &shape.positions.network_curves(),

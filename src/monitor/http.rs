@@ -1,0 +1,46 @@
+//! The monitoring metrics over HTTP, in the Prometheus text exposition format, for a
+//! scraper: `GET /metrics` (any path is answered the same). Off unless `[monitor] http_port`
+//! is set; bound to 127.0.0.1 unless `http_address` says otherwise. A minimal HTTP/1.0
+//! responder on tokio: one short response per connection, never blocking the pipeline.
+
+use crate::shutdown::Shutdown;
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+/// The latest exposition text, shared between the monitor and the server.
+pub type Exposition = Arc<Mutex<String>>;
+
+/// Binds `addr` and serves `text` until `shutdown`.
+pub async fn serve(
+    addr: SocketAddr,
+    text: Exposition,
+    shutdown: Shutdown,
+) -> std::io::Result<tokio::task::JoinHandle<()>> {
+    let listener = tokio::net::TcpListener::bind(addr).await?;
+    tracing::info!("monitor: metrics at http://{addr}/metrics");
+    Ok(tokio::spawn(async move {
+        loop {
+            let conn = tokio::select! {
+                c = listener.accept() => c,
+                _ = shutdown.triggered() => break,
+            };
+            let Ok((mut stream, _)) = conn else { continue };
+            let body = text.lock().map(|t| t.clone()).unwrap_or_default();
+            tokio::spawn(async move {
+                // Read (and ignore) the request head, then answer and close.
+                let mut buf = [0u8; 1024];
+                let _ =
+                    tokio::time::timeout(std::time::Duration::from_secs(2), stream.read(&mut buf))
+                        .await;
+                let head = format!(
+                    "HTTP/1.0 200 OK\r\nContent-Type: text/plain; version=0.0.4\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                    body.len()
+                );
+                let _ = stream.write_all(head.as_bytes()).await;
+                let _ = stream.write_all(body.as_bytes()).await;
+                let _ = stream.shutdown().await;
+            });
+        }
+    }))
+}
