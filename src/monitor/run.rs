@@ -39,6 +39,10 @@ pub struct MonitorReport {
     pub reference_epochs: usize,
     pub alarms_raised: u64,
     pub last: Option<Metrics>,
+    /// Resident memory at the first epoch past one hour of session time, and at the end, MB
+    /// (memory must stay flat in unattended operation).
+    pub rss_mb_after_first_hour: Option<f64>,
+    pub rss_mb: Option<f64>,
 }
 
 /// The monitoring state of a session.
@@ -139,6 +143,8 @@ impl Monitor {
         for (k, w) in std::mem::take(&mut self.open) {
             self.close(k as f64 / self.cfg.epoch_hz, w);
         }
+        crate::live::release_free_memory();
+        self.report.rss_mb = crate::live::rss_mb().0;
         if let Some(f) = &mut self.csv {
             let _ = f.sync_data();
         }
@@ -228,6 +234,10 @@ impl Monitor {
 
     fn close(&mut self, t: f64, window: BTreeMap<u16, (UnitQuaternion<f64>, u8)>) {
         self.report.epochs += 1;
+        if t >= 3600.0 && self.report.rss_mb_after_first_hour.is_none() {
+            crate::live::release_free_memory();
+            self.report.rss_mb_after_first_hour = crate::live::rss_mb().0;
+        }
         let usable: BTreeMap<u16, UnitQuaternion<f64>> = window
             .iter()
             .filter(|(_, (_, f))| f & (flags::INVALID | flags::SATURATED) == 0)

@@ -149,6 +149,17 @@ fn model(kind: StructureKind) -> Model {
 
 /// Position and frame of a sensor at time `t`.
 fn pose(m: &Model, s: &LayoutSensor, t: f64) -> (Vector3<f64>, UnitQuaternion<f64>) {
+    pose_with(m, s, t, true)
+}
+
+/// As [`pose`]; without `position` the riser's centreline is not integrated (the position
+/// is then zero): the samples need only the frame, and a day of stream is otherwise slow.
+fn pose_with(
+    m: &Model,
+    s: &LayoutSensor,
+    t: f64,
+    position: bool,
+) -> (Vector3<f64>, UnitQuaternion<f64>) {
     match m.kind {
         StructureKind::Riser => {
             let tip = RISER_TIP_ANGLE * (std::f64::consts::TAU * t / RISER_PERIOD).sin();
@@ -157,7 +168,11 @@ fn pose(m: &Model, s: &LayoutSensor, t: f64) -> (Vector3<f64>, UnitQuaternion<f6
                 tip * (2.0 * u - u * u)
             };
             // Integrate the centreline (Simpson over 1 cm steps).
-            let steps = ((s.s / 0.01).ceil() as usize).max(1);
+            let steps = if position {
+                ((s.s / 0.01).ceil() as usize).max(1)
+            } else {
+                0
+            };
             let h = s.s / steps as f64;
             let mut p = Vector3::zeros();
             for k in 0..steps {
@@ -263,7 +278,7 @@ pub fn run(
         for s in &m.sensors {
             // Sensors are sampled one after the other within the period.
             let ts = t + dt * s.sensor as f64 / m.sensors.len() as f64;
-            let (_, q) = pose(&m, s, ts);
+            let (_, q) = pose_with(&m, s, ts, false);
             if record {
                 let (p0, q0) = pose(&m, s, t);
                 epoch.positions.push([p0.x, p0.y, p0.z]);
