@@ -58,6 +58,7 @@
 //! epoch_hz = 5.0                     # shapes per second
 //! anchor = 0                         # the node at the origin (default: curve 0's first)
 //! reference_s = 10.0                 # the mean shape of the first seconds is the reference
+//! smoothing_s = 0.0                  # smooth each sensor across epochs (time constant, s)
 //! latest_every = 5                   # latest.glb replaced every this many epochs
 //! metrics_max_mb = 64.0              # metrics.csv rotated past this size …
 //! metrics_keep = 4                   # … keeping this many old files
@@ -133,6 +134,7 @@ pub struct MonitorToml {
     /// The node placed at the origin (the structure's fixed point, e.g. a riser's foot).
     pub anchor: Option<u32>,
     pub reference_s: Option<f64>,
+    pub smoothing_s: Option<f64>,
     pub latest_every: Option<usize>,
     pub metrics_max_mb: Option<f64>,
     pub metrics_keep: Option<usize>,
@@ -191,6 +193,9 @@ pub struct MonitorConfig {
     pub anchor: u32,
     /// Seconds at the start whose mean shape is the reference. Default 10.
     pub reference_s: f64,
+    /// Time constant of the smoothing of each sensor's orientation across epochs, s
+    /// (0: none, the default).
+    pub smoothing_s: f64,
     /// `latest.glb` is replaced every this many epochs. Default 5.
     pub latest_every: usize,
     /// `metrics.csv` is rotated past this size (default 64 MB), keeping `metrics_keep` old
@@ -438,6 +443,13 @@ impl Config {
                 format!("{reference_s} is out of range [0, 86400] s"),
             ));
         }
+        let smoothing_s = m.smoothing_s.unwrap_or(0.0);
+        if !(smoothing_s.is_finite() && (0.0..=3600.0).contains(&smoothing_s)) {
+            return Err(err(
+                "monitor.smoothing_s".into(),
+                format!("{smoothing_s} is out of range [0, 3600] s"),
+            ));
+        }
         let latest_every = m.latest_every.unwrap_or(5);
         if latest_every == 0 {
             return Err(err(
@@ -505,6 +517,7 @@ impl Config {
             epoch_hz,
             anchor,
             reference_s,
+            smoothing_s,
             latest_every,
             metrics_max_bytes: (max_mb * 1e6) as u64,
             metrics_keep: m.metrics_keep.unwrap_or(4).min(1000),

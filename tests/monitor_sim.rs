@@ -322,3 +322,61 @@ fn metrics_are_served_for_a_scraper_while_the_session_runs() {
     assert!(child.wait().unwrap().success());
     assert!(get().is_none(), "still serving after the session ended");
 }
+
+/// Smoothing across epochs (`[monitor] smoothing_s`) takes the epoch-to-epoch jitter of the
+/// metrics down (at 5 epochs per second the sensors' noise shows).
+#[test]
+fn smoothing_across_epochs_lowers_the_jitter() {
+    use sfs::monitor::run::Monitor;
+    let (bytes, truth) = run(StructureKind::Riser, 3, 60.0, 10.0);
+    let cfg = |smoothing_s: f64| sfs::config::MonitorConfig {
+        layout: Layout {
+            sensors: truth.sensors.clone(),
+            curves: truth.curves.clone(),
+        },
+        epoch_hz: 5.0,
+        anchor: 0,
+        reference_s: 1.0,
+        smoothing_s,
+        latest_every: 1000,
+        metrics_max_bytes: u64::MAX,
+        metrics_keep: 1,
+        alarms: Vec::new(),
+        http: None,
+    };
+    let acq = AcquisitionConfig {
+        array_window: 0.2,
+        ..Default::default()
+    };
+    let scan = Acquisition::scan_bytes(&bytes, acq);
+    let mut jitter = Vec::new();
+    for tau in [0.0, 1.0] {
+        let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("monitor-smooth-{tau}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut m = Monitor::new(cfg(tau), &dir).unwrap();
+        for e in &scan.array {
+            m.feed(e);
+        }
+        m.finish();
+        let x: Vec<f64> = std::fs::read_to_string(dir.join("metrics.csv"))
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(3).unwrap().parse().unwrap())
+            .collect();
+        assert!(x.len() > 250, "{} epochs", x.len());
+        let j = x[10..]
+            .windows(3)
+            .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+            .sum::<f64>()
+            / (x.len() - 12) as f64;
+        jitter.push(j);
+    }
+    eprintln!(
+        "curvature-change jitter: raw {:.5}, smoothed {:.5}",
+        jitter[0], jitter[1]
+    );
+    assert!(jitter[1] < 0.5 * jitter[0], "{jitter:?}");
+}

@@ -53,6 +53,8 @@ pub struct Monitor {
     reference: ReferenceBuilder,
     reference_epochs: usize,
     alarms: Vec<Alarm>,
+    /// Each sensor's smoothed orientation (with `smoothing_s`).
+    smoothed: BTreeMap<u16, UnitQuaternion<f64>>,
     /// Orientations (and flags) by sensor of the windows not yet closed, by window number.
     open: BTreeMap<i64, BTreeMap<u16, (UnitQuaternion<f64>, u8)>>,
     csv: Option<std::fs::File>,
@@ -79,6 +81,7 @@ impl Monitor {
             reference_epochs,
             alarms,
             open: BTreeMap::new(),
+            smoothed: BTreeMap::new(),
             csv: None,
             csv_bytes: 0,
             report: MonitorReport::default(),
@@ -238,11 +241,21 @@ impl Monitor {
             crate::live::release_free_memory();
             self.report.rss_mb_after_first_hour = crate::live::rss_mb().0;
         }
-        let usable: BTreeMap<u16, UnitQuaternion<f64>> = window
+        let mut usable: BTreeMap<u16, UnitQuaternion<f64>> = window
             .iter()
             .filter(|(_, (_, f))| f & (flags::INVALID | flags::SATURATED) == 0)
             .map(|(s, (q, _))| (*s, *q))
             .collect();
+        if self.cfg.smoothing_s > 0.0 {
+            // First-order smoothing on SO(3): slerp from the last smoothed orientation
+            // towards the new one by 1 − exp(−Δt/τ).
+            let a = 1.0 - (-1.0 / (self.cfg.epoch_hz * self.cfg.smoothing_s)).exp();
+            for (s, q) in usable.iter_mut() {
+                let prev = self.smoothed.get(s).copied().unwrap_or(*q);
+                *q = prev.try_slerp(q, a, 1e-9).unwrap_or(*q);
+                self.smoothed.insert(*s, *q);
+            }
+        }
         let saturated = window
             .values()
             .filter(|(_, f)| f & flags::SATURATED != 0)
