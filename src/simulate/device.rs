@@ -215,8 +215,10 @@ struct Emitter {
 
 impl Emitter {
     fn t_us(&self, t: f64) -> u32 {
+        // The device clock wraps every 2³² µs (71.6 min): truncate through u64 (an `as u32`
+        // of the float would saturate and stop the clock).
         self.clock_base_us
-            .wrapping_add(((t - self.clock_base_t) * 1e6).round() as u32)
+            .wrapping_add(((t - self.clock_base_t) * 1e6).round() as u64 as u32)
     }
 
     /// Power cycle at session time `t`: sequence, clock and HELLO start over.

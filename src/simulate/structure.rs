@@ -259,7 +259,7 @@ pub fn run(
         if t >= next_status {
             put(
                 Packet::Status(Status {
-                    t_us: (1e6 + t * 1e6) as u32,
+                    t_us: (1e6 + t * 1e6) as u64 as u32,
                     battery_mv: 12_000,
                     flags: 0,
                     dropped: 0,
@@ -288,7 +288,8 @@ pub fn run(
             let mag = q.inverse() * field + rng.vec3(0.3);
             put(
                 Packet::ArraySample(ArraySample {
-                    t_us: (1e6 + ts * 1e6) as u32,
+                    // Wraps every 71.6 min, as the device's clock does.
+                    t_us: (1e6 + ts * 1e6) as u64 as u32,
                     sensor: s.sensor,
                     acc: super::device::counts(&acc, acc_lsb),
                     mag: super::device::counts(&mag, mag_lsb),
