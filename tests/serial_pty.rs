@@ -11,7 +11,7 @@ use sfs::shutdown::Shutdown;
 use sfs::source::{SerialSpec, SourceSpec};
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// A plugged-in device: the pty master it writes to, and the slave kept open so that the line
 /// stays up while the session (re)opens it by path.
@@ -41,18 +41,6 @@ fn opened(pts: &str) -> usize {
         .filter_map(|e| std::fs::read_link(e.ok()?.path()).ok())
         .filter(|t| t == Path::new(pts))
         .count()
-}
-
-fn wait_for(what: &str, timeout: Duration, mut cond: impl FnMut() -> bool) {
-    let t0 = Instant::now();
-    while !cond() {
-        assert!(t0.elapsed() < timeout, "timed out waiting for {what}");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-}
-
-fn file_len(p: &Path) -> u64 {
-    std::fs::metadata(p).map(|m| m.len()).unwrap_or(0)
 }
 
 /// Waits until the session has the device open, then writes `bytes` in small pieces, as a

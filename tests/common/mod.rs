@@ -174,6 +174,20 @@ pub fn fault_stream(n: i32) -> (Vec<u8>, Expected) {
     (b.bytes, b.exp)
 }
 
+/// Polls `cond` every 10 ms until it holds; panics naming `what` after `timeout`.
+pub fn wait_for(what: &str, timeout: std::time::Duration, mut cond: impl FnMut() -> bool) {
+    let t0 = std::time::Instant::now();
+    while !cond() {
+        assert!(t0.elapsed() < timeout, "timed out waiting for {what}");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+}
+
+/// The length of a file, 0 while it does not exist.
+pub fn file_len(p: &std::path::Path) -> u64 {
+    std::fs::metadata(p).map(|m| m.len()).unwrap_or(0)
+}
+
 /// A fresh directory under the target's temporary folder.
 pub fn tmpdir(name: &str) -> PathBuf {
     let d =
