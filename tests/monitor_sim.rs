@@ -9,6 +9,9 @@ use sfs::monitor::layout::Layout;
 use sfs::simulate::structure::{run, StructureKind};
 use std::collections::BTreeMap;
 
+mod common;
+use common::tmpdir;
+
 /// The epochs of acquisition grouped by window (every sensor's window closes within one
 /// sampling period of the others): `(window end, orientation by sensor)`.
 fn epochs(scan: &sfs::scan::Scan) -> Vec<(f64, BTreeMap<u16, UnitQuaternion<f64>>)> {
@@ -186,40 +189,49 @@ fn displacement_follows_the_truth_and_the_alarm_fires_when_and_only_when_crossed
     assert_eq!(raised, episodes);
 }
 
-/// The monitoring daemon end to end: the riser's stream on standard input, `sfs run` with a
-/// `[monitor]` layout and an alarm: a metrics line per epoch, the alarm's transitions in
-/// events.log, latest.glb, and the metrics files rotated within their retention.
-#[test]
-fn the_monitoring_daemon_writes_metrics_events_and_the_latest_shape() {
-    use std::io::Write;
-    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("monitor-daemon-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let (bytes, truth) = run(StructureKind::Riser, 1, 120.0, 10.0);
-    let mut cfg = String::from(
-        "[source]\nkind = \"stdin\"\n[monitor]\nepoch_hz = 5.0\nanchor = 0\nreference_s = 1.0\n\
-         metrics_max_mb = 0.01\nmetrics_keep = 1\n\
-         [[monitor.alarm]]\nmetric = \"max_displacement\"\nthreshold = 1.5\nhysteresis = 0.2\n\
-         [[monitor.curve]]\nnodes = [0, 1]\nnode_s = [0.0, 20.0]\nlength = 20.0\n",
-    );
+/// `sfs run --stdin` on a monitoring configuration: `monitor` (the `[monitor]` keys, alarms
+/// and curves) plus every sensor of `truth`'s layout, in `dir/session`; standard input piped.
+fn start_monitoring(
+    dir: &std::path::Path,
+    monitor: &str,
+    truth: &sfs::simulate::structure::StructureTruth,
+) -> (std::process::Child, std::path::PathBuf) {
+    let mut cfg = format!("[source]\nkind = \"stdin\"\n[monitor]\n{monitor}");
     for s in &truth.sensors {
         cfg += &format!(
             "[[monitor.sensor]]\nsensor = {}\ncurve = {}\ns = {}\n",
             s.sensor, s.curve, s.s
         );
     }
-    std::fs::write(dir.join("riser.toml"), cfg).unwrap();
+    std::fs::write(dir.join("monitor.toml"), cfg).unwrap();
     let session = dir.join("session");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
         .args(["--log", "off", "run", "--stdin", "--config"])
-        .arg(dir.join("riser.toml"))
+        .arg(dir.join("monitor.toml"))
         .arg("--session")
         .arg(&session)
         .stdin(std::process::Stdio::piped())
         .stdout(std::process::Stdio::null())
         .spawn()
         .unwrap();
+    (child, session)
+}
+
+/// The monitoring daemon end to end: the riser's stream on standard input, `sfs run` with a
+/// `[monitor]` layout and an alarm: a metrics line per epoch, the alarm's transitions in
+/// events.log, latest.glb, and the metrics files rotated within their retention.
+#[test]
+fn the_monitoring_daemon_writes_metrics_events_and_the_latest_shape() {
+    use std::io::Write;
+    let dir = tmpdir("monitor-daemon");
+    let (bytes, truth) = run(StructureKind::Riser, 1, 120.0, 10.0);
+    let (mut child, session) = start_monitoring(
+        &dir,
+        "epoch_hz = 5.0\nanchor = 0\nreference_s = 1.0\nmetrics_max_mb = 0.01\nmetrics_keep = 1\n\
+         [[monitor.alarm]]\nmetric = \"max_displacement\"\nthreshold = 1.5\nhysteresis = 0.2\n\
+         [[monitor.curve]]\nnodes = [0, 1]\nnode_s = [0.0, 20.0]\nlength = 20.0\n",
+        &truth,
+    );
     child.stdin.take().unwrap().write_all(&bytes).unwrap();
     assert!(child.wait().unwrap().success());
     let report: serde_json::Value =
@@ -258,38 +270,22 @@ fn the_monitoring_daemon_writes_metrics_events_and_the_latest_shape() {
 #[test]
 fn metrics_are_served_for_a_scraper_while_the_session_runs() {
     use std::io::{Read, Write};
-    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("monitor-http-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = tmpdir("monitor-http");
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
         .unwrap()
         .port();
     let (bytes, truth) = run(StructureKind::Riser, 1, 30.0, 10.0);
-    let mut cfg = format!(
-        "[source]\nkind = \"stdin\"\n[monitor]\nhttp_port = {port}\nreference_s = 1.0\n\
-         [[monitor.alarm]]\nmetric = \"max_displacement\"\nthreshold = 1.0\n\
-         [[monitor.curve]]\nnodes = [0, 1]\nnode_s = [0.0, 20.0]\nlength = 20.0\n"
+    let (mut child, _session) = start_monitoring(
+        &dir,
+        &format!(
+            "http_port = {port}\nreference_s = 1.0\n\
+             [[monitor.alarm]]\nmetric = \"max_displacement\"\nthreshold = 1.0\n\
+             [[monitor.curve]]\nnodes = [0, 1]\nnode_s = [0.0, 20.0]\nlength = 20.0\n"
+        ),
+        &truth,
     );
-    for s in &truth.sensors {
-        cfg += &format!(
-            "[[monitor.sensor]]\nsensor = {}\ncurve = 0\ns = {}\n",
-            s.sensor, s.s
-        );
-    }
-    std::fs::write(dir.join("m.toml"), cfg).unwrap();
-    let session = dir.join("session");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
-        .args(["--log", "off", "run", "--stdin", "--config"])
-        .arg(dir.join("m.toml"))
-        .arg("--session")
-        .arg(&session)
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
     let mut stdin = child.stdin.take().unwrap();
     stdin.write_all(&bytes).unwrap();
     stdin.flush().unwrap();
@@ -351,10 +347,7 @@ fn smoothing_across_epochs_lowers_the_jitter() {
     let scan = Acquisition::scan_bytes(&bytes, acq);
     let mut jitter = Vec::new();
     for tau in [0.0, 1.0] {
-        let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-            .join(format!("monitor-smooth-{tau}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = tmpdir(&format!("monitor-smooth-{tau}"));
         let mut m = Monitor::new(cfg(tau), &dir).unwrap();
         for e in &scan.array {
             m.feed(e);
