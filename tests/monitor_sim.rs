@@ -373,3 +373,134 @@ fn smoothing_across_epochs_lowers_the_jitter() {
     );
     assert!(jitter[1] < 0.5 * jitter[0], "{jitter:?}");
 }
+
+/// `bytes` re-encoded without the samples of `sensors` whose device time is in `t_us`
+/// (sensors that drop out: the array sends nothing for them, and no sequence number is lost).
+fn without_sensors(bytes: &[u8], sensors: &[u16], t_us: std::ops::Range<u32>) -> Vec<u8> {
+    use device_protocol::{Decoder, Event, Packet};
+    let (mut out, mut seq, mut dec) = (Vec::new(), 0u8, Decoder::new());
+    for e in dec.feed(bytes) {
+        if let Event::Packet { packet, .. } = e {
+            if let Packet::ArraySample(s) = &packet {
+                if sensors.contains(&s.sensor) && t_us.contains(&s.t_us) {
+                    continue;
+                }
+            }
+            packet.encode(seq, &mut out);
+            seq = seq.wrapping_add(1);
+        }
+    }
+    out
+}
+
+/// Issue 8, point 6: a monitoring session on a serial device survives sensors dropping out,
+/// an unplug and the device rebooting (clock and sequence restarting): every epoch is
+/// reconstructed, session time stays monotonic, dropped sensors are counted as missing
+/// while they are gone, and the shape after the reboot still follows the truth.
+#[test]
+fn monitoring_survives_dropouts_an_unplug_and_a_device_reboot() {
+    use common::pty::{play, plug, spec};
+    use sfs::shutdown::Shutdown;
+    use std::time::Duration;
+    let dir = tmpdir("monitor-unplug");
+    let link = dir.join("ttySFS");
+    let session_dir = dir.join("session");
+    let (a, truth_a) = run(StructureKind::Riser, 1, 40.0, 10.0);
+    let (b, truth_b) = run(StructureKind::Riser, 2, 40.0, 10.0);
+    // Sensors 10 and 11 send nothing from 10 s to 20 s of the first run (device clock
+    // starts at 1 s).
+    let a = without_sensors(&a, &[10, 11], 11_000_000..21_000_000);
+    let epoch_hz = 5.0;
+    let mut options = sfs::session::Options::default();
+    options.acquisition.array_window = 1.0 / epoch_hz;
+    options.monitor = Some(sfs::config::MonitorConfig {
+        layout: Layout {
+            sensors: truth_a.sensors.clone(),
+            curves: truth_a.curves.clone(),
+        },
+        epoch_hz,
+        anchor: 0,
+        reference_s: 1.0,
+        smoothing_s: 0.0,
+        latest_every: 5,
+        metrics_max_bytes: u64::MAX,
+        metrics_keep: 1,
+        alarms: Vec::new(),
+        http: None,
+    });
+    let shutdown = Shutdown::new();
+    let mut dev = plug(&link);
+    let session = {
+        let (spec, dir, shutdown) = (spec(&link), session_dir.clone(), shutdown.clone());
+        std::thread::spawn(move || {
+            tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .unwrap()
+                .block_on(sfs::session::run(
+                    spec,
+                    &dir,
+                    &options,
+                    sfs::session::Start::New,
+                    shutdown,
+                ))
+        })
+    };
+    let capture = session_dir.join("capture.bin");
+    play(&mut dev, &a);
+    common::wait_for("the first run captured", Duration::from_secs(20), || {
+        common::file_len(&capture) == a.len() as u64
+    });
+    drop(dev); // unplug
+    std::thread::sleep(Duration::from_millis(300));
+    let mut dev = plug(&link); // back, rebooted: a new HELLO, clock and sequence from 0
+    play(&mut dev, &b);
+    common::wait_for("the second run captured", Duration::from_secs(20), || {
+        common::file_len(&capture) == (a.len() + b.len()) as u64
+    });
+    // Let the session decode the last bytes before stopping it.
+    std::thread::sleep(Duration::from_millis(300));
+    shutdown.trigger();
+    let outcome = session.join().unwrap().expect("session ran");
+    drop(dev);
+
+    let report = &outcome.report;
+    assert_eq!(report.link.reboots, 1, "{:?}", report.link);
+    assert_eq!(report.link.connects, 2, "{:?}", report.link);
+    let m = report.monitor.as_ref().expect("monitor report");
+    assert_eq!(m.failed, 0);
+    // Sensors 10 and 11, back, first report the window they were cut off in: too late.
+    assert_eq!(m.late, 2);
+    // 80 s of stream at 5 epochs per second, each closed once.
+    assert!((398..=401).contains(&m.epochs), "{} epochs", m.epochs);
+    let text = std::fs::read_to_string(session_dir.join("metrics.csv")).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').take(7).map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len() as u64, m.epochs);
+    let (mut worst, mut after_reboot) = (0.0f64, 0);
+    for (k, r) in rows.iter().enumerate() {
+        let (t, max_d, missing) = (r[0], r[1], r[4]);
+        if k > 0 {
+            assert!(t > rows[k - 1][0], "time went back at line {}: {t}", k + 2);
+        }
+        if (10.6..=19.8).contains(&t) {
+            assert_eq!(missing, 2.0, "t = {t}: sensors 10 and 11 are out");
+        } else if !(9.6..=20.6).contains(&t) {
+            assert_eq!(missing, 0.0, "t = {t}");
+        }
+        // After the reboot (session time bridged at 40 s): the second run's truth, against
+        // the reference (the mean of the first run's first second).
+        if t > 41.0 && t < 79.6 {
+            let mid = t - 40.0 - 0.1;
+            let expected = (truth_top(&truth_b, mid) - truth_top(&truth_a, 0.5)).norm();
+            worst = worst.max((max_d - expected).abs());
+            after_reboot += 1;
+        }
+    }
+    eprintln!("after the reboot: {after_reboot} epochs, worst displacement error {worst:.3} m");
+    assert!(after_reboot > 180);
+    assert!(worst <= 0.02 * truth_a.size, "worst {worst} m");
+}

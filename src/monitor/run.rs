@@ -36,6 +36,9 @@ pub struct MonitorReport {
     pub epochs: u64,
     /// Epochs that could not be reconstructed (no curve with a sensor), each also a warning.
     pub failed: u64,
+    /// Sensor epochs that came after their window had closed, ignored (a sensor back from a
+    /// dropout reports the window it was cut off in).
+    pub late: u64,
     pub reference_epochs: usize,
     pub alarms_raised: u64,
     pub last: Option<Metrics>,
@@ -57,6 +60,8 @@ pub struct Monitor {
     smoothed: BTreeMap<u16, UnitQuaternion<f64>>,
     /// Orientations (and flags) by sensor of the windows not yet closed, by window number.
     open: BTreeMap<i64, BTreeMap<u16, (UnitQuaternion<f64>, u8)>>,
+    /// The newest window closed.
+    closed: Option<i64>,
     csv: Option<std::fs::File>,
     csv_bytes: u64,
     pub report: MonitorReport,
@@ -81,6 +86,7 @@ impl Monitor {
             reference_epochs,
             alarms,
             open: BTreeMap::new(),
+            closed: None,
             smoothed: BTreeMap::new(),
             csv: None,
             csv_bytes: 0,
@@ -123,9 +129,19 @@ impl Monitor {
         self.open_csv()
     }
 
-    /// Feeds one sensor's epoch; windows older than the newest one seen are closed.
+    /// Feeds one sensor's epoch; windows older than the newest one seen are closed. An epoch
+    /// of a window already closed is ignored (counted as late).
     pub fn feed(&mut self, e: &ArrayEpoch) {
         let key = (e.t * self.cfg.epoch_hz).round() as i64;
+        if self.closed.is_some_and(|c| key <= c) {
+            self.report.late += 1;
+            tracing::debug!(
+                "monitor: sensor {} reported the window ending at t = {:.2} s after it closed; ignored",
+                e.sensor,
+                e.t
+            );
+            return;
+        }
         let q = UnitQuaternion::from_quaternion(Quaternion::new(e.q[0], e.q[1], e.q[2], e.q[3]));
         self.open
             .entry(key)
@@ -137,6 +153,7 @@ impl Monitor {
                 break;
             }
             let window = self.open.remove(&k).expect("present");
+            self.closed = Some(k);
             self.close(k as f64 / self.cfg.epoch_hz, window);
         }
     }

@@ -5,6 +5,8 @@
 use device_protocol::*;
 use std::path::PathBuf;
 
+pub mod pty;
+
 /// What a correct decoder must count on a [`fault_stream`].
 #[derive(Debug, Default, Clone, PartialEq)]
 pub struct Expected {
