@@ -57,7 +57,8 @@
 //! [monitor]                          # instrumented structures (sensor arrays)
 //! epoch_hz = 5.0                     # shapes per second
 //! anchor = 0                         # the node at the origin (default: curve 0's first)
-//! reference_s = 10.0                 # the mean shape of the first seconds is the reference
+//! reference_s = 10.0                 # the mean shape of the first seconds is the reference,
+//! # reference_file = "reference.json" #   or a fixed one (a session's reference.json, or a design)
 //! smoothing_s = 0.0                  # smooth each sensor across epochs (time constant, s)
 //! latest_every = 5                   # latest.glb replaced every this many epochs
 //! metrics_max_mb = 64.0              # metrics.csv rotated past this size …
@@ -134,6 +135,9 @@ pub struct MonitorToml {
     /// The node placed at the origin (the structure's fixed point, e.g. a riser's foot).
     pub anchor: Option<u32>,
     pub reference_s: Option<f64>,
+    /// A fixed reference shape ([`crate::monitor::metrics::ReferenceFile`]), relative to the
+    /// configuration file's directory.
+    pub reference_file: Option<PathBuf>,
     pub smoothing_s: Option<f64>,
     pub latest_every: Option<usize>,
     pub metrics_max_mb: Option<f64>,
@@ -193,6 +197,8 @@ pub struct MonitorConfig {
     pub anchor: u32,
     /// Seconds at the start whose mean shape is the reference. Default 10.
     pub reference_s: f64,
+    /// A fixed reference instead (`reference_file`), sampled as the epochs are.
+    pub reference: Option<crate::monitor::metrics::Shape>,
     /// Time constant of the smoothing of each sensor's orientation across epochs, s
     /// (0: none, the default).
     pub smoothing_s: f64,
@@ -443,6 +449,42 @@ impl Config {
                 format!("{reference_s} is out of range [0, 86400] s"),
             ));
         }
+        let reference = match &m.reference_file {
+            None => None,
+            Some(_) if m.reference_s.is_some() => {
+                return Err(err(
+                    "monitor.reference_file".into(),
+                    "give reference_s (a reference built from the first seconds) or reference_file, not both".into(),
+                ))
+            }
+            Some(p) => {
+                let key = || "monitor.reference_file".to_string();
+                let path = if p.is_relative() {
+                    file.parent().unwrap_or(Path::new("")).join(p)
+                } else {
+                    p.clone()
+                };
+                let text = std::fs::read_to_string(&path)
+                    .map_err(|e| err(key(), format!("{}: {e}", path.display())))?;
+                let r = crate::monitor::metrics::ReferenceFile::parse(&text)
+                    .map_err(|e| err(key(), format!("{}: {e}", path.display())))?;
+                if r.anchor != anchor {
+                    return Err(err(
+                        key(),
+                        format!(
+                            "{}: anchored at node {}, the configuration at node {anchor}",
+                            path.display(),
+                            r.anchor
+                        ),
+                    ));
+                }
+                let step = crate::monitor::epoch::EpochParams::default().step;
+                Some(
+                    r.shape(&layout.curves, step)
+                        .map_err(|e| err(key(), format!("{}: {e}", path.display())))?,
+                )
+            }
+        };
         let smoothing_s = m.smoothing_s.unwrap_or(0.0);
         if !(smoothing_s.is_finite() && (0.0..=3600.0).contains(&smoothing_s)) {
             return Err(err(
@@ -517,6 +559,7 @@ impl Config {
             epoch_hz,
             anchor,
             reference_s,
+            reference,
             smoothing_s,
             latest_every,
             metrics_max_bytes: (max_mb * 1e6) as u64,
@@ -918,6 +961,62 @@ mod tests {
             assert_eq!(e.key, key, "{text}: {e}");
             assert!(e.reason.contains(reason), "{text}: {e}");
         }
+    }
+
+    #[test]
+    fn monitor_reference_file_errors_name_the_key_and_the_file() {
+        let dir = std::env::temp_dir().join(format!("sfs-config-ref-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("monitor.toml");
+        let reference = |anchor: u32, curve: usize| {
+            format!(
+                r#"{{"format": "sfs-monitor-reference", "version": 1, "anchor": {anchor},
+                    "curves": [{{"curve": {curve}, "points": [[0, 0, 0], [0, 0, 20]]}}]}}"#
+            )
+        };
+        std::fs::write(dir.join("good.json"), reference(0, 0)).unwrap();
+        std::fs::write(dir.join("anchor.json"), reference(1, 0)).unwrap();
+        std::fs::write(dir.join("curve.json"), reference(0, 3)).unwrap();
+        std::fs::write(
+            dir.join("format.json"),
+            r#"{"format": "x", "version": 1, "anchor": 0, "curves": []}"#,
+        )
+        .unwrap();
+        let text = |keys: &str| {
+            format!(
+                "[source]\nkind = \"stdin\"\n[monitor]\n{keys}\n[[monitor.curve]]\nnodes = [0, 1]\n\
+                 node_s = [0.0, 20.0]\nlength = 20.0\n"
+            )
+        };
+        let m = Config::parse(&text("reference_file = \"good.json\""), &file)
+            .unwrap()
+            .monitor_config(&file)
+            .unwrap()
+            .unwrap();
+        // Relative to the configuration's directory; sampled every 5 cm.
+        assert_eq!(m.reference.unwrap().curves[0].1.len(), 401);
+        let cases = [
+            ("reference_file = \"none.json\"", "none.json"),
+            ("reference_file = \"anchor.json\"", "anchored at node 1"),
+            (
+                "reference_file = \"curve.json\"",
+                "curve 3 is not in the layout",
+            ),
+            (
+                "reference_file = \"format.json\"",
+                "is not \"sfs-monitor-reference\"",
+            ),
+            (
+                "reference_file = \"good.json\"\nreference_s = 3.0",
+                "not both",
+            ),
+        ];
+        for (keys, reason) in cases {
+            let e = Config::parse(&text(keys), &file).unwrap_err();
+            assert_eq!(e.key, "monitor.reference_file", "{keys}: {e}");
+            assert!(e.reason.contains(reason), "{keys}: {e}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -333,6 +333,7 @@ fn smoothing_across_epochs_lowers_the_jitter() {
         epoch_hz: 5.0,
         anchor: 0,
         reference_s: 1.0,
+        reference: None,
         smoothing_s,
         latest_every: 1000,
         metrics_max_bytes: u64::MAX,
@@ -421,6 +422,7 @@ fn monitoring_survives_dropouts_an_unplug_and_a_device_reboot() {
         epoch_hz,
         anchor: 0,
         reference_s: 1.0,
+        reference: None,
         smoothing_s: 0.0,
         latest_every: 5,
         metrics_max_bytes: u64::MAX,
@@ -503,4 +505,112 @@ fn monitoring_survives_dropouts_an_unplug_and_a_device_reboot() {
     eprintln!("after the reboot: {after_reboot} epochs, worst displacement error {worst:.3} m");
     assert!(after_reboot > 180);
     assert!(worst <= 0.02 * truth_a.size, "worst {worst} m");
+}
+
+/// The `[monitor]` configuration of `truth`'s layout with `keys` (a riser: one curve).
+fn riser_config(
+    dir: &std::path::Path,
+    keys: &str,
+    truth: &sfs::simulate::structure::StructureTruth,
+) -> sfs::config::MonitorConfig {
+    let mut text = format!(
+        "[source]\nkind = \"stdin\"\n[monitor]\nepoch_hz = 5.0\nanchor = 0\n{keys}\n\
+         [[monitor.curve]]\nnodes = [0, 1]\nnode_s = [0.0, 20.0]\nlength = 20.0\n"
+    );
+    for s in &truth.sensors {
+        text += &format!(
+            "[[monitor.sensor]]\nsensor = {}\ncurve = {}\ns = {}\n",
+            s.sensor, s.curve, s.s
+        );
+    }
+    let file = dir.join("monitor.toml");
+    std::fs::write(&file, &text).unwrap();
+    sfs::config::Config::load(&file)
+        .unwrap()
+        .monitor_config(&file)
+        .unwrap()
+        .unwrap()
+}
+
+/// Runs a monitor over `scan` in `dir`; its metrics lines (without the header).
+fn monitor_lines(
+    cfg: sfs::config::MonitorConfig,
+    dir: &std::path::Path,
+    scan: &sfs::scan::Scan,
+) -> (Vec<String>, sfs::monitor::run::MonitorReport) {
+    let mut m = sfs::monitor::run::Monitor::new(cfg, dir).unwrap();
+    for e in &scan.array {
+        m.feed(e);
+    }
+    m.finish();
+    let text = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
+    (text.lines().skip(1).map(String::from).collect(), m.report)
+}
+
+/// Issue 8, point 3: the reference from a file. A session writes the reference it built as
+/// reference.json; a later session naming it in `reference_file` measures against exactly
+/// that shape from its first epoch.
+#[test]
+fn a_reference_built_by_one_session_is_kept_by_the_next() {
+    let (bytes, truth) = run(StructureKind::Riser, 4, 30.0, 10.0);
+    let acq = AcquisitionConfig {
+        array_window: 0.2,
+        ..Default::default()
+    };
+    let scan = Acquisition::scan_bytes(&bytes, acq);
+    let first = tmpdir("monitor-ref-first");
+    let cfg = riser_config(&first, "reference_s = 2.0", &truth);
+    let (built, report) = monitor_lines(cfg, &first, &scan);
+    assert_eq!(report.reference_epochs, 10);
+    let kept = first.join("reference.json");
+    assert!(kept.exists());
+
+    let second = tmpdir("monitor-ref-second");
+    let cfg = riser_config(
+        &second,
+        &format!("reference_file = {:?}", kept.to_str().unwrap()),
+        &truth,
+    );
+    assert!(cfg.reference.is_some());
+    let (again, report) = monitor_lines(cfg, &second, &scan);
+    assert_eq!(report.reference_epochs, 0);
+    assert!(!second.join("reference.json").exists());
+    assert_eq!(built.len(), again.len());
+    assert!(built.len() > 140, "{} epochs", built.len());
+    // While the first session built its reference its metrics differ; after, not a digit.
+    assert_ne!(built[..9], again[..9]);
+    assert_eq!(built[10..], again[10..]);
+}
+
+/// A design shape as the reference: the riser's rest (straight up, 20 m) given as a
+/// two-point polyline; the displacement measured against it is the truth's top
+/// displacement from the vertical.
+#[test]
+fn a_design_reference_is_resampled_and_measured_against() {
+    let (bytes, truth) = run(StructureKind::Riser, 5, 60.0, 10.0);
+    let acq = AcquisitionConfig {
+        array_window: 0.2,
+        ..Default::default()
+    };
+    let scan = Acquisition::scan_bytes(&bytes, acq);
+    let dir = tmpdir("monitor-ref-design");
+    std::fs::write(
+        dir.join("vertical.json"),
+        r#"{"format": "sfs-monitor-reference", "version": 1, "anchor": 0,
+            "curves": [{"curve": 0, "points": [[0, 0, 0], [0, 0, 20]]}]}"#,
+    )
+    .unwrap();
+    // Relative to the configuration file's directory.
+    let cfg = riser_config(&dir, "reference_file = \"vertical.json\"", &truth);
+    let (lines, _) = monitor_lines(cfg, &dir, &scan);
+    let (mut worst, mut swing) = (0.0f64, 0.0f64);
+    for l in &lines[1..lines.len() - 1] {
+        let f: Vec<f64> = l.split(',').take(2).map(|x| x.parse().unwrap()).collect();
+        let expected = (truth_top(&truth, f[0] - 0.1) - Vector3::new(0.0, 0.0, 20.0)).norm();
+        worst = worst.max((f[1] - expected).abs());
+        swing = swing.max(expected);
+    }
+    eprintln!("against the design: swing {swing:.2} m, worst error {worst:.3} m");
+    assert!(swing > 1.5);
+    assert!(worst <= 0.02 * truth.size, "worst {worst} m");
 }

@@ -20,7 +20,7 @@
 //! assert!((d - Vector3::new(2.0, 0.0, 0.0)).norm() < 1e-9);
 //! ```
 
-use super::layout::Layout;
+use super::layout::{Layout, LayoutCurve};
 use crate::network::poisson::{PoissonSolver, Positions};
 use crate::network::prefilter::UniformCurve;
 use crate::network::regression::{RegressionParams, RegressionSolver};
@@ -140,16 +140,11 @@ fn frame_at(on: &[(f64, UnitQuaternion<f64>)], x: f64) -> UnitQuaternion<f64> {
         .unwrap_or(if t < 0.5 { q0 } else { q1 })
 }
 
-/// Curve `c` from its first node to its last, at a uniform step per segment of at most
-/// `step`, nodes on samples.
-fn resample(
-    c: &super::layout::LayoutCurve,
-    on: &[(f64, UnitQuaternion<f64>)],
-    step: f64,
-) -> UniformCurve {
-    let (mut d, mut q, mut nodes, mut h) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let s0 = c.node_s[0];
-    nodes.push((0, c.nodes[0]));
+/// The rest arc lengths at which curve `c` is sampled, from its first node to its last: a
+/// uniform step of at most `step` per segment between nodes, nodes on samples. Also the
+/// segment steps, and each node's sample.
+pub fn samples(c: &LayoutCurve, step: f64) -> (Vec<f64>, Vec<f64>, Vec<(usize, u32)>) {
+    let (mut x, mut h, mut nodes) = (Vec::new(), Vec::new(), vec![(0, c.nodes[0])]);
     for k in 0..c.nodes.len() - 1 {
         let (a, b) = (c.node_s[k], c.node_s[k + 1]);
         let n = ((b - a) / step.max(1e-6)).ceil().max(1.0) as usize;
@@ -157,12 +152,19 @@ fn resample(
         h.push(hk);
         // A segment's first sample is the previous one's last (the node between them).
         for j in usize::from(k > 0)..=n {
-            let x = a + j as f64 * hk;
-            d.push(x - s0);
-            q.push(frame_at(on, x));
+            x.push(a + j as f64 * hk);
         }
-        nodes.push((d.len() - 1, c.nodes[k + 1]));
+        nodes.push((x.len() - 1, c.nodes[k + 1]));
     }
+    (x, h, nodes)
+}
+
+/// Curve `c` at its [`samples`], frames interpolated from the sensors `on`.
+fn resample(c: &LayoutCurve, on: &[(f64, UnitQuaternion<f64>)], step: f64) -> UniformCurve {
+    let (x, h, nodes) = samples(c, step);
+    let s0 = c.node_s[0];
+    let d: Vec<f64> = x.iter().map(|x| x - s0).collect();
+    let q = x.iter().map(|&x| frame_at(on, x)).collect();
     let w = vec![1.0; d.len()];
     UniformCurve {
         index: c.index,

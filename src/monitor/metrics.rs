@@ -143,3 +143,140 @@ impl ReferenceBuilder {
         Some(s)
     }
 }
+
+/// The `format` of a reference file.
+pub const REFERENCE_FORMAT: &str = "sfs-monitor-reference";
+
+/// A reference shape on disk (JSON): per curve of the layout, a polyline from its first node
+/// to its last, in metres, with the anchor node at the origin. A monitoring session writes
+/// the reference it built as `reference.json` in this format; `[monitor] reference_file`
+/// reads one (that file, or a design shape).
+///
+/// ```
+/// use sfs::monitor::layout::LayoutCurve;
+/// use sfs::monitor::metrics::ReferenceFile;
+/// let text = r#"{"format": "sfs-monitor-reference", "version": 1, "anchor": 0,
+///                "curves": [{"curve": 0, "points": [[0, 0, 0], [0, 0, 20]]}]}"#;
+/// let r = ReferenceFile::parse(text).unwrap();
+/// let riser = LayoutCurve { index: 0, nodes: vec![0, 1], node_s: vec![0.0, 20.0], length: 20.0 };
+/// // Resampled where an epoch samples the curve (every 5 cm here: 401 points).
+/// let shape = r.shape(&[riser], 0.05).unwrap();
+/// assert_eq!(shape.curves[0].1.len(), 401);
+/// assert!((shape.curves[0].1[200].z - 10.0).abs() < 1e-12);
+/// ```
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceFile {
+    pub format: String,
+    pub version: u32,
+    /// The node at the origin.
+    pub anchor: u32,
+    pub curves: Vec<ReferenceCurve>,
+}
+
+/// One curve of a [`ReferenceFile`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceCurve {
+    /// Its index in the layout.
+    pub curve: usize,
+    pub points: Vec<[f64; 3]>,
+}
+
+impl ReferenceFile {
+    /// The file of `shape`, anchored at `anchor`.
+    pub fn from_shape(shape: &Shape, anchor: u32) -> ReferenceFile {
+        ReferenceFile {
+            format: REFERENCE_FORMAT.into(),
+            version: 1,
+            anchor,
+            curves: shape
+                .curves
+                .iter()
+                .map(|(curve, p)| ReferenceCurve {
+                    curve: *curve,
+                    points: p.iter().map(|x| [x.x, x.y, x.z]).collect(),
+                })
+                .collect(),
+        }
+    }
+
+    /// Parses and checks a reference file (format, version, finite points, at least two per
+    /// curve, each curve once).
+    pub fn parse(text: &str) -> Result<ReferenceFile, String> {
+        let r: ReferenceFile = serde_json::from_str(text).map_err(|e| e.to_string())?;
+        if r.format != REFERENCE_FORMAT {
+            return Err(format!("format {:?} is not {REFERENCE_FORMAT:?}", r.format));
+        }
+        if r.version != 1 {
+            return Err(format!("version {} is not supported (1)", r.version));
+        }
+        for (k, c) in r.curves.iter().enumerate() {
+            if c.points.len() < 2 {
+                return Err(format!("curve {}: fewer than two points", c.curve));
+            }
+            if let Some(j) = c
+                .points
+                .iter()
+                .position(|p| p.iter().any(|x| !x.is_finite()))
+            {
+                return Err(format!("curve {}: point {j} is not finite", c.curve));
+            }
+            if r.curves[..k].iter().any(|o| o.curve == c.curve) {
+                return Err(format!("curve {} is given twice", c.curve));
+            }
+        }
+        Ok(r)
+    }
+
+    /// The reference shape where an epoch samples the curves of `layout` at `step`
+    /// ([`super::epoch::samples`]): a polyline with exactly as many points is taken as it
+    /// is; any other is resampled at the same fractions of its arc length as the samples
+    /// are of the curve's rest length. Every curve of the layout must be in the file.
+    pub fn shape(&self, layout: &[super::layout::LayoutCurve], step: f64) -> Result<Shape, String> {
+        if let Some(c) = self
+            .curves
+            .iter()
+            .find(|c| !layout.iter().any(|l| l.index == c.curve))
+        {
+            return Err(format!("curve {} is not in the layout", c.curve));
+        }
+        let mut curves = Vec::with_capacity(layout.len());
+        for l in layout {
+            let Some(c) = self.curves.iter().find(|c| c.curve == l.index) else {
+                return Err(format!(
+                    "curve {} of the layout is not in the file",
+                    l.index
+                ));
+            };
+            let pts: Vec<Vector3<f64>> = c.points.iter().map(|p| Vector3::from(*p)).collect();
+            let (x, _, _) = super::epoch::samples(l, step);
+            if pts.len() == x.len() {
+                curves.push((l.index, pts));
+                continue;
+            }
+            // Cumulative arc length of the polyline.
+            let mut acc = vec![0.0];
+            for w in pts.windows(2) {
+                acc.push(acc.last().unwrap() + (w[1] - w[0]).norm());
+            }
+            let (total, s0, rest) = (*acc.last().unwrap(), x[0], x.last().unwrap() - x[0]);
+            if total <= 0.0 {
+                return Err(format!("curve {}: the polyline has no length", l.index));
+            }
+            let at = |u: f64| {
+                let a = u * total;
+                let j = acc.partition_point(|&v| v <= a).clamp(1, pts.len() - 1);
+                let seg = acc[j] - acc[j - 1];
+                let t = if seg > 0.0 {
+                    (a - acc[j - 1]) / seg
+                } else {
+                    0.0
+                };
+                pts[j - 1] + (pts[j] - pts[j - 1]) * t.clamp(0.0, 1.0)
+            };
+            curves.push((l.index, x.iter().map(|&x| at((x - s0) / rest)).collect()));
+        }
+        Ok(Shape { curves })
+    }
+}

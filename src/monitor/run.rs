@@ -1,8 +1,10 @@
 //! The monitoring loop of a session: sensor-array epochs (per-sensor orientations averaged by
 //! acquisition over windows of `1 / epoch_hz`) grouped by window → the shape
-//! ([`super::epoch`]) → the reference (mean of the first `reference_s` seconds) → metrics and
-//! alarms → outputs in the session directory:
+//! ([`super::epoch`]) → the reference (mean of the first `reference_s` seconds, or
+//! `reference_file`) → metrics and alarms → outputs in the session directory:
 //!
+//! - `reference.json`: the reference built from the first seconds, once complete
+//!   ([`super::metrics::ReferenceFile`]; name it in `reference_file` to keep it across runs);
 //! - `metrics.csv`: one line per epoch (time, displacement, curvature change, sensors missing,
 //!   saturated, magnetically disturbed, alarms raised), rotated to `metrics.1.csv`, … when it
 //!   passes `metrics_max_mb`, keeping `metrics_keep` files;
@@ -27,6 +29,8 @@ pub const METRICS_FILE: &str = "metrics.csv";
 pub const EVENTS_FILE: &str = "events.log";
 /// Name of the latest shape.
 pub const LATEST_FILE: &str = "latest.glb";
+/// Name of the reference a session built.
+pub const REFERENCE_FILE: &str = "reference.json";
 
 const CSV_HEADER: &str = "t_s,max_displacement_m,mean_displacement_m,max_curvature_change_rad_m,missing,saturated,disturbed,alarms\n";
 
@@ -39,6 +43,7 @@ pub struct MonitorReport {
     /// Sensor epochs that came after their window had closed, ignored (a sensor back from a
     /// dropout reports the window it was cut off in).
     pub late: u64,
+    /// Epochs averaged into the reference (0: the reference came from a file).
     pub reference_epochs: usize,
     pub alarms_raised: u64,
     pub last: Option<Metrics>,
@@ -55,6 +60,8 @@ pub struct Monitor {
     rec: EpochReconstructor,
     reference: ReferenceBuilder,
     reference_epochs: usize,
+    /// The reference once complete (from the configuration, or built).
+    fixed: Option<Shape>,
     alarms: Vec<Alarm>,
     /// Each sensor's smoothed orientation (with `smoothing_s`).
     smoothed: BTreeMap<u16, UnitQuaternion<f64>>,
@@ -79,11 +86,11 @@ impl Monitor {
             .collect();
         let reference_epochs = ((cfg.reference_s * cfg.epoch_hz).round() as usize).max(1);
         let mut m = Monitor {
-            cfg,
             dir: dir.to_owned(),
             rec: EpochReconstructor::new(),
             reference: ReferenceBuilder::new(),
             reference_epochs,
+            fixed: cfg.reference.clone(),
             alarms,
             open: BTreeMap::new(),
             closed: None,
@@ -92,6 +99,7 @@ impl Monitor {
             csv_bytes: 0,
             report: MonitorReport::default(),
             exposition: Default::default(),
+            cfg,
         };
         m.open_csv()?;
         Ok(m)
@@ -252,6 +260,22 @@ impl Monitor {
         }
     }
 
+    /// The reference is complete: kept, and written as `reference.json`.
+    fn keep_reference(&mut self, r: Shape) {
+        let file = super::metrics::ReferenceFile::from_shape(&r, self.cfg.anchor);
+        let path = self.dir.join(REFERENCE_FILE);
+        match crate::atomic::write_json(&path, &file, false) {
+            Ok(()) => tracing::info!(
+                "monitor: reference of {} epochs written to {}",
+                self.reference.count(),
+                path.display()
+            ),
+            Err(e) => tracing::error!("monitor: {}: {e}", path.display()),
+        }
+        self.fixed = Some(r);
+        self.reference = ReferenceBuilder::new();
+    }
+
     fn close(&mut self, t: f64, window: BTreeMap<u16, (UnitQuaternion<f64>, u8)>) {
         self.report.epochs += 1;
         if t >= 3600.0 && self.report.rss_mb_after_first_hour.is_none() {
@@ -303,14 +327,20 @@ impl Monitor {
             );
             return;
         };
-        if self.reference.count() < self.reference_epochs && self.reference.add(&now) {
-            self.report.reference_epochs = self.reference.count();
-        }
-        let metrics = self
-            .reference
-            .reference()
-            .map(|r| compare(&r, &now))
-            .unwrap_or_default();
+        let metrics = match &self.fixed {
+            Some(r) => compare(r, &now),
+            None => {
+                if self.reference.add(&now) {
+                    self.report.reference_epochs = self.reference.count();
+                }
+                let r = self.reference.reference().expect("an epoch was added");
+                let m = compare(&r, &now);
+                if self.reference.count() >= self.reference_epochs {
+                    self.keep_reference(r);
+                }
+                m
+            }
+        };
         let mut raised = Vec::new();
         for a in &mut self.alarms {
             let value = match a.metric.as_str() {
