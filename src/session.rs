@@ -281,7 +281,15 @@ pub async fn run(
 
     let mut monitor = match &options.monitor {
         Some(m) => Some(
-            crate::monitor::run::Monitor::new(m.clone(), out_dir).map_err(output_err(out_dir))?,
+            crate::monitor::run::Monitor::new(
+                m.clone(),
+                out_dir,
+                match start {
+                    Start::Resume => crate::monitor::run::Begin::Resume,
+                    Start::New | Start::NewWithConfig(_) => crate::monitor::run::Begin::Fresh,
+                },
+            )
+            .map_err(output_err(out_dir))?,
         ),
         None => None,
     };
@@ -312,9 +320,17 @@ pub async fn run(
     if let Some(bytes) = prior {
         // Resume: the same decoder and acquisition state as if the session had not stopped.
         stats.bytes += bytes.len() as u64;
-        for e in decoder.feed(&bytes) {
-            stats.observe(&e);
-            acq.event(&e);
+        // In pieces, so that a monitor takes the epochs as they come.
+        for chunk in bytes.chunks(1 << 16) {
+            for e in decoder.feed(chunk) {
+                stats.observe(&e);
+                acq.event(&e);
+            }
+            if let Some(m) = &mut monitor {
+                for e in acq.take_array() {
+                    m.feed(&e);
+                }
+            }
         }
         tracing::info!(
             bytes = bytes.len(),

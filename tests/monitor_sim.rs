@@ -349,7 +349,7 @@ fn smoothing_across_epochs_lowers_the_jitter() {
     let mut jitter = Vec::new();
     for tau in [0.0, 1.0] {
         let dir = tmpdir(&format!("monitor-smooth-{tau}"));
-        let mut m = Monitor::new(cfg(tau), &dir).unwrap();
+        let mut m = Monitor::new(cfg(tau), &dir, sfs::monitor::run::Begin::Fresh).unwrap();
         for e in &scan.array {
             m.feed(e);
         }
@@ -538,7 +538,7 @@ fn monitor_lines(
     dir: &std::path::Path,
     scan: &sfs::scan::Scan,
 ) -> (Vec<String>, sfs::monitor::run::MonitorReport) {
-    let mut m = sfs::monitor::run::Monitor::new(cfg, dir).unwrap();
+    let mut m = sfs::monitor::run::Monitor::new(cfg, dir, sfs::monitor::run::Begin::Fresh).unwrap();
     for e in &scan.array {
         m.feed(e);
     }
@@ -613,4 +613,83 @@ fn a_design_reference_is_resampled_and_measured_against() {
     eprintln!("against the design: swing {swing:.2} m, worst error {worst:.3} m");
     assert!(swing > 1.5);
     assert!(worst <= 0.02 * truth.size, "worst {worst} m");
+}
+
+/// A monitoring session killed (SIGKILL) and resumed (`sfs run --resume`) writes the same
+/// metrics, events, reference and latest shape as the session would have uninterrupted
+/// (`sfs replay` of the whole capture): the resumed session feeds the capture again, quietly
+/// up to the last metrics line, so that the reference, the alarms' states and the epoch
+/// count carry over.
+#[test]
+fn a_killed_monitoring_session_resumes_where_it_stopped() {
+    use std::io::Write;
+    use std::time::Duration;
+    let dir = tmpdir("monitor-resume");
+    let (bytes, truth) = run(StructureKind::Riser, 1, 120.0, 10.0);
+    let (first, rest) = bytes.split_at(bytes.len() * 11 / 20);
+    let (mut child, session) = start_monitoring(
+        &dir,
+        "epoch_hz = 5.0\nanchor = 0\nreference_s = 4.0\nlatest_every = 7\n\
+         [[monitor.alarm]]\nmetric = \"max_displacement\"\nthreshold = 1.5\nhysteresis = 0.2\n\
+         [[monitor.curve]]\nnodes = [0, 1]\nnode_s = [0.0, 20.0]\nlength = 20.0\n",
+        &truth,
+    );
+    let mut stdin = child.stdin.take().unwrap();
+    stdin.write_all(first).unwrap();
+    stdin.flush().unwrap();
+    let metrics = session.join("metrics.csv");
+    common::wait_for(
+        "the first part captured and measured",
+        Duration::from_secs(20),
+        || {
+            common::file_len(&session.join("capture.bin")) == first.len() as u64
+                && std::fs::read_to_string(&metrics).is_ok_and(|t| t.lines().count() > 300)
+        },
+    );
+    child.kill().unwrap(); // SIGKILL
+    let _ = child.wait();
+    drop(stdin);
+    let events_before = std::fs::read_to_string(session.join("events.log")).unwrap();
+    assert!(events_before.contains("alarm raised"), "{events_before}");
+
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "off", "run", "--stdin", "--resume"])
+        .arg(&session)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(rest).unwrap();
+    assert!(child.wait().unwrap().success());
+    assert_eq!(std::fs::read(session.join("capture.bin")).unwrap(), bytes);
+
+    let whole = dir.join("whole");
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "off", "replay"])
+        .arg(session.join("capture.bin"))
+        .arg("--config")
+        .arg(dir.join("monitor.toml"))
+        .arg("--out")
+        .arg(&whole)
+        .stdout(std::process::Stdio::null())
+        .status()
+        .unwrap();
+    assert!(st.success());
+    for name in ["metrics.csv", "events.log", "reference.json", "latest.glb"] {
+        let (a, b) = (
+            std::fs::read(session.join(name)).unwrap(),
+            std::fs::read(whole.join(name)).unwrap(),
+        );
+        assert!(a == b, "{name} differs from the uninterrupted session's");
+    }
+    let lines = std::fs::read_to_string(&metrics).unwrap().lines().count();
+    assert!((599..=602).contains(&lines), "{lines} lines");
+    let report = |d: &std::path::Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap()
+    };
+    let (r, w) = (report(&session), report(&whole));
+    for key in ["epochs", "alarms_raised", "reference_epochs"] {
+        assert_eq!(r["monitor"][key], w["monitor"][key], "{key}");
+    }
+    assert_eq!(w["monitor"]["alarms_raised"], 4);
 }

@@ -171,6 +171,9 @@ pub struct ReferenceFile {
     pub version: u32,
     /// The node at the origin.
     pub anchor: u32,
+    /// Epochs averaged into it (a reference a session built).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub epochs: Option<usize>,
     pub curves: Vec<ReferenceCurve>,
 }
 
@@ -184,12 +187,13 @@ pub struct ReferenceCurve {
 }
 
 impl ReferenceFile {
-    /// The file of `shape`, anchored at `anchor`.
-    pub fn from_shape(shape: &Shape, anchor: u32) -> ReferenceFile {
+    /// The file of `shape`, anchored at `anchor`, the mean of `epochs` epochs.
+    pub fn from_shape(shape: &Shape, anchor: u32, epochs: Option<usize>) -> ReferenceFile {
         ReferenceFile {
             format: REFERENCE_FORMAT.into(),
             version: 1,
             anchor,
+            epochs,
             curves: shape
                 .curves
                 .iter()

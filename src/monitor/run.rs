@@ -34,6 +34,54 @@ pub const REFERENCE_FILE: &str = "reference.json";
 
 const CSV_HEADER: &str = "t_s,max_displacement_m,mean_displacement_m,max_curvature_change_rad_m,missing,saturated,disturbed,alarms\n";
 
+fn remove_if_present(p: &Path) -> std::io::Result<()> {
+    match std::fs::remove_file(p) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+        _ => Ok(()),
+    }
+}
+
+/// The time of the last complete line of a metrics file (a line cut by a kill is removed),
+/// `None` without one.
+fn last_metrics_time(path: &Path) -> std::io::Result<Option<f64>> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut f = match std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+    {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(e),
+    };
+    let len = f.metadata()?.len();
+    let from = len.saturating_sub(4096);
+    f.seek(SeekFrom::Start(from))?;
+    let mut tail = Vec::new();
+    f.read_to_end(&mut tail)?;
+    let Some(end) = tail.iter().rposition(|&b| b == b'\n') else {
+        return Ok(None);
+    };
+    if end + 1 < tail.len() {
+        tracing::warn!(
+            "monitor: {}: its last line was cut ({} bytes); removed",
+            path.display(),
+            tail.len() - end - 1
+        );
+        f.set_len(from + end as u64 + 1)?;
+    }
+    let body = &tail[..end];
+    let line = match body.iter().rposition(|&b| b == b'\n') {
+        Some(k) => &body[k + 1..],
+        None => body,
+    };
+    let t = std::str::from_utf8(line)
+        .ok()
+        .and_then(|l| l.split(',').next())
+        .and_then(|x| x.parse::<f64>().ok());
+    Ok(t)
+}
+
 /// What a monitoring session did, for `report.json`.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct MonitorReport {
@@ -51,6 +99,19 @@ pub struct MonitorReport {
     /// (memory must stay flat in unattended operation).
     pub rss_mb_after_first_hour: Option<f64>,
     pub rss_mb: Option<f64>,
+}
+
+/// How a monitor starts in its directory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Begin {
+    /// Afresh: `metrics.csv`, its rotated files and `events.log` of an earlier run there are
+    /// removed.
+    Fresh,
+    /// Continuing a stopped session whose capture is fed again from its start: epochs up to
+    /// the last line of `metrics.csv` rebuild the state (reference, alarms, smoothing) without
+    /// writing anything; the reference it kept (`reference.json`) is the reference, unless
+    /// the configuration names one.
+    Resume,
 }
 
 /// The monitoring state of a session.
@@ -71,14 +132,16 @@ pub struct Monitor {
     closed: Option<i64>,
     csv: Option<std::fs::File>,
     csv_bytes: u64,
+    /// Resume: epochs up to this time were written by the session before (quiet replay).
+    quiet_until: Option<f64>,
     pub report: MonitorReport,
     /// The Prometheus exposition of the latest epoch ([`super::http`]).
     pub exposition: super::http::Exposition,
 }
 
 impl Monitor {
-    /// Starts monitoring into `dir` (the metrics file is appended to).
-    pub fn new(cfg: MonitorConfig, dir: &Path) -> std::io::Result<Monitor> {
+    /// Starts monitoring into `dir`.
+    pub fn new(cfg: MonitorConfig, dir: &Path, begin: Begin) -> std::io::Result<Monitor> {
         let alarms = cfg
             .alarms
             .iter()
@@ -91,6 +154,7 @@ impl Monitor {
             reference: ReferenceBuilder::new(),
             reference_epochs,
             fixed: cfg.reference.clone(),
+            quiet_until: None,
             alarms,
             open: BTreeMap::new(),
             closed: None,
@@ -101,8 +165,55 @@ impl Monitor {
             exposition: Default::default(),
             cfg,
         };
+        match begin {
+            Begin::Fresh => {
+                for k in 1..=m.cfg.metrics_keep {
+                    remove_if_present(&dir.join(format!("metrics.{k}.csv")))?;
+                }
+                remove_if_present(&dir.join(METRICS_FILE))?;
+                remove_if_present(&dir.join(EVENTS_FILE))?;
+                remove_if_present(&dir.join(REFERENCE_FILE))?;
+            }
+            Begin::Resume => {
+                m.quiet_until = last_metrics_time(&dir.join(METRICS_FILE))?;
+                if m.fixed.is_none() {
+                    if let Some((r, epochs)) = m.kept_reference() {
+                        m.fixed = Some(r);
+                        m.report.reference_epochs = epochs;
+                    }
+                }
+            }
+        }
         m.open_csv()?;
         Ok(m)
+    }
+
+    /// The reference a stopped session kept, if it is there and fits the layout (and the
+    /// epochs averaged into it).
+    fn kept_reference(&self) -> Option<(Shape, usize)> {
+        let path = self.dir.join(REFERENCE_FILE);
+        let text = std::fs::read_to_string(&path).ok()?;
+        let step = EpochParams::default().step;
+        let shape = super::metrics::ReferenceFile::parse(&text)
+            .and_then(|r| {
+                if r.anchor == self.cfg.anchor {
+                    Ok((
+                        r.shape(&self.cfg.layout.curves, step)?,
+                        r.epochs.unwrap_or(0),
+                    ))
+                } else {
+                    Err(format!("anchored at node {}", r.anchor))
+                }
+            })
+            .map_err(|e| {
+                tracing::warn!(
+                    "monitor: {}: {e}; the reference is built again",
+                    path.display()
+                )
+            })
+            .ok()?;
+        tracing::info!("monitor: resumed with the reference of {}", path.display());
+        Some(shape)
     }
 
     fn open_csv(&mut self) -> std::io::Result<()> {
@@ -262,7 +373,11 @@ impl Monitor {
 
     /// The reference is complete: kept, and written as `reference.json`.
     fn keep_reference(&mut self, r: Shape) {
-        let file = super::metrics::ReferenceFile::from_shape(&r, self.cfg.anchor);
+        let file = super::metrics::ReferenceFile::from_shape(
+            &r,
+            self.cfg.anchor,
+            Some(self.reference.count()),
+        );
         let path = self.dir.join(REFERENCE_FILE);
         match crate::atomic::write_json(&path, &file, false) {
             Ok(()) => tracing::info!(
@@ -278,6 +393,8 @@ impl Monitor {
 
     fn close(&mut self, t: f64, window: BTreeMap<u16, (UnitQuaternion<f64>, u8)>) {
         self.report.epochs += 1;
+        // Written as `{t:.3}` by the session before.
+        let quiet = self.quiet_until.is_some_and(|q| t <= q + 5e-4);
         if t >= 3600.0 && self.report.rss_mb_after_first_hour.is_none() {
             crate::live::release_free_memory();
             self.report.rss_mb_after_first_hour = crate::live::rss_mb().0;
@@ -349,12 +466,13 @@ impl Monitor {
                 "max_curvature_change" => metrics.max_curvature_change,
                 _ => f64::NAN,
             };
-            if let Some(tr) = a.update(value) {
+            let tr = a.update(value);
+            if tr == Some(Transition::Raised) {
+                self.report.alarms_raised += 1;
+            }
+            if let Some(tr) = tr.filter(|_| !quiet) {
                 let what = match tr {
-                    Transition::Raised => {
-                        self.report.alarms_raised += 1;
-                        "raised"
-                    }
+                    Transition::Raised => "raised",
                     Transition::Cleared => "cleared",
                 };
                 tracing::warn!(
@@ -389,6 +507,11 @@ impl Monitor {
             shape.missing.len(),
             raised.join(";")
         );
+        self.report.last = Some(metrics);
+        self.expose(t, &metrics, shape.missing.len(), saturated, disturbed);
+        if quiet {
+            return;
+        }
         if self.csv_bytes + line.len() as u64 > self.cfg.metrics_max_bytes {
             if let Err(e) = self.rotate() {
                 tracing::error!("monitor: rotating {METRICS_FILE}: {e}");
@@ -400,8 +523,6 @@ impl Monitor {
                 Err(e) => tracing::error!("monitor: cannot append to {METRICS_FILE}: {e}"),
             }
         }
-        self.report.last = Some(metrics);
-        self.expose(t, &metrics, shape.missing.len(), saturated, disturbed);
         if self.report.epochs % self.cfg.latest_every as u64 == 0 {
             let glb = crate::gltf_out::network_glb(
                 &shape.positions.network_curves(),
