@@ -118,6 +118,25 @@ pub(crate) struct Clock {
 }
 
 impl Clock {
+    /// The clock where a capture file starts (see [`crate::capture::CaptureStart`]).
+    pub(crate) fn at(start: &crate::capture::CaptureStart) -> Clock {
+        Clock {
+            last: start.last_t_us,
+            elapsed_us: start.elapsed_us,
+            restart: start.restart,
+        }
+    }
+
+    /// The state to start another capture file from.
+    pub(crate) fn state(&self) -> crate::capture::CaptureStart {
+        crate::capture::CaptureStart {
+            elapsed_us: self.elapsed_us,
+            last_t_us: self.last,
+            restart: self.restart,
+            hello: None,
+        }
+    }
+
     /// The device restarted: its clock starts over.
     pub(crate) fn restart(&mut self) {
         self.restart = true;
@@ -182,12 +201,18 @@ impl Acquisition {
     }
 
     pub fn new(cfg: AcquisitionConfig) -> Self {
+        Self::starting_at(cfg, &crate::capture::CaptureStart::default())
+    }
+
+    /// Acquisition of a capture file that continues an earlier one (a rotated capture: its
+    /// session time goes on from `start`).
+    pub fn starting_at(cfg: AcquisitionConfig, start: &crate::capture::CaptureStart) -> Self {
         let ahrs = Ahrs::new(cfg.ahrs);
-        Acquisition {
+        let mut acq = Acquisition {
             cfg,
             model: None,
             kind: None,
-            clock: Clock::default(),
+            clock: Clock::at(start),
             wheel_last: None,
             wheel_m: 0.0,
             wheel_reset: false,
@@ -201,7 +226,11 @@ impl Acquisition {
             gap: false,
             array: BTreeMap::new(),
             late_lengths: BTreeMap::new(),
+        };
+        if let Some(h) = start.hello() {
+            acq.hello(&h);
         }
+        acq
     }
 
     /// The scan so far (accepted curves only).

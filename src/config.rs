@@ -81,6 +81,8 @@
 //! [output]                           # what `sfs run` writes into the session directory
 //! live = true                        # rebuild network.glb and report.json after every curve
 //! snapshots = false                  # also keep snapshots/curve-NNN.glb per curve
+//! capture_max_mb = 256.0             # capture.bin rotated past this size (default: never;
+//! capture_keep = 8                   #   256 MB and 8 kept when monitoring) … keeping this many
 //! ```
 
 use crate::acquisition::AcquisitionConfig;
@@ -219,6 +221,8 @@ pub struct MonitorConfig {
 pub struct OutputToml {
     pub live: Option<bool>,
     pub snapshots: Option<bool>,
+    pub capture_max_mb: Option<f64>,
+    pub capture_keep: Option<usize>,
 }
 
 /// `[surface]`, as written (see the module documentation).
@@ -382,6 +386,7 @@ impl Config {
         cfg.network_params(file)?;
         cfg.surface_params(file)?;
         cfg.monitor_config(file)?;
+        cfg.capture_rotation(file)?;
         Ok(cfg)
     }
 
@@ -609,6 +614,41 @@ impl Config {
             p.regression.xi = x;
         }
         Ok(p)
+    }
+
+    /// The rotation of a live session's capture (`None`: one file that grows): set by
+    /// `[output] capture_max_mb` / `capture_keep`; on by default when monitoring (256 MB, 8
+    /// kept), since an unattended run would otherwise fill the disk.
+    pub fn capture_rotation(
+        &self,
+        file: &Path,
+    ) -> Result<Option<crate::capture::Rotation>, ConfigError> {
+        let o = &self.output;
+        let monitoring = self.monitor.is_some();
+        let max_mb = match o.capture_max_mb {
+            Some(x) => x,
+            None if monitoring => 256.0,
+            None if o.capture_keep.is_some() => {
+                return Err(ConfigError {
+                    file: file.to_owned(),
+                    key: "output.capture_keep".into(),
+                    reason: "needs output.capture_max_mb (the capture is rotated only past a size)"
+                        .into(),
+                })
+            }
+            None => return Ok(None),
+        };
+        if !(max_mb.is_finite() && (0.01..=1e7).contains(&max_mb)) {
+            return Err(ConfigError {
+                file: file.to_owned(),
+                key: "output.capture_max_mb".into(),
+                reason: format!("{max_mb} is out of range [0.01, 1e7] MB"),
+            });
+        }
+        Ok(Some(crate::capture::Rotation {
+            max_bytes: (max_mb * 1e6) as u64,
+            keep: o.capture_keep.unwrap_or(8).min(100_000),
+        }))
     }
 
     /// The surfacing settings this configuration describes (`None`: surfacing disabled).

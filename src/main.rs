@@ -131,6 +131,7 @@ fn options(cfg: &Config, file: &Path) -> Result<session::Options, ConfigError> {
         surface: cfg.surface_params(file)?,
         live: cfg.output.live.unwrap_or(true) && cfg.monitor.is_none(),
         snapshots: cfg.output.snapshots.unwrap_or(false),
+        capture_rotation: cfg.capture_rotation(file)?,
     })
 }
 

@@ -35,6 +35,8 @@ pub struct Options {
     pub snapshots: bool,
     /// Monitoring of an instrumented structure ([`crate::monitor::run`]).
     pub monitor: Option<crate::config::MonitorConfig>,
+    /// Rotation of a live session's capture ([`crate::capture::Rotation`]); `None`: one file.
+    pub capture_rotation: Option<crate::capture::Rotation>,
 }
 
 /// The soft-constraint weight ω of the surface fit for scans (measured data). On a noisy
@@ -57,6 +59,7 @@ impl Default for Options {
             live: true,
             snapshots: false,
             monitor: None,
+            capture_rotation: None,
         }
     }
 }
@@ -232,7 +235,8 @@ pub async fn run(
     };
     std::fs::create_dir_all(out_dir).map_err(output_err(out_dir))?;
     let capture_path = spec.is_live().then(|| out_dir.join(CAPTURE_FILE));
-    // Raw bytes of the session so far (resume), read before the source appends anything.
+    // Raw bytes of the session so far (resume): its capture files, opened before the source
+    // appends anything (or rotates them).
     let prior = match (&capture_path, &start) {
         (Some(p), Start::New | Start::NewWithConfig(_)) => match std::fs::metadata(p) {
             Ok(m) if m.len() > 0 => {
@@ -243,8 +247,8 @@ pub async fn run(
             }
             _ => None,
         },
-        (Some(p), Start::Resume) => match std::fs::read(p) {
-            Ok(b) => Some(b),
+        (Some(p), Start::Resume) => match prior_files(p) {
+            Ok(f) => Some(f),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
                 return Err(SessionError::Resume(format!(
                     "{} has no {CAPTURE_FILE}",
@@ -269,9 +273,21 @@ pub async fn run(
         let p = out_dir.join(CONFIG_COPY);
         crate::atomic::write_atomic(&p, text.as_bytes()).map_err(output_err(&p))?;
     }
-    let capture = match &capture_path {
-        Some(p) => Some(CaptureWriter::open_append(p).map_err(output_err(p))?),
-        None => None,
+    let capture = match (&capture_path, options.capture_rotation) {
+        (Some(p), None) => Some(CaptureWriter::open_append(p).map_err(output_err(p))?),
+        (Some(p), Some(r)) => Some(CaptureWriter::open_rotating(p, r).map_err(output_err(p))?),
+        (None, _) => None,
+    };
+    // Where the session clock starts: a replayed piece of a rotated capture continues the
+    // time of the files before it (its sidecar).
+    let replay_start = match &spec {
+        SourceSpec::Replay { path, .. } => {
+            crate::capture::read_start(path).map_err(|source| SessionError::Output {
+                path: crate::capture::start_path(path),
+                source,
+            })?
+        }
+        _ => Default::default(),
     };
     let description = spec.describe();
     let progress = replay_progress(&spec);
@@ -303,7 +319,23 @@ pub async fn run(
     };
     let mut decoder = Decoder::new();
     let mut stats = LinkStats::default();
-    let mut acq = Acquisition::new(options.acquisition.clone());
+    // Resume: the capture files to decode again, from the newest that starts before what a
+    // monitor needs (all of them otherwise).
+    let prior = prior.map(|mut files| {
+        let from = monitor.as_ref().and_then(|m| m.replay_from());
+        let k = from.map_or(0, |t| {
+            files
+                .iter()
+                .rposition(|f| f.start.elapsed_us as f64 * 1e-6 <= t)
+                .unwrap_or(0)
+        });
+        files.split_off(k)
+    });
+    let clock_start = match &prior {
+        Some(files) => files[0].start.clone(),
+        None => replay_start,
+    };
+    let mut acq = Acquisition::starting_at(options.acquisition.clone(), &clock_start);
     let mut live = if options.live {
         Some(
             crate::live::Live::spawn(crate::live::LiveSettings {
@@ -317,23 +349,34 @@ pub async fn run(
     } else {
         None
     };
-    if let Some(bytes) = prior {
+    if let Some(files) = prior {
         // Resume: the same decoder and acquisition state as if the session had not stopped.
-        stats.bytes += bytes.len() as u64;
-        // In pieces, so that a monitor takes the epochs as they come.
-        for chunk in bytes.chunks(1 << 16) {
-            for e in decoder.feed(chunk) {
-                stats.observe(&e);
-                acq.event(&e);
-            }
-            if let Some(m) = &mut monitor {
-                for e in acq.take_array() {
-                    m.feed(&e);
+        // Read in pieces, up to the length each file had before the source appended to it,
+        // so that a monitor takes the epochs as they come.
+        let mut chunk = vec![0u8; 1 << 16];
+        let mut total = 0;
+        for f in files {
+            stats.bytes += f.len;
+            total += f.len;
+            let mut file = std::io::Read::take(f.file, f.len);
+            loop {
+                let n = std::io::Read::read(&mut file, &mut chunk).map_err(output_err(&f.path))?;
+                if n == 0 {
+                    break;
+                }
+                for e in decoder.feed(&chunk[..n]) {
+                    stats.observe(&e);
+                    acq.event(&e);
+                }
+                if let Some(m) = &mut monitor {
+                    for e in acq.take_array() {
+                        m.feed(&e);
+                    }
                 }
             }
         }
         tracing::info!(
-            bytes = bytes.len(),
+            bytes = total,
             curves = acq.scan().curves.len(),
             "resumed: the capture so far is decoded"
         );
@@ -500,6 +543,43 @@ fn network_glb(
         &net.positions.nodes,
         mesh.as_ref(),
     )
+}
+
+/// A capture file of a session being resumed, opened before the source appends to it.
+struct PriorFile {
+    path: PathBuf,
+    file: std::fs::File,
+    /// Its length then.
+    len: u64,
+    /// The session clock where it starts ([`crate::capture::CaptureStart`]).
+    start: crate::capture::CaptureStart,
+}
+
+/// The capture files of a session, oldest first: the rotated ones still kept
+/// (`capture.K.bin` … `capture.1.bin`), then `capture` itself.
+fn prior_files(capture: &Path) -> std::io::Result<Vec<PriorFile>> {
+    let open = |path: PathBuf| -> std::io::Result<PriorFile> {
+        let file = std::fs::File::open(&path)?;
+        let len = file.metadata()?.len();
+        let start = crate::capture::read_start(&path)?;
+        Ok(PriorFile {
+            path,
+            file,
+            len,
+            start,
+        })
+    };
+    let mut files = vec![open(capture.to_owned())?];
+    let stem = capture.file_stem().unwrap_or_default().to_string_lossy();
+    for k in 1.. {
+        match open(capture.with_file_name(format!("{stem}.{k}.bin"))) {
+            Ok(f) => files.push(f),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => break,
+            Err(e) => return Err(e),
+        }
+    }
+    files.reverse();
+    Ok(files)
 }
 
 /// A progress bar on standard error for a replayed capture, when standard error is a terminal

@@ -203,6 +203,7 @@ fn start_monitoring(
             s.sensor, s.curve, s.s
         );
     }
+    std::fs::create_dir_all(dir).unwrap();
     std::fs::write(dir.join("monitor.toml"), cfg).unwrap();
     let session = dir.join("session");
     let child = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
@@ -615,25 +616,24 @@ fn a_design_reference_is_resampled_and_measured_against() {
     assert!(worst <= 0.02 * truth.size, "worst {worst} m");
 }
 
-/// A monitoring session killed (SIGKILL) and resumed (`sfs run --resume`) writes the same
-/// metrics, events, reference and latest shape as the session would have uninterrupted
-/// (`sfs replay` of the whole capture): the resumed session feeds the capture again, quietly
-/// up to the last metrics line, so that the reference, the alarms' states and the epoch
-/// count carry over.
-#[test]
-fn a_killed_monitoring_session_resumes_where_it_stopped() {
+/// The `[monitor]` keys of the resume tests: a reference of 4 s, an alarm at 1.5 m.
+const RESUME_KEYS: &str = "epoch_hz = 5.0\nanchor = 0\nreference_s = 4.0\nlatest_every = 7\n\
+     [[monitor.alarm]]\nmetric = \"max_displacement\"\nthreshold = 1.5\nhysteresis = 0.2\n\
+     [[monitor.curve]]\nnodes = [0, 1]\nnode_s = [0.0, 20.0]\nlength = 20.0\n";
+
+/// A monitoring session on standard input (`monitor`: its keys) given the first 55 % of
+/// `bytes`, killed (SIGKILL) once it has measured 300 epochs, then resumed with the rest;
+/// its directory.
+fn kill_and_resume(
+    dir: &std::path::Path,
+    monitor: &str,
+    bytes: &[u8],
+    truth: &sfs::simulate::structure::StructureTruth,
+) -> std::path::PathBuf {
     use std::io::Write;
     use std::time::Duration;
-    let dir = tmpdir("monitor-resume");
-    let (bytes, truth) = run(StructureKind::Riser, 1, 120.0, 10.0);
     let (first, rest) = bytes.split_at(bytes.len() * 11 / 20);
-    let (mut child, session) = start_monitoring(
-        &dir,
-        "epoch_hz = 5.0\nanchor = 0\nreference_s = 4.0\nlatest_every = 7\n\
-         [[monitor.alarm]]\nmetric = \"max_displacement\"\nthreshold = 1.5\nhysteresis = 0.2\n\
-         [[monitor.curve]]\nnodes = [0, 1]\nnode_s = [0.0, 20.0]\nlength = 20.0\n",
-        &truth,
-    );
+    let (mut child, session) = start_monitoring(dir, monitor, truth);
     let mut stdin = child.stdin.take().unwrap();
     stdin.write_all(first).unwrap();
     stdin.flush().unwrap();
@@ -642,7 +642,9 @@ fn a_killed_monitoring_session_resumes_where_it_stopped() {
         "the first part captured and measured",
         Duration::from_secs(20),
         || {
-            common::file_len(&session.join("capture.bin")) == first.len() as u64
+            // Everything captured (the current file ends where `first` does; earlier files
+            // may have been rotated away) and measured.
+            std::fs::read(session.join("capture.bin")).is_ok_and(|c| first.ends_with(&c))
                 && std::fs::read_to_string(&metrics).is_ok_and(|t| t.lines().count() > 300)
         },
     );
@@ -661,6 +663,19 @@ fn a_killed_monitoring_session_resumes_where_it_stopped() {
         .unwrap();
     child.stdin.take().unwrap().write_all(rest).unwrap();
     assert!(child.wait().unwrap().success());
+    session
+}
+
+/// A monitoring session killed (SIGKILL) and resumed (`sfs run --resume`) writes the same
+/// metrics, events, reference and latest shape as the session would have uninterrupted
+/// (`sfs replay` of the whole capture): the resumed session feeds the capture again, quietly
+/// up to the last metrics line, so that the reference, the alarms' states and the epoch
+/// count carry over.
+#[test]
+fn a_killed_monitoring_session_resumes_where_it_stopped() {
+    let dir = tmpdir("monitor-resume");
+    let (bytes, truth) = run(StructureKind::Riser, 1, 120.0, 10.0);
+    let session = kill_and_resume(&dir, RESUME_KEYS, &bytes, &truth);
     assert_eq!(std::fs::read(session.join("capture.bin")).unwrap(), bytes);
 
     let whole = dir.join("whole");
@@ -682,7 +697,10 @@ fn a_killed_monitoring_session_resumes_where_it_stopped() {
         );
         assert!(a == b, "{name} differs from the uninterrupted session's");
     }
-    let lines = std::fs::read_to_string(&metrics).unwrap().lines().count();
+    let lines = std::fs::read_to_string(session.join("metrics.csv"))
+        .unwrap()
+        .lines()
+        .count();
     assert!((599..=602).contains(&lines), "{lines} lines");
     let report = |d: &std::path::Path| -> serde_json::Value {
         serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap()
@@ -692,4 +710,53 @@ fn a_killed_monitoring_session_resumes_where_it_stopped() {
         assert_eq!(r["monitor"][key], w["monitor"][key], "{key}");
     }
     assert_eq!(w["monitor"]["alarms_raised"], 4);
+}
+
+/// Issue 8, point 5 with point 6: the capture of a monitoring session is rotated
+/// (`[output] capture_max_mb`, `capture_keep`), so a month-long run cannot fill the disk; a
+/// session killed and resumed from its last capture file alone (its session time from the
+/// file's sidecar, the reference from reference.json, the alarm states from the last metrics
+/// line) writes the metrics and events of a session that was never interrupted.
+#[test]
+fn a_monitoring_session_with_a_rotated_capture_resumes_too() {
+    use std::io::Write;
+    let dir = tmpdir("monitor-rotated");
+    let (bytes, truth) = run(StructureKind::Riser, 1, 120.0, 10.0);
+    // 1.3 MB of stream in files of 60 kB, 4 old ones kept.
+    let keys = format!("{RESUME_KEYS}[output]\ncapture_max_mb = 0.06\ncapture_keep = 4\n");
+    let session = kill_and_resume(&dir.join("a"), &keys, &bytes, &truth);
+    let whole_dir = dir.join("b");
+    std::fs::create_dir_all(&whole_dir).unwrap();
+    let (mut child, whole) = start_monitoring(&whole_dir, &keys, &truth);
+    child.stdin.take().unwrap().write_all(&bytes).unwrap();
+    assert!(child.wait().unwrap().success());
+
+    for d in [&session, &whole] {
+        let mut kept = Vec::new();
+        for n in [
+            "capture.4.bin",
+            "capture.3.bin",
+            "capture.2.bin",
+            "capture.1.bin",
+            "capture.bin",
+        ] {
+            let b = std::fs::read(d.join(n)).unwrap();
+            assert!(b.len() <= 70_000, "{n}: {} bytes", b.len());
+            kept.extend_from_slice(&b);
+        }
+        assert!(!d.join("capture.5.bin").exists());
+        assert!(
+            bytes.ends_with(&kept),
+            "the kept files are not the stream's end"
+        );
+    }
+    for name in ["metrics.csv", "events.log", "reference.json"] {
+        let (a, b) = (
+            std::fs::read_to_string(session.join(name)).unwrap(),
+            std::fs::read_to_string(whole.join(name)).unwrap(),
+        );
+        assert!(a == b, "{name} differs from the uninterrupted session's");
+    }
+    let events = std::fs::read_to_string(whole.join("events.log")).unwrap();
+    assert_eq!(events.matches("alarm raised").count(), 4, "{events}");
 }

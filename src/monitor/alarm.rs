@@ -42,6 +42,16 @@ impl Alarm {
         self.raised
     }
 
+    /// Its name in `metrics.csv`: `metric>threshold`.
+    pub fn label(&self) -> String {
+        format!("{}>{}", self.metric, self.threshold)
+    }
+
+    /// Restores a state (a resumed session, from the last line of its metrics).
+    pub fn set_raised(&mut self, raised: bool) {
+        self.raised = raised;
+    }
+
     /// Feeds the metric's value of an epoch. A non-finite value changes nothing.
     pub fn update(&mut self, value: f64) -> Option<Transition> {
         if !value.is_finite() {

@@ -6,7 +6,8 @@
 //! - `reference.json`: the reference built from the first seconds, once complete
 //!   ([`super::metrics::ReferenceFile`]; name it in `reference_file` to keep it across runs);
 //! - `metrics.csv`: one line per epoch (time, displacement, curvature change, sensors missing,
-//!   saturated, magnetically disturbed, alarms raised), rotated to `metrics.1.csv`, … when it
+//!   saturated, magnetically disturbed, alarms raised as `metric>threshold` separated by
+//!   `;`), rotated to `metrics.1.csv`, … when it
 //!   passes `metrics_max_mb`, keeping `metrics_keep` files;
 //! - `events.log`: one line per alarm raised or cleared (also a warning in the log);
 //! - `latest.glb`: the network of the latest shape, replaced atomically every `latest_every`
@@ -41,9 +42,9 @@ fn remove_if_present(p: &Path) -> std::io::Result<()> {
     }
 }
 
-/// The time of the last complete line of a metrics file (a line cut by a kill is removed),
-/// `None` without one.
-fn last_metrics_time(path: &Path) -> std::io::Result<Option<f64>> {
+/// The time and the alarms raised of the last complete line of a metrics file (a line cut by
+/// a kill is removed), `None` without one.
+fn last_metrics_line(path: &Path) -> std::io::Result<Option<(f64, Vec<String>)>> {
     use std::io::{Read, Seek, SeekFrom};
     let mut f = match std::fs::OpenOptions::new()
         .read(true)
@@ -75,11 +76,23 @@ fn last_metrics_time(path: &Path) -> std::io::Result<Option<f64>> {
         Some(k) => &body[k + 1..],
         None => body,
     };
-    let t = std::str::from_utf8(line)
-        .ok()
-        .and_then(|l| l.split(',').next())
-        .and_then(|x| x.parse::<f64>().ok());
-    Ok(t)
+    let Ok(line) = std::str::from_utf8(line) else {
+        return Ok(None);
+    };
+    let fields: Vec<&str> = line.split(',').collect();
+    let Ok(t) = fields[0].parse::<f64>() else {
+        return Ok(None);
+    };
+    let alarms = fields
+        .get(7)
+        .map(|a| {
+            a.split(';')
+                .filter(|x| !x.is_empty())
+                .map(String::from)
+                .collect()
+        })
+        .unwrap_or_default();
+    Ok(Some((t, alarms)))
 }
 
 /// What a monitoring session did, for `report.json`.
@@ -134,6 +147,9 @@ pub struct Monitor {
     csv_bytes: u64,
     /// Resume: epochs up to this time were written by the session before (quiet replay).
     quiet_until: Option<f64>,
+    /// Resume: the alarms raised at the last line written before, restored when the quiet
+    /// replay ends (a rotated capture may not go back far enough to rebuild them).
+    resume_alarms: Option<Vec<String>>,
     pub report: MonitorReport,
     /// The Prometheus exposition of the latest epoch ([`super::http`]).
     pub exposition: super::http::Exposition,
@@ -155,6 +171,7 @@ impl Monitor {
             reference_epochs,
             fixed: cfg.reference.clone(),
             quiet_until: None,
+            resume_alarms: None,
             alarms,
             open: BTreeMap::new(),
             closed: None,
@@ -175,7 +192,10 @@ impl Monitor {
                 remove_if_present(&dir.join(REFERENCE_FILE))?;
             }
             Begin::Resume => {
-                m.quiet_until = last_metrics_time(&dir.join(METRICS_FILE))?;
+                if let Some((t, alarms)) = last_metrics_line(&dir.join(METRICS_FILE))? {
+                    m.quiet_until = Some(t);
+                    m.resume_alarms = Some(alarms);
+                }
                 if m.fixed.is_none() {
                     if let Some((r, epochs)) = m.kept_reference() {
                         m.fixed = Some(r);
@@ -186,6 +206,15 @@ impl Monitor {
         }
         m.open_csv()?;
         Ok(m)
+    }
+
+    /// Resume: the session time from which the capture must be fed again to rebuild the
+    /// state (a little before the last metrics line, for the windows and the smoothing);
+    /// `None`: from its start (no metrics yet, or a reference still being built).
+    pub fn replay_from(&self) -> Option<f64> {
+        let q = self.quiet_until?;
+        self.fixed.as_ref()?;
+        Some(q - 2.0 / self.cfg.epoch_hz - 5.0 * self.cfg.smoothing_s)
     }
 
     /// The reference a stopped session kept, if it is there and fits the layout (and the
@@ -395,6 +424,13 @@ impl Monitor {
         self.report.epochs += 1;
         // Written as `{t:.3}` by the session before.
         let quiet = self.quiet_until.is_some_and(|q| t <= q + 5e-4);
+        if !quiet {
+            if let Some(raised) = self.resume_alarms.take() {
+                for a in &mut self.alarms {
+                    a.set_raised(raised.contains(&a.label()));
+                }
+            }
+        }
         if t >= 3600.0 && self.report.rss_mb_after_first_hour.is_none() {
             crate::live::release_free_memory();
             self.report.rss_mb_after_first_hour = crate::live::rss_mb().0;
@@ -496,7 +532,7 @@ impl Monitor {
                 }
             }
             if a.is_raised() {
-                raised.push(a.metric.clone());
+                raised.push(a.label());
             }
         }
         let line = format!(
