@@ -40,6 +40,28 @@ pub fn write_atomic_with(
     result
 }
 
+/// Removes the temporary files a killed writer left in `dir` (`.NAME.tmpPID`, of another
+/// process than this one); returns how many.
+pub fn remove_stale(dir: &Path) -> io::Result<usize> {
+    let ours = format!(".tmp{}", std::process::id());
+    let mut removed = 0;
+    for e in std::fs::read_dir(dir)? {
+        let e = e?;
+        let name = e.file_name();
+        let Some(name) = name.to_str() else { continue };
+        let stale = name.starts_with('.')
+            && name
+                .rsplit_once(".tmp")
+                .is_some_and(|(_, pid)| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+            && !name.ends_with(&ours);
+        if stale && e.file_type()?.is_file() {
+            std::fs::remove_file(e.path())?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
 /// Writes `value` as JSON (indented when `pretty`), atomically.
 pub fn write_json<T: serde::Serialize>(path: &Path, value: &T, pretty: bool) -> io::Result<()> {
     write_atomic_with(path, |w| {
@@ -70,6 +92,32 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names, vec![std::ffi::OsString::from("report.json")]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn stale_temporaries_of_a_killed_writer_are_removed_and_nothing_else() {
+        let dir = std::env::temp_dir().join(format!("sfs-atomic-stale-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let keep = [
+            "latest.glb".to_string(),
+            ".hidden".into(),
+            ".notes.tmpx".into(),
+            format!(".report.json.tmp{}", std::process::id()),
+        ];
+        for n in keep.iter().chain([&".latest.glb.tmp12".to_string()]) {
+            std::fs::write(dir.join(n), b"x").unwrap();
+        }
+        assert_eq!(remove_stale(&dir).unwrap(), 1);
+        let mut names: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        names.sort();
+        let mut expected = keep.to_vec();
+        expected.sort();
+        assert_eq!(names, expected);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -234,6 +234,11 @@ pub async fn run(
         move |source| SessionError::Output { path, source }
     };
     std::fs::create_dir_all(out_dir).map_err(output_err(out_dir))?;
+    match crate::atomic::remove_stale(out_dir) {
+        Ok(0) => {}
+        Ok(n) => tracing::info!("removed {n} temporary files a killed session left"),
+        Err(e) => tracing::warn!("cannot clean {}: {e}", out_dir.display()),
+    }
     let capture_path = spec.is_live().then(|| out_dir.join(CAPTURE_FILE));
     // Raw bytes of the session so far (resume): its capture files, opened before the source
     // appends anything (or rotates them).

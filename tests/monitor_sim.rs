@@ -663,6 +663,11 @@ fn kill_and_resume(
         .unwrap();
     child.stdin.take().unwrap().write_all(rest).unwrap();
     assert!(child.wait().unwrap().success());
+    // No temporary file of the killed session is left behind.
+    for e in std::fs::read_dir(&session).unwrap() {
+        let name = e.unwrap().file_name();
+        assert!(!name.to_string_lossy().starts_with('.'), "{name:?} left");
+    }
     session
 }
 
