@@ -61,6 +61,7 @@
 //! # reference_file = "reference.json" #   or a fixed one (a session's reference.json, or a design)
 //! smoothing_s = 0.0                  # smooth each sensor across epochs (time constant, s)
 //! latest_every = 5                   # latest.glb replaced every this many epochs
+//! surface = false                    # true: latest.glb with the surface ([surface] settings)
 //! metrics_max_mb = 64.0              # metrics.csv rotated past this size …
 //! metrics_keep = 4                   # … keeping this many old files
 //! http_port = 9464                   # Prometheus metrics at http://127.0.0.1:9464/metrics
@@ -142,6 +143,8 @@ pub struct MonitorToml {
     pub reference_file: Option<PathBuf>,
     pub smoothing_s: Option<f64>,
     pub latest_every: Option<usize>,
+    /// Surface the shape in `latest.glb` (with the `[surface]` settings).
+    pub surface: Option<bool>,
     pub metrics_max_mb: Option<f64>,
     pub metrics_keep: Option<usize>,
     /// Serve the metrics over HTTP (Prometheus text format) on this port; off when absent.
@@ -206,6 +209,8 @@ pub struct MonitorConfig {
     pub smoothing_s: f64,
     /// `latest.glb` is replaced every this many epochs. Default 5.
     pub latest_every: usize,
+    /// The surface of the shape in `latest.glb` (`None`: the network only, the default).
+    pub surface: Option<crate::surface::fit::SurfaceParams>,
     /// `metrics.csv` is rotated past this size (default 64 MB), keeping `metrics_keep` old
     /// files (default 4).
     pub metrics_max_bytes: u64,
@@ -504,6 +509,15 @@ impl Config {
                 "must be at least 1".into(),
             ));
         }
+        let surface = match m.surface {
+            Some(true) => Some(self.surface_params(file)?.ok_or_else(|| {
+                err(
+                    "monitor.surface".into(),
+                    "true, but [surface] enabled = false".into(),
+                )
+            })?),
+            _ => None,
+        };
         let max_mb = m.metrics_max_mb.unwrap_or(64.0);
         if !(max_mb.is_finite() && (0.01..=1e6).contains(&max_mb)) {
             return Err(err(
@@ -567,6 +581,7 @@ impl Config {
             reference,
             smoothing_s,
             latest_every,
+            surface,
             metrics_max_bytes: (max_mb * 1e6) as u64,
             metrics_keep: m.metrics_keep.unwrap_or(4).min(1000),
             alarms,

@@ -10,8 +10,8 @@
 //!   `;`), rotated to `metrics.1.csv`, … when it
 //!   passes `metrics_max_mb`, keeping `metrics_keep` files;
 //! - `events.log`: one line per alarm raised or cleared (also a warning in the log);
-//! - `latest.glb`: the network of the latest shape, replaced atomically every `latest_every`
-//!   epochs.
+//! - `latest.glb`: the network of the latest shape (and its surface with `surface = true`),
+//!   replaced atomically every `latest_every` epochs.
 
 use super::alarm::{Alarm, Transition};
 use super::epoch::{EpochParams, EpochReconstructor};
@@ -112,6 +112,11 @@ pub struct MonitorReport {
     /// (memory must stay flat in unattended operation).
     pub rss_mb_after_first_hour: Option<f64>,
     pub rss_mb: Option<f64>,
+    /// Surfaces made for `latest.glb`, the shapes that could not be surfaced (each also a
+    /// warning), and the time of the last, ms.
+    pub surfaces: u64,
+    pub surfaces_failed: u64,
+    pub surface_ms: Option<f64>,
 }
 
 /// How a monitor starts in its directory.
@@ -132,6 +137,7 @@ pub struct Monitor {
     cfg: MonitorConfig,
     dir: PathBuf,
     rec: EpochReconstructor,
+    surfacer: crate::surface::fit::Surfacer,
     reference: ReferenceBuilder,
     reference_epochs: usize,
     /// The reference once complete (from the configuration, or built).
@@ -167,6 +173,7 @@ impl Monitor {
         let mut m = Monitor {
             dir: dir.to_owned(),
             rec: EpochReconstructor::new(),
+            surfacer: Default::default(),
             reference: ReferenceBuilder::new(),
             reference_epochs,
             fixed: cfg.reference.clone(),
@@ -560,10 +567,27 @@ impl Monitor {
             }
         }
         if self.report.epochs % self.cfg.latest_every as u64 == 0 {
+            let mesh = self.cfg.surface.as_ref().and_then(|sp| {
+                let t0 = std::time::Instant::now();
+                let segs =
+                    crate::surface::cycles::NetworkSegments::from_positions(&shape.positions);
+                match self.surfacer.run(&segs, sp) {
+                    Ok(s) => {
+                        self.report.surfaces += 1;
+                        self.report.surface_ms = Some(t0.elapsed().as_secs_f64() * 1e3);
+                        Some(s.mesh())
+                    }
+                    Err(e) => {
+                        self.report.surfaces_failed += 1;
+                        tracing::warn!("monitor: t = {t:.2} s: no surface: {e}");
+                        None
+                    }
+                }
+            });
             let glb = crate::gltf_out::network_glb(
                 &shape.positions.network_curves(),
                 &shape.positions.nodes,
-                None,
+                mesh.as_ref(),
             );
             let path = self.dir.join(LATEST_FILE);
             match glb
