@@ -1,7 +1,8 @@
 //! Speed of one monitoring epoch (issue 8: ≤ 20 ms for 200 sensors): a 2 m × 2 m panel bulged
 //! by 5 cm, instrumented with 10 curves along x and 10 along y (crossing at 100 nodes), 10
 //! sensors on each (200 in all); one epoch = the layout's frames interpolated and resampled at
-//! 5 cm, the Poisson step, with and without the regression.
+//! 5 cm, the Poisson step, with and without the regression; and the optional surface of the
+//! shape (81 closed cells) with the default `[surface]` settings, as `latest.glb` gets it.
 //! `cargo bench --bench monitor`; targets in BENCHMARKS.md.
 
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -77,6 +78,18 @@ fn bench(c: &mut Criterion) {
     };
     g.bench_function("regression_and_poisson", |b| {
         b.iter(|| black_box(rec.run(&layout, black_box(&q), &pr).expect("a shape")))
+    });
+    let shape = rec.run(&layout, &q, &p).expect("a shape");
+    let segs = sfs::surface::cycles::NetworkSegments::from_positions(&shape.positions);
+    let sp = sfs::surface::fit::SurfaceParams {
+        soft: sfs::session::SCAN_SOFTNESS,
+        ..Default::default()
+    };
+    let mut surfacer = sfs::surface::fit::Surfacer::new();
+    let s = surfacer.run(&segs, &sp).expect("a surface");
+    eprintln!("surface: {} vertices", s.mesh().positions.len());
+    g.bench_function("surface", |b| {
+        b.iter(|| black_box(surfacer.run(black_box(&segs), &sp).expect("a surface")))
     });
     g.finish();
 }
