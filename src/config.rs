@@ -366,7 +366,13 @@ impl Config {
             key: "-".into(),
             reason: format!("cannot read: {e}"),
         })?;
-        let mut cfg = Self::parse(&text, path)?;
+        Self::from_text(&text, path)
+    }
+
+    /// As [`load`](Self::load), for the text of a file at `path` (relative paths in it are
+    /// relative to its directory).
+    pub fn from_text(text: &str, path: &Path) -> Result<Config, ConfigError> {
+        let mut cfg = Self::parse(text, path)?;
         let base = path.parent().unwrap_or(Path::new(""));
         if let Some(p) = &mut cfg.source.path {
             if p.is_relative() && cfg.source.kind != "serial" {

@@ -150,8 +150,8 @@ fn run(a: RunArgs) -> i32 {
         (None, true) if saved.is_file() => Some(saved.clone()),
         (c, _) => c.clone(),
     };
-    if let (Some(given), true, Ok(kept)) = (&a.config, resume, std::fs::read(&saved)) {
-        if std::fs::read(given).ok().as_ref() != Some(&kept) {
+    if let (Some(given), true, Ok(kept)) = (&a.config, resume, std::fs::read_to_string(&saved)) {
+        if std::fs::read_to_string(given).ok().as_deref() != Some(session::kept_origin(&kept).1) {
             tracing::warn!(
                 "{} differs from the configuration the session started with ({}): the curves so far are rebuilt with the new one",
                 given.display(),
@@ -169,8 +169,8 @@ fn run(a: RunArgs) -> i32 {
     let start = if resume {
         session::Start::Resume
     } else {
-        match config.as_deref().map(std::fs::read_to_string) {
-            Some(Ok(text)) => session::Start::NewWithConfig(text),
+        match config.as_deref().map(|f| (f, std::fs::read_to_string(f))) {
+            Some((f, Ok(text))) => session::Start::NewWithConfig(session::kept_config(&text, f)),
             _ => session::Start::New,
         }
     };
@@ -188,7 +188,18 @@ fn resolve_run(
         reason: reason.into(),
     };
     let (cfg, file) = match config {
-        Some(f) => (Config::load(f)?, f.to_owned()),
+        Some(f) => {
+            // A kept copy resolves its relative paths where it was copied from.
+            let text = std::fs::read_to_string(f).map_err(|e| ConfigError {
+                file: f.to_owned(),
+                key: "-".into(),
+                reason: format!("cannot read: {e}"),
+            })?;
+            match session::kept_origin(&text) {
+                (Some(origin), body) => (Config::from_text(body, &origin)?, origin),
+                (None, _) => (Config::from_text(&text, f)?, f.to_owned()),
+            }
+        }
         None => (Config::default(), "command line".into()),
     };
     let mut spec = if a.stdin {

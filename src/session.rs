@@ -169,6 +169,28 @@ const SHUTDOWN_GRACE: Duration = Duration::from_millis(300);
 /// Name of the copy of the configuration a session started with (used by `--resume`).
 pub const CONFIG_COPY: &str = "config.toml";
 
+/// The first line of a kept configuration: where it was copied from. Its relative paths (a
+/// replayed capture, a reference file) are relative to that file's directory, not to the
+/// session's.
+const CONFIG_ORIGIN: &str = "# sfs: copied from ";
+
+/// The text to keep as `config.toml` for the configuration `text` read from `origin`.
+pub fn kept_config(text: &str, origin: &Path) -> String {
+    let origin = std::path::absolute(origin).unwrap_or_else(|_| origin.to_owned());
+    format!("{CONFIG_ORIGIN}{}\n{text}", origin.display())
+}
+
+/// A kept configuration's origin (see [`kept_config`]) and its text as it was.
+pub fn kept_origin(kept: &str) -> (Option<PathBuf>, &str) {
+    match kept
+        .strip_prefix(CONFIG_ORIGIN)
+        .and_then(|r| r.split_once('\n'))
+    {
+        Some((origin, text)) => (Some(PathBuf::from(origin)), text),
+        None => (None, kept),
+    }
+}
+
 /// How a session with a live source starts in its directory.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub enum Start {

@@ -859,3 +859,58 @@ fn the_panel_is_surfaced_in_the_latest_shape() {
     eprintln!("panel displacement: worst error {:.2} mm", worst * 1e3);
     assert!(worst < 0.01 * truth.size, "{worst} m");
 }
+
+/// The kept configuration of a session (`SESSION/config.toml`, used by `--resume` without
+/// `--config`) resolves its relative paths where it was copied from: a `reference_file`
+/// next to the original configuration is found again.
+#[test]
+fn a_resumed_session_finds_the_relative_paths_of_its_configuration() {
+    use std::io::Write;
+    let dir = tmpdir("monitor-kept-config");
+    let (bytes, truth) = run(StructureKind::Riser, 7, 20.0, 10.0);
+    let cfg_dir = dir.join("etc");
+    std::fs::create_dir_all(&cfg_dir).unwrap();
+    std::fs::write(
+        cfg_dir.join("vertical.json"),
+        r#"{"format": "sfs-monitor-reference", "version": 1, "anchor": 0,
+            "curves": [{"curve": 0, "points": [[0, 0, 0], [0, 0, 20]]}]}"#,
+    )
+    .unwrap();
+    let (mut child, session) = start_monitoring(
+        &cfg_dir,
+        "reference_file = \"vertical.json\"\n\
+         [[monitor.curve]]\nnodes = [0, 1]\nnode_s = [0.0, 20.0]\nlength = 20.0\n",
+        &truth,
+    );
+    let (first, rest) = bytes.split_at(bytes.len() / 2);
+    child.stdin.take().unwrap().write_all(first).unwrap();
+    assert!(child.wait().unwrap().success());
+    let kept = std::fs::read_to_string(session.join("config.toml")).unwrap();
+    assert!(kept.starts_with("# sfs: copied from /"), "{kept}");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "off", "run", "--stdin", "--resume"])
+        .arg(&session)
+        .current_dir(&dir)
+        .stdin(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(rest).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(session.join("report.json")).unwrap()).unwrap();
+    assert_eq!(
+        report["monitor"]["reference_epochs"], 0,
+        "the file is the reference"
+    );
+    let lines = std::fs::read_to_string(session.join("metrics.csv"))
+        .unwrap()
+        .lines()
+        .count();
+    assert!((99..=102).contains(&lines), "{lines} lines");
+}
