@@ -62,6 +62,8 @@
 //! smoothing_s = 0.0                  # smooth each sensor across epochs (time constant, s)
 //! latest_every = 5                   # latest.glb replaced every this many epochs
 //! surface = false                    # true: latest.glb with the surface ([surface] settings)
+//! regression = false                 # true: the regression on SO(3) over the network in each
+//!                                    #   epoch ([network] settings)
 //! metrics_max_mb = 64.0              # metrics.csv rotated past this size …
 //! metrics_keep = 4                   # … keeping this many old files
 //! http_port = 9464                   # Prometheus metrics at http://127.0.0.1:9464/metrics
@@ -145,6 +147,8 @@ pub struct MonitorToml {
     pub latest_every: Option<usize>,
     /// Surface the shape in `latest.glb` (with the `[surface]` settings).
     pub surface: Option<bool>,
+    /// Run the regression on SO(3) in each epoch (with the `[network]` settings).
+    pub regression: Option<bool>,
     pub metrics_max_mb: Option<f64>,
     pub metrics_keep: Option<usize>,
     /// Serve the metrics over HTTP (Prometheus text format) on this port; off when absent.
@@ -211,6 +215,10 @@ pub struct MonitorConfig {
     pub latest_every: usize,
     /// The surface of the shape in `latest.glb` (`None`: the network only, the default).
     pub surface: Option<crate::surface::fit::SurfaceParams>,
+    /// The regression over the network in each epoch (`None`: the frames interpolated
+    /// between the sensors as they are, the default: on the simulator's riser and panel it
+    /// changed the sensors' positions by less than 0.1 mm, at 6 ms an epoch for 200 sensors).
+    pub regression: Option<crate::network::regression::RegressionParams>,
     /// `metrics.csv` is rotated past this size (default 64 MB), keeping `metrics_keep` old
     /// files (default 4).
     pub metrics_max_bytes: u64,
@@ -524,6 +532,10 @@ impl Config {
             })?),
             _ => None,
         };
+        let regression = match m.regression {
+            Some(true) => Some(self.network_params(file)?.regression),
+            _ => None,
+        };
         let max_mb = m.metrics_max_mb.unwrap_or(64.0);
         if !(max_mb.is_finite() && (0.01..=1e6).contains(&max_mb)) {
             return Err(err(
@@ -588,6 +600,7 @@ impl Config {
             smoothing_s,
             latest_every,
             surface,
+            regression,
             metrics_max_bytes: (max_mb * 1e6) as u64,
             metrics_keep: m.metrics_keep.unwrap_or(4).min(1000),
             alarms,
@@ -988,6 +1001,24 @@ mod tests {
         let m = ok.monitor_config(Path::new("x")).unwrap().unwrap();
         assert_eq!((m.layout.sensors.len(), m.epoch_hz, m.anchor), (2, 2.0, 0));
         assert_eq!(m.http, None, "no endpoint unless asked for");
+        assert_eq!(
+            (m.regression, m.surface.is_some()),
+            (None, false),
+            "off by default"
+        );
+        let on = parse(&format!(
+            "{base}[network]\nxi = 2.0\n[monitor]\nregression = true\nsurface = true\n{curve}"
+        ))
+        .unwrap()
+        .monitor_config(Path::new("x"))
+        .unwrap()
+        .unwrap();
+        assert_eq!(
+            on.regression.map(|r| r.xi),
+            Some(2.0),
+            "with the [network] settings"
+        );
+        assert!(on.surface.is_some());
         let cases = [
             (format!("[monitor]\n{curve}{}", sensor(0, 1, 0.0)), "monitor.sensor[0]", "curve 1"),
             (
@@ -1006,6 +1037,11 @@ mod tests {
             (format!("[monitor]\nanchor = 7\n{curve}"), "monitor.anchor", "node 7"),
             ("[monitor]\nepoch_hz = 1.0\n".to_string(), "monitor.curve", "at least one"),
             (format!("[monitor]\nhttp_port = 0\n{curve}"), "monitor.http_port", "not a port"),
+            (
+                format!("[surface]\nenabled = false\n[monitor]\nsurface = true\n{curve}"),
+                "monitor.surface",
+                "enabled = false",
+            ),
             (
                 format!("[monitor]\nhttp_port = 9464\nhttp_address = \"localhost\"\n{curve}"),
                 "monitor.http_address",

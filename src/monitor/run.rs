@@ -465,10 +465,14 @@ impl Monitor {
             .values()
             .filter(|(_, f)| f & flags::MAG_DISTURBED != 0)
             .count();
-        let shape = match self
-            .rec
-            .run(&self.cfg.layout, &usable, &EpochParams::default())
-        {
+        let shape = match self.rec.run(
+            &self.cfg.layout,
+            &usable,
+            &EpochParams {
+                regression: self.cfg.regression,
+                ..Default::default()
+            },
+        ) {
             Ok(s) => s,
             Err(e) => {
                 self.report.failed += 1;
