@@ -57,6 +57,8 @@
 //! [monitor]                          # instrumented structures (sensor arrays)
 //! epoch_hz = 5.0                     # shapes per second
 //! anchor = 0                         # the node at the origin (default: curve 0's first)
+//! x_azimuth_deg = 90.0               # the structure's x axis, clockwise from magnetic north
+//!                                    #   (default: x east, y north, z up)
 //! reference_s = 10.0                 # the mean shape of the first seconds is the reference,
 //! # reference_file = "reference.json" #   or a fixed one (a session's reference.json, or a design)
 //! smoothing_s = 0.0                  # smooth each sensor across epochs (time constant, s)
@@ -139,6 +141,7 @@ pub struct MonitorToml {
     pub epoch_hz: Option<f64>,
     /// The node placed at the origin (the structure's fixed point, e.g. a riser's foot).
     pub anchor: Option<u32>,
+    pub x_azimuth_deg: Option<f64>,
     pub reference_s: Option<f64>,
     /// A fixed reference shape ([`crate::monitor::metrics::ReferenceFile`]), relative to the
     /// configuration file's directory.
@@ -204,6 +207,10 @@ pub struct MonitorConfig {
     pub epoch_hz: f64,
     /// The node at the origin; default the first curve's first node.
     pub anchor: u32,
+    /// The reference frame's x axis: its azimuth, degrees clockwise from magnetic north
+    /// (default 90: x east, y magnetic north, z up, the sensors' own world frame). Shapes,
+    /// `latest.glb` and reference files are in this frame.
+    pub x_azimuth_deg: f64,
     /// Seconds at the start whose mean shape is the reference. Default 10.
     pub reference_s: f64,
     /// A fixed reference instead (`reference_file`), sampled as the epochs are.
@@ -466,6 +473,13 @@ impl Config {
                 format!("node {anchor} is on no curve of the layout"),
             ));
         }
+        let x_azimuth_deg = m.x_azimuth_deg.unwrap_or(90.0);
+        if !(x_azimuth_deg.is_finite() && (-360.0..=360.0).contains(&x_azimuth_deg)) {
+            return Err(err(
+                "monitor.x_azimuth_deg".into(),
+                format!("{x_azimuth_deg} is out of range [-360, 360] degrees"),
+            ));
+        }
         let reference_s = m.reference_s.unwrap_or(10.0);
         if !(reference_s.is_finite() && (0.0..=86_400.0).contains(&reference_s)) {
             return Err(err(
@@ -595,6 +609,7 @@ impl Config {
             layout,
             epoch_hz,
             anchor,
+            x_azimuth_deg,
             reference_s,
             reference,
             smoothing_s,

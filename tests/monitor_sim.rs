@@ -333,6 +333,7 @@ fn smoothing_across_epochs_lowers_the_jitter() {
         },
         epoch_hz: 5.0,
         anchor: 0,
+        x_azimuth_deg: 90.0,
         reference_s: 1.0,
         reference: None,
         smoothing_s,
@@ -424,6 +425,7 @@ fn monitoring_survives_dropouts_an_unplug_and_a_device_reboot() {
         },
         epoch_hz,
         anchor: 0,
+        x_azimuth_deg: 90.0,
         reference_s: 1.0,
         reference: None,
         smoothing_s: 0.0,
@@ -915,4 +917,54 @@ fn a_resumed_session_finds_the_relative_paths_of_its_configuration() {
         .lines()
         .count();
     assert!((99..=102).contains(&lines), "{lines} lines");
+}
+
+/// Issue 8, point 1: the reference frame. The riser bends towards magnetic east; with the
+/// structure's x axis pointing north (`x_azimuth_deg = 0`) its top moves along −y in
+/// `latest.glb` (z stays up), and the metrics, which do not depend on the frame, are the same
+/// digits as in the sensors' own frame.
+#[test]
+fn the_shape_is_given_in_the_configured_frame() {
+    let (bytes, truth) = run(StructureKind::Riser, 8, 20.0, 10.0);
+    let acq = AcquisitionConfig {
+        array_window: 0.2,
+        ..Default::default()
+    };
+    let scan = Acquisition::scan_bytes(&bytes, acq);
+    let mut metrics = Vec::new();
+    for azimuth in [90.0, 0.0] {
+        let dir = tmpdir(&format!("monitor-frame-{azimuth}"));
+        let cfg = layout_config(
+            &dir,
+            &format!("anchor = 0\nreference_s = 1.0\nlatest_every = 1\nx_azimuth_deg = {azimuth}"),
+            &truth,
+        );
+        let (lines, _) = monitor_lines(cfg, &dir, &scan);
+        let t: f64 = lines
+            .last()
+            .unwrap()
+            .split(',')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        let top = sfs::gltf_out::read_glb(&std::fs::read(dir.join("latest.glb")).unwrap())
+            .unwrap()
+            .nodes[&1];
+        // East, north, up → the structure's frame.
+        let w = truth_top(&truth, t - 0.1);
+        let expected = if azimuth == 90.0 {
+            w
+        } else {
+            Vector3::new(w.y, -w.x, w.z)
+        };
+        eprintln!("x azimuth {azimuth}: top {top:?}, expected {expected:?}");
+        assert!(w.x > 1.0, "the riser barely bent: {w:?}");
+        assert!(
+            (top - expected).norm() < 0.1,
+            "top {top:?}, expected {expected:?}"
+        );
+        metrics.push(lines);
+    }
+    assert_eq!(metrics[0], metrics[1]);
 }

@@ -142,6 +142,8 @@ pub struct Monitor {
     reference_epochs: usize,
     /// The reference once complete (from the configuration, or built).
     fixed: Option<Shape>,
+    /// The structure's frame from the sensors' world frame (east, north, up).
+    frame: UnitQuaternion<f64>,
     alarms: Vec<Alarm>,
     /// Each sensor's smoothed orientation (with `smoothing_s`).
     smoothed: BTreeMap<u16, UnitQuaternion<f64>>,
@@ -177,6 +179,10 @@ impl Monitor {
             reference: ReferenceBuilder::new(),
             reference_epochs,
             fixed: cfg.reference.clone(),
+            frame: UnitQuaternion::from_axis_angle(
+                &nalgebra::Vector3::z_axis(),
+                (cfg.x_azimuth_deg - 90.0).to_radians(),
+            ),
             quiet_until: None,
             resume_alarms: None,
             alarms,
@@ -445,7 +451,7 @@ impl Monitor {
         let mut usable: BTreeMap<u16, UnitQuaternion<f64>> = window
             .iter()
             .filter(|(_, (_, f))| f & (flags::INVALID | flags::SATURATED) == 0)
-            .map(|(s, (q, _))| (*s, *q))
+            .map(|(s, (q, _))| (*s, self.frame * q))
             .collect();
         if self.cfg.smoothing_s > 0.0 {
             // First-order smoothing on SO(3): slerp from the last smoothed orientation
