@@ -542,6 +542,25 @@ fn layout_config(
         .unwrap()
 }
 
+/// `duration` seconds of the simulated structure (10 Hz, seed `seed`) as acquisition gives them
+/// to a monitor at 5 epochs per second, and the truth.
+fn epochs_of(
+    kind: StructureKind,
+    seed: u64,
+    duration: f64,
+) -> (sfs::scan::Scan, sfs::simulate::structure::StructureTruth) {
+    let (bytes, truth) = run(kind, seed, duration, 10.0);
+    let acq = AcquisitionConfig {
+        array_window: 0.2,
+        ..Default::default()
+    };
+    (Acquisition::scan_bytes(&bytes, acq), truth)
+}
+
+/// The riser at rest (straight up, 20 m) as a reference file: a two-point polyline.
+const VERTICAL: &str = r#"{"format": "sfs-monitor-reference", "version": 1, "anchor": 0,
+    "curves": [{"curve": 0, "points": [[0, 0, 0], [0, 0, 20]]}]}"#;
+
 /// Runs a monitor over `scan` in `dir`; its metrics lines (without the header).
 fn monitor_lines(
     cfg: sfs::config::MonitorConfig,
@@ -562,12 +581,7 @@ fn monitor_lines(
 /// that shape from its first epoch.
 #[test]
 fn a_reference_built_by_one_session_is_kept_by_the_next() {
-    let (bytes, truth) = run(StructureKind::Riser, 4, 30.0, 10.0);
-    let acq = AcquisitionConfig {
-        array_window: 0.2,
-        ..Default::default()
-    };
-    let scan = Acquisition::scan_bytes(&bytes, acq);
+    let (scan, truth) = epochs_of(StructureKind::Riser, 4, 30.0);
     let first = tmpdir("monitor-ref-first");
     let cfg = layout_config(&first, "reference_s = 2.0", &truth);
     let (built, report) = monitor_lines(cfg, &first, &scan);
@@ -597,19 +611,9 @@ fn a_reference_built_by_one_session_is_kept_by_the_next() {
 /// displacement from the vertical.
 #[test]
 fn a_design_reference_is_resampled_and_measured_against() {
-    let (bytes, truth) = run(StructureKind::Riser, 5, 60.0, 10.0);
-    let acq = AcquisitionConfig {
-        array_window: 0.2,
-        ..Default::default()
-    };
-    let scan = Acquisition::scan_bytes(&bytes, acq);
+    let (scan, truth) = epochs_of(StructureKind::Riser, 5, 60.0);
     let dir = tmpdir("monitor-ref-design");
-    std::fs::write(
-        dir.join("vertical.json"),
-        r#"{"format": "sfs-monitor-reference", "version": 1, "anchor": 0,
-            "curves": [{"curve": 0, "points": [[0, 0, 0], [0, 0, 20]]}]}"#,
-    )
-    .unwrap();
+    std::fs::write(dir.join("vertical.json"), VERTICAL).unwrap();
     // Relative to the configuration file's directory.
     let cfg = layout_config(&dir, "reference_file = \"vertical.json\"", &truth);
     let (lines, _) = monitor_lines(cfg, &dir, &scan);
@@ -780,12 +784,7 @@ fn a_monitoring_session_with_a_rotated_capture_resumes_too() {
 /// truth's bulge.
 #[test]
 fn the_panel_is_surfaced_in_the_latest_shape() {
-    let (bytes, truth) = run(StructureKind::Panel, 6, 25.0, 10.0);
-    let acq = AcquisitionConfig {
-        array_window: 0.2,
-        ..Default::default()
-    };
-    let scan = Acquisition::scan_bytes(&bytes, acq);
+    let (scan, truth) = epochs_of(StructureKind::Panel, 6, 25.0);
     let dir = tmpdir("monitor-panel-surface");
     let cfg = layout_config(
         &dir,
@@ -874,12 +873,7 @@ fn a_resumed_session_finds_the_relative_paths_of_its_configuration() {
     let (bytes, truth) = run(StructureKind::Riser, 7, 20.0, 10.0);
     let cfg_dir = dir.join("etc");
     std::fs::create_dir_all(&cfg_dir).unwrap();
-    std::fs::write(
-        cfg_dir.join("vertical.json"),
-        r#"{"format": "sfs-monitor-reference", "version": 1, "anchor": 0,
-            "curves": [{"curve": 0, "points": [[0, 0, 0], [0, 0, 20]]}]}"#,
-    )
-    .unwrap();
+    std::fs::write(cfg_dir.join("vertical.json"), VERTICAL).unwrap();
     let (mut child, session) = start_monitoring(
         &cfg_dir,
         "reference_file = \"vertical.json\"\n\
@@ -925,12 +919,7 @@ fn a_resumed_session_finds_the_relative_paths_of_its_configuration() {
 /// digits as in the sensors' own frame.
 #[test]
 fn the_shape_is_given_in_the_configured_frame() {
-    let (bytes, truth) = run(StructureKind::Riser, 8, 20.0, 10.0);
-    let acq = AcquisitionConfig {
-        array_window: 0.2,
-        ..Default::default()
-    };
-    let scan = Acquisition::scan_bytes(&bytes, acq);
+    let (scan, truth) = epochs_of(StructureKind::Riser, 8, 20.0);
     let mut metrics = Vec::new();
     for azimuth in [90.0, 0.0] {
         let dir = tmpdir(&format!("monitor-frame-{azimuth}"));
