@@ -69,3 +69,29 @@ fn demo_config_runs_the_shipped_replay_from_any_directory() {
     // A replay is not live: nothing to capture.
     assert!(!out_dir.join("capture.bin").exists());
 }
+
+/// The shipped monitoring configurations describe the simulator's structures, so that
+/// `sfs simulate --structure riser|panel` streams can be monitored with them as they are.
+#[test]
+fn shipped_monitoring_layouts_are_the_simulators() {
+    use sfs::simulate::structure::{run, StructureKind};
+    for (name, kind) in [
+        ("riser", StructureKind::Riser),
+        ("panel", StructureKind::Panel),
+    ] {
+        let file = std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/config"))
+            .join(format!("{name}.toml"));
+        let m = sfs::config::Config::load(&file)
+            .unwrap()
+            .monitor_config(&file)
+            .unwrap()
+            .expect("a [monitor] section");
+        let (_, truth) = run(kind, 1, 0.2, 10.0);
+        assert_eq!(m.layout.curves, truth.curves, "{name}");
+        assert_eq!(m.layout.sensors.len(), truth.sensors.len(), "{name}");
+        for (a, b) in m.layout.sensors.iter().zip(&truth.sensors) {
+            assert_eq!((a.sensor, a.curve), (b.sensor, b.curve), "{name}");
+            assert!((a.s - b.s).abs() < 1e-9, "{name}: sensor {}", a.sensor);
+        }
+    }
+}
