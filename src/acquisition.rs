@@ -180,6 +180,11 @@ pub struct Acquisition {
     open: Option<OpenCurve>,
     scan: Scan,
     field: FieldReference,
+    /// Sensor arrays: the field reference as of a window (its median is recomputed once per
+    /// window, not once per sensor).
+    array_field: Option<(i64, Option<(f64, f64)>)>,
+    /// Sensor arrays: the newest window of the grid seen.
+    array_grid: Option<i64>,
     ahrs: Ahrs,
     last_sample_t: Option<f64>,
     gap: bool,
@@ -221,6 +226,8 @@ impl Acquisition {
             open: None,
             scan: Scan::default(),
             field: FieldReference::new(),
+            array_field: None,
+            array_grid: None,
             ahrs,
             last_sample_t: None,
             gap: false,
@@ -709,43 +716,32 @@ impl Acquisition {
         sat: bool,
     ) {
         // Windows on a grid of session time shared by every sensor, so that the epochs of
-        // all sensors of one window carry the same time (the window's end).
-        let window = self.cfg.array_window;
+        // all sensors of one window carry the same time (the window's end). Samples come in
+        // time order: the first of a window closes every sensor's earlier one (a sensor that
+        // stops sending has its last window closed on time, not when it comes back).
         let th = self.cfg.thresholds;
-        let k = (t / window).floor() as i64;
+        let k = (t / self.cfg.array_window).floor() as i64;
+        if self.array_grid.is_none_or(|g| k > g) {
+            let done: Vec<u16> = self
+                .array
+                .iter()
+                .filter(|(_, st)| st.window < k)
+                .map(|(id, _)| *id)
+                .collect();
+            for id in done {
+                let st = self.array.remove(&id).expect("listed");
+                self.close_array_window(id, st);
+            }
+            self.array_grid = Some(k);
+        }
         let st = self.array.entry(sensor).or_insert_with(|| ArraySensor {
             window: k,
             ..Default::default()
         });
-        if k != st.window && st.n == 0 {
-            // Nothing usable in the last window (every sample saturated): no epoch.
-            *st = ArraySensor {
-                window: k,
-                ..Default::default()
-            };
-        }
-        if k != st.window {
-            let t = (st.window + 1) as f64 * window;
-            let q = triad(&(st.acc / st.n as f64), &(st.mag / st.n as f64));
-            let mut f = st.flags;
-            let q = match q {
-                Some(q) => q,
-                None => {
-                    f |= flags::INVALID;
-                    UnitQuaternion::identity()
-                }
-            };
-            self.scan.array.push(ArrayEpoch {
-                t,
-                sensor,
-                q: quat_array(&q),
-                samples: st.n,
-                flags: f,
-            });
-            *st = ArraySensor {
-                window: k,
-                ..Default::default()
-            };
+        if k < st.window {
+            // Out of time order: its window is closed already.
+            self.scan.counts.array_late += 1;
+            return;
         }
         if sat {
             st.flags |= flags::SATURATED;
@@ -753,10 +749,66 @@ impl Acquisition {
         }
         if acc_motion(&acc, &th) {
             st.flags |= flags::ACC_MOTION;
+        } else {
+            self.field.add(&acc, &mag);
         }
         st.acc += acc;
         st.mag += mag;
         st.n += 1;
+    }
+
+    /// The epoch of one sensor's finished window: its mean orientation (TRIAD of the mean
+    /// acceleration and field), flagged saturated, moving or magnetically disturbed; a window
+    /// whose samples were all saturated gives an epoch without orientation (so that the
+    /// sensor is known saturated, not missing).
+    fn close_array_window(&mut self, sensor: u16, st: ArraySensor) {
+        let t = (st.window + 1) as f64 * self.cfg.array_window;
+        if st.n == 0 {
+            if st.flags & flags::SATURATED != 0 {
+                self.scan.array.push(ArrayEpoch {
+                    t,
+                    sensor,
+                    q: quat_array(&UnitQuaternion::identity()),
+                    samples: 0,
+                    flags: st.flags | flags::INVALID,
+                });
+            }
+            return;
+        }
+        let (acc_mean, mag_mean) = (st.acc / st.n as f64, st.mag / st.n as f64);
+        let mut f = st.flags;
+        // Magnetically disturbed: the window's mean field off the site's (the median over
+        // every sensor at rest so far, taken once per window) in norm or dip.
+        let reference = match self.array_field {
+            Some((w, r)) if w == st.window => r,
+            _ => {
+                let r = self.field.reference();
+                self.array_field = Some((st.window, r));
+                r
+            }
+        };
+        if crate::orientation::disturbance::mag_disturbed(
+            reference,
+            &acc_mean,
+            &mag_mean,
+            &self.cfg.thresholds,
+        ) {
+            f |= flags::MAG_DISTURBED;
+        }
+        let q = match triad(&acc_mean, &mag_mean) {
+            Some(q) => q,
+            None => {
+                f |= flags::INVALID;
+                UnitQuaternion::identity()
+            }
+        };
+        self.scan.array.push(ArrayEpoch {
+            t,
+            sensor,
+            q: quat_array(&q),
+            samples: st.n,
+            flags: f,
+        });
     }
 
     /// Ends acquisition: an open curve is reported and dropped (it was never ended).

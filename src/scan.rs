@@ -111,6 +111,9 @@ pub struct Counts {
     pub wrong_kind: u64,
     /// Implausible jumps of the wheel counter (ignored).
     pub wheel_glitches: u64,
+    /// Sensor-array samples older than the window they fall in (out of time order; ignored).
+    #[serde(default)]
+    pub array_late: u64,
 }
 
 /// Per-sensor orientations of a sensor array, one per averaging window.

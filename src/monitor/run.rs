@@ -5,10 +5,10 @@
 //!
 //! - `reference.json`: the reference built from the first seconds, once complete
 //!   ([`super::metrics::ReferenceFile`]; name it in `reference_file` to keep it across runs);
-//! - `metrics.csv`: one line per epoch (time, displacement, curvature change, sensors missing,
-//!   saturated, magnetically disturbed, alarms raised as `metric>threshold` separated by
-//!   `;`), rotated to `metrics.1.csv`, … when it
-//!   passes `metrics_max_mb`, keeping `metrics_keep` files;
+//! - `metrics.csv`: one line per epoch (time, displacement, curvature change, the layout's
+//!   sensors left out: missing, saturated, magnetically disturbed, each counted once and
+//!   interpolated across; alarms raised as `metric>threshold` separated by `;`), rotated to
+//!   `metrics.1.csv`, … when it passes `metrics_max_mb`, keeping `metrics_keep` files;
 //! - `events.log`: one line per alarm raised or cleared (also a warning in the log);
 //! - `latest.glb`: the network of the latest shape (and its surface with `surface = true`),
 //!   replaced atomically every `latest_every` epochs.
@@ -377,19 +377,19 @@ impl Monitor {
         put(
             "sensors_missing",
             "gauge",
-            "Sensors without an orientation.",
+            "Sensors of the layout without an orientation (no samples, or none usable), saturated and disturbed ones aside.",
             missing.to_string(),
         );
         put(
             "sensors_saturated",
             "gauge",
-            "Sensors saturated.",
+            "Sensors of the layout left out because saturated.",
             saturated.to_string(),
         );
         put(
             "sensors_disturbed",
             "gauge",
-            "Sensors in a disturbed magnetic field.",
+            "Sensors of the layout left out because their magnetic field is disturbed.",
             disturbed.to_string(),
         );
         put(
@@ -448,9 +448,12 @@ impl Monitor {
             crate::live::release_free_memory();
             self.report.rss_mb_after_first_hour = crate::live::rss_mb().0;
         }
+        // Saturated and magnetically disturbed sensors are left out like missing ones (their
+        // curve is interpolated across them): a disturbed magnetometer turns the heading.
+        let unusable = flags::INVALID | flags::SATURATED | flags::MAG_DISTURBED;
         let mut usable: BTreeMap<u16, UnitQuaternion<f64>> = window
             .iter()
-            .filter(|(_, (_, f))| f & (flags::INVALID | flags::SATURATED) == 0)
+            .filter(|(_, (_, f))| f & unusable == 0)
             .map(|(s, (q, _))| (*s, self.frame * q))
             .collect();
         if self.cfg.smoothing_s > 0.0 {
@@ -463,14 +466,6 @@ impl Monitor {
                 self.smoothed.insert(*s, *q);
             }
         }
-        let saturated = window
-            .values()
-            .filter(|(_, f)| f & flags::SATURATED != 0)
-            .count();
-        let disturbed = window
-            .values()
-            .filter(|(_, f)| f & flags::MAG_DISTURBED != 0)
-            .count();
         let shape = match self.rec.run(
             &self.cfg.layout,
             &usable,
@@ -486,6 +481,16 @@ impl Monitor {
                 return;
             }
         };
+        // Each sensor of the layout left out is counted once: saturated, else disturbed, else
+        // missing (no samples, or no orientation from them).
+        let (mut missing, mut saturated, mut disturbed) = (0, 0, 0);
+        for s in &shape.missing {
+            match window.get(s).map(|(_, f)| *f) {
+                Some(f) if f & flags::SATURATED != 0 => saturated += 1,
+                Some(f) if f & flags::MAG_DISTURBED != 0 => disturbed += 1,
+                _ => missing += 1,
+            }
+        }
         for w in &shape.left_out {
             tracing::debug!("monitor: t = {t:.2} s: {w}");
         }
@@ -557,11 +562,11 @@ impl Monitor {
             metrics.max_displacement,
             metrics.mean_displacement,
             metrics.max_curvature_change,
-            shape.missing.len(),
+            missing,
             raised.join(";")
         );
         self.report.last = Some(metrics);
-        self.expose(t, &metrics, shape.missing.len(), saturated, disturbed);
+        self.expose(t, &metrics, missing, saturated, disturbed);
         if quiet {
             return;
         }
