@@ -1061,3 +1061,21 @@ fn an_epoch_of_a_closed_window_is_late() {
         .collect();
     assert!(t.len() >= 2 && t.windows(2).all(|w| w[1] > w[0]), "{t:?}");
 }
+
+/// A sensor that streams but is not in the layout (here the riser's top one, left out of
+/// it) is ignored and named once, in the report and the log; the shape is made without it.
+#[test]
+fn a_sensor_the_layout_does_not_place_is_named_and_ignored() {
+    let (scan, mut truth) = epochs_of(StructureKind::Riser, 1, 3.0);
+    truth.sensors.retain(|s| s.sensor != 40);
+    let dir = tmpdir("monitor-unknown");
+    let cfg = layout_config(&dir, "anchor = 0\nreference_s = 0.2", &truth);
+    let (lines, report) = monitor_lines(cfg, &dir, &scan);
+    assert_eq!(report.unknown_sensors, vec![40]);
+    assert_eq!(report.failed, 0);
+    assert!(lines.len() >= 10);
+    assert!(
+        lines.iter().all(|l| l.split(',').nth(4) == Some("0")),
+        "{lines:?}"
+    );
+}

@@ -101,9 +101,11 @@ pub struct MonitorReport {
     pub epochs: u64,
     /// Epochs that could not be reconstructed (no curve with a sensor), each also a warning.
     pub failed: u64,
-    /// Sensor epochs that came after their window had closed, ignored (a sensor back from a
-    /// dropout reports the window it was cut off in).
+    /// Sensor epochs that came after their window had closed (out of time order), ignored.
     pub late: u64,
+    /// Sensors streaming that the layout does not place (ignored; each also a warning, once):
+    /// a layout numbered otherwise than the array, or a sensor left out of it.
+    pub unknown_sensors: Vec<u16>,
     /// Epochs averaged into the reference (0: the reference came from a file).
     pub reference_epochs: usize,
     pub alarms_raised: u64,
@@ -151,6 +153,8 @@ pub struct Monitor {
     open: BTreeMap<i64, BTreeMap<u16, (UnitQuaternion<f64>, u8)>>,
     /// The newest window closed.
     closed: Option<i64>,
+    /// The sensor ids of the layout.
+    known: std::collections::BTreeSet<u16>,
     csv: Option<std::fs::File>,
     csv_bytes: u64,
     /// Resume: epochs up to this time were written by the session before (quiet replay).
@@ -188,6 +192,7 @@ impl Monitor {
             alarms,
             open: BTreeMap::new(),
             closed: None,
+            known: cfg.layout.sensors.iter().map(|s| s.sensor).collect(),
             smoothed: BTreeMap::new(),
             csv: None,
             csv_bytes: 0,
@@ -293,6 +298,16 @@ impl Monitor {
     /// Feeds one sensor's epoch; windows older than the newest one seen are closed. An epoch
     /// of a window already closed is ignored (counted as late).
     pub fn feed(&mut self, e: &ArrayEpoch) {
+        if !self.known.contains(&e.sensor) {
+            if let Err(k) = self.report.unknown_sensors.binary_search(&e.sensor) {
+                tracing::warn!(
+                    "monitor: sensor {} streams but the layout does not place it; ignored",
+                    e.sensor
+                );
+                self.report.unknown_sensors.insert(k, e.sensor);
+            }
+            return;
+        }
         let key = (e.t * self.cfg.epoch_hz).round() as i64;
         if self.closed.is_some_and(|c| key <= c) {
             self.report.late += 1;
