@@ -315,6 +315,7 @@ fn metrics_are_served_for_a_scraper_while_the_session_runs() {
         "{page}"
     );
     assert!(page.contains("sfs_sensors_missing 0"), "{page}");
+    assert!(page.contains("sfs_sensors_unknown 0"), "{page}");
     drop(stdin); // end of input: the session finishes and the endpoint closes
     assert!(child.wait().unwrap().success());
     assert!(get().is_none(), "still serving after the session ended");

@@ -372,6 +372,18 @@ impl Monitor {
             self.report.failed.to_string(),
         );
         put(
+            "epochs_late_total",
+            "counter",
+            "Sensor epochs ignored because their window had closed.",
+            self.report.late.to_string(),
+        );
+        put(
+            "sensors_unknown",
+            "gauge",
+            "Sensors streaming that the layout does not place.",
+            self.report.unknown_sensors.len().to_string(),
+        );
+        put(
             "max_displacement_meters",
             "gauge",
             "Largest displacement from the reference shape.",
