@@ -673,6 +673,15 @@ fn a_reference_built_by_one_session_is_kept_by_the_next() {
     // While the first session built its reference its metrics differ; after, not a digit.
     assert_ne!(built[..9], again[..9]);
     assert_eq!(built[10..], again[10..]);
+    // Afresh in the first directory, measuring from its own kept reference: the file stays.
+    let cfg = layout_config(
+        &first,
+        &format!("reference_file = {:?}", kept.to_str().unwrap()),
+        &truth,
+    );
+    let (third, _) = monitor_lines(cfg, &first, &scan);
+    assert!(kept.exists(), "the configured reference was removed");
+    assert_eq!(third, again);
 }
 
 /// A design shape as the reference: the riser's rest (straight up, 20 m) given as a

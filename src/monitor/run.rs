@@ -124,8 +124,8 @@ pub struct MonitorReport {
 /// How a monitor starts in its directory.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Begin {
-    /// Afresh: `metrics.csv`, its rotated files and `events.log` of an earlier run there are
-    /// removed.
+    /// Afresh: `metrics.csv`, its rotated files, `events.log` and (unless a reference file is
+    /// configured) `reference.json` of an earlier run there are removed.
     Fresh,
     /// Continuing a stopped session whose capture is fed again from its start: epochs up to
     /// the last line of `metrics.csv` rebuild the state (reference, alarms, smoothing) without
@@ -207,7 +207,10 @@ impl Monitor {
                 }
                 remove_if_present(&dir.join(METRICS_FILE))?;
                 remove_if_present(&dir.join(EVENTS_FILE))?;
-                remove_if_present(&dir.join(REFERENCE_FILE))?;
+                // A configured reference may be this very file: kept then (it is not rebuilt).
+                if m.cfg.reference.is_none() {
+                    remove_if_present(&dir.join(REFERENCE_FILE))?;
+                }
             }
             Begin::Resume => {
                 if let Some((t, alarms)) = last_metrics_line(&dir.join(METRICS_FILE))? {
