@@ -489,6 +489,20 @@ fn print_summary(o: &Outcome) {
         o.report.ended,
         o.report.wall_time_s,
     );
+    if let Some(m) = &o.report.monitor {
+        let last = m.last.map_or("no metrics".to_string(), |x| {
+            format!(
+                "last: max displacement {:.3} m, mean {:.3} m, curvature change {:.4} rad/m",
+                x.max_displacement, x.mean_displacement, x.max_curvature_change
+            )
+        });
+        say!(
+            "monitor: {} epochs ({} failed), {} alarms raised; {last}",
+            m.epochs,
+            m.failed,
+            m.alarms_raised
+        );
+    }
     if let Some(c) = &o.capture_path {
         say!("capture: {}", c.display());
     }

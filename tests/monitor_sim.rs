@@ -1089,3 +1089,27 @@ fn a_sensor_the_layout_does_not_place_is_named_and_ignored() {
         "{lines:?}"
     );
 }
+
+/// Monitoring a stream that is not a sensor array's (here the shipped Morphorider capture
+/// with the riser's configuration) says so, rather than writing nothing silently.
+#[test]
+fn monitoring_a_stream_without_an_array_says_so() {
+    let dir = tmpdir("monitor-no-array");
+    let root = env!("CARGO_MANIFEST_DIR");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "warn", "replay"])
+        .arg(format!("{root}/replay-logs/cone-morphorider.bin"))
+        .arg("--config")
+        .arg(format!("{root}/config/riser.toml"))
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(stdout.contains("monitor: 0 epochs"), "{stdout}");
+    assert!(stderr.contains("no sensor-array samples"), "{stderr}");
+}

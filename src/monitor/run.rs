@@ -342,6 +342,11 @@ impl Monitor {
         for (k, w) in std::mem::take(&mut self.open) {
             self.close(k as f64 / self.cfg.epoch_hz, w);
         }
+        if self.report.epochs == 0 && self.report.unknown_sensors.is_empty() {
+            tracing::warn!(
+                "monitor: no epoch: the stream held no sensor-array samples (monitoring needs a device of kind 3, see report.json \"link\" → \"hello\")"
+            );
+        }
         crate::live::release_free_memory();
         self.report.rss_mb = crate::live::rss_mb().0;
         if let Some(f) = &mut self.csv {
