@@ -6,7 +6,8 @@
 //! - `device-protocol` (its own crate): bytes ⇄ packets, the wire format version 1.
 //! - [`source`]: where bytes come from (serial port, capture file, stdin), each on its own
 //!   thread behind one channel of [`source::SourceEvent`]s.
-//! - [`capture`]: lossless capture of live bytes, written before anything decodes them.
+//! - [`capture`]: lossless capture of live bytes, written before anything decodes them
+//!   (rotated with retention for unattended runs, each piece keeping the session's time).
 //! - [`link`]: statistics of the decoded link (packets, rejects, gaps, reboots, STATUS).
 //! - [`sensor`]: packets → calibrated samples (HELLO scales, calibration, axis mapping).
 //! - [`orientation`]: samples → orientations of the frame [T B N] (TRIAD, the phone's
@@ -22,7 +23,9 @@
 //! - [`session`]: one run of the pipeline, source → decoder → acquisition → outputs;
 //!   [`live`]: the worker that rebuilds the outputs after every curve (coalescing).
 //! - [`report`]: `report.json`; [`atomic`]: atomic replacement of output files.
-//! - [`monitor`]: instrumented structures (sensor arrays): layout, shape per epoch.
+//! - [`monitor`]: instrumented structures (sensor arrays): layout → shape per epoch →
+//!   metrics against a reference → alarms → rolling outputs (metrics.csv, events.log,
+//!   latest.glb, a Prometheus endpoint).
 //! - [`calibrate`]: `sfs calibrate` (ellipsoid and static-pose fits).
 //! - [`simulate`]: captures of known shapes (operator timeline, device models).
 //! - [`config`]: the resolved configuration (`config/*.toml`); [`cli`]: raw flags.
