@@ -464,6 +464,30 @@ fn saturated_disturbed_and_missing_sensors_are_counted_and_left_out() {
     }
     assert!(seen.iter().all(|&n| n >= 20), "{seen:?}");
     eprintln!("health: worst displacement error {worst:.3} m");
+    // Per sensor, in events.log: when it was left out and why, and when it came back.
+    let events = std::fs::read_to_string(dir.join("events.log")).unwrap();
+    let got: Vec<(f64, &str)> = events
+        .lines()
+        .filter_map(|l| {
+            let (t, rest) = l.strip_prefix("t=")?.split_once(' ')?;
+            Some((t.parse().ok()?, rest))
+        })
+        .collect();
+    let expected = [
+        (10.0, "sensor 5 saturated"),
+        (10.0, "sensor 20 disturbed"),
+        (10.0, "sensor 21 disturbed"),
+        (15.0, "sensor 5 ok"),
+        (20.0, "sensor 20 ok"),
+        (20.0, "sensor 21 ok"),
+        (25.0, "sensor 30 missing"),
+        (30.0, "sensor 30 ok"),
+    ];
+    assert_eq!(got.len(), expected.len(), "{events}");
+    for ((t, what), (te, we)) in got.iter().zip(expected) {
+        assert_eq!(*what, we, "{events}");
+        assert!(*t > te && *t <= te + 0.4, "{what} at {t}: {events}");
+    }
     assert!(worst <= 0.02 * truth.size, "worst {worst} m");
 }
 

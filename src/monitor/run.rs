@@ -9,7 +9,9 @@
 //!   sensors left out: missing, saturated, magnetically disturbed, each counted once and
 //!   interpolated across; alarms raised as `metric>threshold` separated by `;`), rotated to
 //!   `metrics.1.csv`, … when it passes `metrics_max_mb`, keeping `metrics_keep` files;
-//! - `events.log`: one line per alarm raised or cleared (also a warning in the log);
+//! - `events.log`: one line per alarm raised or cleared, and per sensor of the layout left
+//!   out (missing, saturated, disturbed) or back (`ok`), when that changes (also in the
+//!   log); rotated as `metrics.csv` is;
 //! - `latest.glb`: the network of the latest shape (and its surface with `surface = true`),
 //!   replaced atomically every `latest_every` epochs.
 
@@ -34,6 +36,21 @@ pub const LATEST_FILE: &str = "latest.glb";
 pub const REFERENCE_FILE: &str = "reference.json";
 
 const CSV_HEADER: &str = "t_s,max_displacement_m,mean_displacement_m,max_curvature_change_rad_m,missing,saturated,disturbed,alarms\n";
+
+/// `dir/NAME.EXT` → `NAME.1.EXT` → … → `NAME.KEEP.EXT` (the oldest beyond is deleted).
+fn rotate_file(dir: &Path, file: &str, keep: usize) -> std::io::Result<()> {
+    let (stem, ext) = file.rsplit_once('.').unwrap_or((file, ""));
+    let name = |k: usize| dir.join(format!("{stem}.{k}.{ext}"));
+    let _ = std::fs::remove_file(name(keep));
+    for k in (1..keep).rev() {
+        let _ = std::fs::rename(name(k), name(k + 1));
+    }
+    if keep > 0 {
+        std::fs::rename(dir.join(file), name(1))
+    } else {
+        std::fs::remove_file(dir.join(file))
+    }
+}
 
 fn remove_if_present(p: &Path) -> std::io::Result<()> {
     match std::fs::remove_file(p) {
@@ -155,6 +172,8 @@ pub struct Monitor {
     closed: Option<i64>,
     /// The sensor ids of the layout.
     known: std::collections::BTreeSet<u16>,
+    /// The layout's sensors left out at the last epoch, and why.
+    health: BTreeMap<u16, &'static str>,
     csv: Option<std::fs::File>,
     csv_bytes: u64,
     /// Resume: epochs up to this time were written by the session before (quiet replay).
@@ -193,6 +212,7 @@ impl Monitor {
             open: BTreeMap::new(),
             closed: None,
             known: cfg.layout.sensors.iter().map(|s| s.sensor).collect(),
+            health: BTreeMap::new(),
             smoothed: BTreeMap::new(),
             csv: None,
             csv_bytes: 0,
@@ -204,6 +224,7 @@ impl Monitor {
             Begin::Fresh => {
                 for k in 1..=m.cfg.metrics_keep {
                     remove_if_present(&dir.join(format!("metrics.{k}.csv")))?;
+                    remove_if_present(&dir.join(format!("events.{k}.log")))?;
                 }
                 remove_if_present(&dir.join(METRICS_FILE))?;
                 remove_if_present(&dir.join(EVENTS_FILE))?;
@@ -284,18 +305,28 @@ impl Monitor {
     /// Rotates `metrics.csv` → `metrics.1.csv` → … keeping `metrics_keep` old files.
     fn rotate(&mut self) -> std::io::Result<()> {
         self.csv = None;
-        let name = |k: usize| self.dir.join(format!("metrics.{k}.csv"));
-        let keep = self.cfg.metrics_keep;
-        let _ = std::fs::remove_file(name(keep));
-        for k in (1..keep).rev() {
-            let _ = std::fs::rename(name(k), name(k + 1));
-        }
-        if keep > 0 {
-            std::fs::rename(self.dir.join(METRICS_FILE), name(1))?;
-        } else {
-            std::fs::remove_file(self.dir.join(METRICS_FILE))?;
-        }
+        rotate_file(&self.dir, METRICS_FILE, self.cfg.metrics_keep)?;
         self.open_csv()
+    }
+
+    /// Appends `line` to `events.log` (rotated as `metrics.csv` is, past the same size) and
+    /// syncs it.
+    fn event(&mut self, line: &str) {
+        let path = self.dir.join(EVENTS_FILE);
+        let size = std::fs::metadata(&path).map_or(0, |m| m.len());
+        if size + line.len() as u64 > self.cfg.metrics_max_bytes {
+            if let Err(e) = rotate_file(&self.dir, EVENTS_FILE, self.cfg.metrics_keep) {
+                tracing::error!("monitor: rotating {EVENTS_FILE}: {e}");
+            }
+        }
+        let written = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .and_then(|mut f| f.write_all(line.as_bytes()).and_then(|_| f.sync_data()));
+        if let Err(e) = written {
+            tracing::error!("monitor: cannot append to {}: {e}", path.display());
+        }
     }
 
     /// Feeds one sensor's epoch; windows older than the newest one seen are closed. An epoch
@@ -448,6 +479,36 @@ impl Monitor {
         }
     }
 
+    /// Per-sensor health: a line in `events.log` (and the log) when a sensor of the layout is
+    /// left out (missing, saturated, disturbed) or back (`ok`). `health`: the sensors left
+    /// out this epoch.
+    fn health_changes(&mut self, t: f64, health: BTreeMap<u16, &'static str>, quiet: bool) {
+        if health == self.health {
+            return;
+        }
+        let mut lines = Vec::new();
+        for (s, now) in &health {
+            if self.health.get(s) != Some(now) {
+                if !quiet {
+                    tracing::warn!(sensor = s, "monitor: t = {t:.2} s: sensor {s} {now}");
+                }
+                lines.push(format!("t={t:.3} sensor {s} {now}\n"));
+            }
+        }
+        for s in self.health.keys().filter(|s| !health.contains_key(s)) {
+            if !quiet {
+                tracing::info!(sensor = s, "monitor: t = {t:.2} s: sensor {s} ok");
+            }
+            lines.push(format!("t={t:.3} sensor {s} ok\n"));
+        }
+        self.health = health;
+        if !quiet {
+            for l in lines {
+                self.event(&l);
+            }
+        }
+    }
+
     /// The reference is complete: kept, and written as `reference.json`.
     fn keep_reference(&mut self, r: Shape) {
         let file = super::metrics::ReferenceFile::from_shape(
@@ -519,13 +580,25 @@ impl Monitor {
         // Each sensor of the layout left out is counted once: saturated, else disturbed, else
         // missing (no samples, or no orientation from them).
         let (mut missing, mut saturated, mut disturbed) = (0, 0, 0);
+        let mut health = BTreeMap::new();
         for s in &shape.missing {
-            match window.get(s).map(|(_, f)| *f) {
-                Some(f) if f & flags::SATURATED != 0 => saturated += 1,
-                Some(f) if f & flags::MAG_DISTURBED != 0 => disturbed += 1,
-                _ => missing += 1,
-            }
+            let state = match window.get(s).map(|(_, f)| *f) {
+                Some(f) if f & flags::SATURATED != 0 => {
+                    saturated += 1;
+                    "saturated"
+                }
+                Some(f) if f & flags::MAG_DISTURBED != 0 => {
+                    disturbed += 1;
+                    "disturbed"
+                }
+                _ => {
+                    missing += 1;
+                    "missing"
+                }
+            };
+            health.insert(*s, state);
         }
+        self.health_changes(t, health, quiet);
         for w in &shape.left_out {
             tracing::debug!("monitor: t = {t:.2} s: {w}");
         }
@@ -552,6 +625,7 @@ impl Monitor {
             }
         };
         let mut raised = Vec::new();
+        let mut lines = Vec::new();
         for a in &mut self.alarms {
             let value = match a.metric.as_str() {
                 "max_displacement" => metrics.max_displacement,
@@ -578,19 +652,14 @@ impl Monitor {
                     "t={t:.3} alarm {what} {}={value:.4} threshold={}\n",
                     a.metric, a.threshold
                 );
-                let path = self.dir.join(EVENTS_FILE);
-                let written = std::fs::OpenOptions::new()
-                    .create(true)
-                    .append(true)
-                    .open(&path)
-                    .and_then(|mut f| f.write_all(line.as_bytes()).and_then(|_| f.sync_data()));
-                if let Err(e) = written {
-                    tracing::error!("monitor: cannot append to {}: {e}", path.display());
-                }
+                lines.push(line);
             }
             if a.is_raised() {
                 raised.push(a.label());
             }
+        }
+        for l in lines {
+            self.event(&l);
         }
         let line = format!(
             "{t:.3},{:.6},{:.6},{:.6},{},{saturated},{disturbed},{}\n",
