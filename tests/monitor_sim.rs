@@ -464,6 +464,23 @@ fn saturated_disturbed_and_missing_sensors_are_counted_and_left_out() {
     }
     assert!(seen.iter().all(|&n| n >= 20), "{seen:?}");
     eprintln!("health: worst displacement error {worst:.3} m");
+    // For a scraper, while it lasts: which sensors are left out, and why.
+    let live = tmpdir("monitor-health-exposition");
+    let cfg = layout_config(&live, "anchor = 0\nreference_s = 1.0", &truth);
+    let mut m =
+        sfs::monitor::run::Monitor::new(cfg, &live, sfs::monitor::run::Begin::Fresh).unwrap();
+    for e in scan.array.iter().filter(|e| e.t < 12.0) {
+        m.feed(e);
+    }
+    let page = m.exposition.lock().unwrap().clone();
+    for l in [
+        "sfs_sensor_left_out{sensor=\"5\",reason=\"saturated\"} 1",
+        "sfs_sensor_left_out{sensor=\"20\",reason=\"disturbed\"} 1",
+        "sfs_sensor_left_out{sensor=\"21\",reason=\"disturbed\"} 1",
+    ] {
+        assert!(page.contains(l), "{page}");
+    }
+    assert_eq!(page.matches("sfs_sensor_left_out{").count(), 3, "{page}");
     // Per sensor, in events.log: when it was left out and why, and when it came back.
     let events = std::fs::read_to_string(dir.join("events.log")).unwrap();
     let got: Vec<(f64, &str)> = events

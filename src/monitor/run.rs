@@ -474,6 +474,10 @@ impl Monitor {
                 u8::from(a.is_raised())
             );
         }
+        s += "# HELP sfs_sensor_left_out A sensor of the layout left out of the latest shape, and why.\n# TYPE sfs_sensor_left_out gauge\n";
+        for (sensor, reason) in &self.health {
+            s += &format!("sfs_sensor_left_out{{sensor=\"{sensor}\",reason=\"{reason}\"}} 1\n");
+        }
         if let Ok(mut e) = self.exposition.lock() {
             *e = s;
         }
