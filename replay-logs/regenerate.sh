@@ -17,3 +17,5 @@ cone-morphorider              cone        morphorider default 1
 sphere-octa-morphorider-field sphere-octa morphorider field   2
 bowl-phone                    bowl        phone       default 3
 LIST
+# A sensor array on the bending riser (monitoring mode, with config/riser.toml): one 60 s swing.
+"$sfs" simulate --structure riser --duration 60 --seed 1 --out replay-logs/riser-array

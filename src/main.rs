@@ -497,7 +497,7 @@ fn print_summary(o: &Outcome) {
             )
         });
         say!(
-            "monitor: {} epochs ({} failed), {} alarms raised; {last}",
+            "monitor: {} epochs ({} failed), alarms raised: {}; {last}",
             m.epochs,
             m.failed,
             m.alarms_raised

@@ -139,3 +139,77 @@ fn cone_log_reconstructs_within_target() {
     let s = e["surface"]["mean_pct"].as_f64().expect("a surface scored");
     assert!(s <= 0.10, "surface mean {s} % of the diagonal");
 }
+
+/// The riser log (a sensor array, monitoring mode) is what the simulator makes, and replayed
+/// with the shipped `config/riser.toml` it gives an epoch every 0.2 s, the top within 2 % of
+/// the riser's length of the truth in `latest.glb`, and the alarm at 1.5 m raised as often
+/// as the truth crosses it.
+#[test]
+fn riser_log_is_monitored_with_the_shipped_configuration() {
+    use sfs::simulate::structure::{run, StructureKind};
+    let (bytes, truth) = run(StructureKind::Riser, 1, 60.0, 10.0);
+    let bin = std::fs::read(root().join("replay-logs/riser-array.bin")).unwrap();
+    assert!(
+        bin == bytes,
+        "riser-array.bin is stale: run replay-logs/regenerate.sh"
+    );
+    let committed = std::fs::read(root().join("replay-logs/riser-array.truth.json")).unwrap();
+    assert!(
+        committed == serde_json::to_vec(&truth).unwrap(),
+        "riser-array.truth.json is stale: run replay-logs/regenerate.sh"
+    );
+    let out_dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("logs-riser-{}", std::process::id()));
+    let st = Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "off", "replay"])
+        .arg(root().join("replay-logs/riser-array.bin"))
+        .arg("--config")
+        .arg(root().join("config/riser.toml"))
+        .arg("--out")
+        .arg(&out_dir)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("report.json")).unwrap()).unwrap();
+    let m = &report["monitor"];
+    assert!((299..=300).contains(&m["epochs"].as_u64().unwrap()), "{m}");
+    assert_eq!(m["failed"], 0);
+    // The truth's top (the last sensor), every second; the reference is the mean of the
+    // first 10 s, the alarm at 1.5 m with 0.2 m of hysteresis (config/riser.toml).
+    let top =
+        |e: &sfs::simulate::structure::Epoch| nalgebra::Vector3::from(*e.positions.last().unwrap());
+    let reference = truth
+        .epochs
+        .iter()
+        .filter(|e| e.t < 10.0)
+        .map(top)
+        .sum::<nalgebra::Vector3<f64>>()
+        / truth.epochs.iter().filter(|e| e.t < 10.0).count() as f64;
+    let (mut episodes, mut below) = (0, true);
+    for e in &truth.epochs {
+        let d = (top(e) - reference).norm();
+        if below && d > 1.5 {
+            episodes += 1;
+            below = false;
+        } else if d < 1.3 {
+            below = true;
+        }
+    }
+    assert!(episodes >= 1);
+    assert_eq!(m["alarms_raised"], episodes);
+    let net = sfs::gltf_out::read_glb(&std::fs::read(out_dir.join("latest.glb")).unwrap()).unwrap();
+    let t_last = report["monitor"]["epochs"].as_f64().unwrap() / 5.0;
+    let end = truth
+        .epochs
+        .iter()
+        .min_by(|a, b| (a.t - t_last).abs().total_cmp(&(b.t - t_last).abs()))
+        .unwrap();
+    let got = net.nodes[&1] - net.nodes[&0];
+    assert!(
+        (got - top(end)).norm() < 0.02 * truth.size,
+        "top {got:?}, truth {:?} at {} s",
+        top(end),
+        end.t
+    );
+}
