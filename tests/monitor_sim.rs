@@ -196,7 +196,26 @@ fn start_monitoring(
     monitor: &str,
     truth: &sfs::simulate::structure::StructureTruth,
 ) -> (std::process::Child, std::path::PathBuf) {
+    start_monitoring_logged(dir, monitor, truth, "off")
+}
+
+/// As [`start_monitoring`], logging at `log` to a piped standard error; `truth`'s curves are
+/// added when `monitor` names none.
+fn start_monitoring_logged(
+    dir: &std::path::Path,
+    monitor: &str,
+    truth: &sfs::simulate::structure::StructureTruth,
+    log: &str,
+) -> (std::process::Child, std::path::PathBuf) {
     let mut cfg = format!("[source]\nkind = \"stdin\"\n[monitor]\n{monitor}");
+    if !monitor.contains("[[monitor.curve]]") {
+        for c in &truth.curves {
+            cfg += &format!(
+                "[[monitor.curve]]\nnodes = {:?}\nnode_s = {:?}\nlength = {}\n",
+                c.nodes, c.node_s, c.length
+            );
+        }
+    }
     for s in &truth.sensors {
         cfg += &format!(
             "[[monitor.sensor]]\nsensor = {}\ncurve = {}\ns = {}\n",
@@ -207,12 +226,13 @@ fn start_monitoring(
     std::fs::write(dir.join("monitor.toml"), cfg).unwrap();
     let session = dir.join("session");
     let child = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
-        .args(["--log", "off", "run", "--stdin", "--config"])
+        .args(["--log", log, "run", "--stdin", "--config"])
         .arg(dir.join("monitor.toml"))
         .arg("--session")
         .arg(&session)
         .stdin(std::process::Stdio::piped())
         .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
     (child, session)
@@ -1156,4 +1176,33 @@ fn monitoring_a_stream_without_an_array_says_so() {
         "{stdout}"
     );
     assert!(stderr.contains("no sensor-array samples"), "{stderr}");
+}
+
+/// Epochs that cannot be reconstructed (here a magnet disturbs every sensor for 5 s) are
+/// counted, warned about once while it lasts, and the recovery is said: an unattended log
+/// does not grow by a line per epoch.
+#[test]
+fn failing_epochs_are_warned_about_once_while_it_lasts() {
+    use std::io::Write;
+    let (bytes, truth) = run(StructureKind::Riser, 10, 25.0, 10.0);
+    let during = |t_us: u32| (11e6..16e6).contains(&(t_us as f64));
+    let bytes = edit_samples(&bytes, |s| {
+        if during(s.t_us) {
+            s.mag = s.mag.map(|m| (m as f64 * 1.3) as i16);
+        }
+        true
+    });
+    let dir = tmpdir("monitor-failing");
+    let (mut child, session) =
+        start_monitoring_logged(&dir, "anchor = 0\nreference_s = 1.0\n", &truth, "sfs=info");
+    child.stdin.take().unwrap().write_all(&bytes).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let log = String::from_utf8_lossy(&out.stderr);
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(session.join("report.json")).unwrap()).unwrap();
+    let failed = report["monitor"]["failed"].as_u64().unwrap();
+    assert!((20..=26).contains(&failed), "{failed} failed");
+    assert_eq!(log.matches("said once while it lasts").count(), 1, "{log}");
+    assert_eq!(log.matches("reconstructed again").count(), 1, "{log}");
 }

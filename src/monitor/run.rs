@@ -174,6 +174,8 @@ pub struct Monitor {
     known: std::collections::BTreeSet<u16>,
     /// The layout's sensors left out at the last epoch, and why.
     health: BTreeMap<u16, &'static str>,
+    /// Epochs failing since, and why.
+    failing: Option<(f64, String)>,
     csv: Option<std::fs::File>,
     csv_bytes: u64,
     /// Resume: epochs up to this time were written by the session before (quiet replay).
@@ -213,6 +215,7 @@ impl Monitor {
             closed: None,
             known: cfg.layout.sensors.iter().map(|s| s.sensor).collect(),
             health: BTreeMap::new(),
+            failing: None,
             smoothed: BTreeMap::new(),
             csv: None,
             csv_bytes: 0,
@@ -483,6 +486,16 @@ impl Monitor {
         }
     }
 
+    /// An epoch that cannot be reconstructed: counted, and a warning when it starts failing or
+    /// the reason changes (not one per epoch: an unattended log must not fill the disk).
+    fn failed(&mut self, t: f64, why: String) {
+        self.report.failed += 1;
+        if self.failing.as_ref().is_none_or(|(_, w)| *w != why) {
+            tracing::warn!("monitor: epoch at t = {t:.2} s: {why} (said once while it lasts)");
+            self.failing = Some((t, why));
+        }
+    }
+
     /// Per-sensor health: a line in `events.log` (and the log) when a sensor of the layout is
     /// left out (missing, saturated, disturbed) or back (`ok`). `health`: the sensors left
     /// out this epoch.
@@ -575,11 +588,7 @@ impl Monitor {
             },
         ) {
             Ok(s) => s,
-            Err(e) => {
-                self.report.failed += 1;
-                tracing::warn!("monitor: epoch at t = {t:.2} s: {e}");
-                return;
-            }
+            Err(e) => return self.failed(t, e.to_string()),
         };
         // Each sensor of the layout left out is counted once: saturated, else disturbed, else
         // missing (no samples, or no orientation from them).
@@ -607,13 +616,15 @@ impl Monitor {
             tracing::debug!("monitor: t = {t:.2} s: {w}");
         }
         let Some(now) = Shape::anchored(&shape.positions, self.cfg.anchor) else {
-            self.report.failed += 1;
-            tracing::warn!(
-                "monitor: epoch at t = {t:.2} s: the anchor node {} is on no curve with a sensor",
+            let why = format!(
+                "the anchor node {} is on no curve with a sensor",
                 self.cfg.anchor
             );
-            return;
+            return self.failed(t, why);
         };
+        if let Some((since, _)) = self.failing.take() {
+            tracing::info!("monitor: epochs reconstructed again from t = {t:.2} s (failing since {since:.2} s)");
+        }
         let metrics = match &self.fixed {
             Some(r) => compare(r, &now),
             None => {
