@@ -1206,3 +1206,28 @@ fn failing_epochs_are_warned_about_once_while_it_lasts() {
     assert_eq!(log.matches("said once while it lasts").count(), 1, "{log}");
     assert_eq!(log.matches("reconstructed again").count(), 1, "{log}");
 }
+
+/// A flapping sensor (present one epoch, gone the next, for 20 s): every change is in
+/// events.log, but the log says at most four a minute for it.
+#[test]
+fn a_flapping_sensor_does_not_flood_the_log() {
+    use std::io::Write;
+    let (bytes, truth) = run(StructureKind::Riser, 11, 30.0, 10.0);
+    let bytes = edit_samples(&bytes, |s| {
+        let t = s.t_us as f64 * 1e-6 - 1.0;
+        !(s.sensor == 7 && (5.0..25.0).contains(&t) && (t / 0.2).floor() as i64 % 2 == 0)
+    });
+    let dir = tmpdir("monitor-flapping");
+    let (mut child, session) =
+        start_monitoring_logged(&dir, "anchor = 0\nreference_s = 1.0\n", &truth, "sfs=info");
+    child.stdin.take().unwrap().write_all(&bytes).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let log = String::from_utf8_lossy(&out.stderr);
+    let events = std::fs::read_to_string(session.join("events.log")).unwrap();
+    let in_events = events.matches("sensor 7 ").count();
+    let in_log = log.matches("sensor 7 ").count();
+    eprintln!("sensor 7: {in_events} changes in events.log, {in_log} in the log");
+    assert!(in_events >= 90, "{events}");
+    assert!((1..=4).contains(&in_log), "{log}");
+}

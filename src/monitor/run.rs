@@ -174,6 +174,9 @@ pub struct Monitor {
     known: std::collections::BTreeSet<u16>,
     /// The layout's sensors left out at the last epoch, and why.
     health: BTreeMap<u16, &'static str>,
+    /// Per sensor, the log's budget of health changes: the minute's start (session time),
+    /// changes logged in it, changes not logged since the last logged one.
+    health_logged: BTreeMap<u16, (f64, u32, u32)>,
     /// Epochs failing since, and why.
     failing: Option<(f64, String)>,
     csv: Option<std::fs::File>,
@@ -216,6 +219,7 @@ impl Monitor {
             known: cfg.layout.sensors.iter().map(|s| s.sensor).collect(),
             health: BTreeMap::new(),
             failing: None,
+            health_logged: BTreeMap::new(),
             smoothed: BTreeMap::new(),
             csv: None,
             csv_bytes: 0,
@@ -496,27 +500,50 @@ impl Monitor {
         }
     }
 
-    /// Per-sensor health: a line in `events.log` (and the log) when a sensor of the layout is
-    /// left out (missing, saturated, disturbed) or back (`ok`). `health`: the sensors left
-    /// out this epoch.
+    /// Per-sensor health: a line in `events.log` when a sensor of the layout is left out
+    /// (missing, saturated, disturbed) or back (`ok`); in the log too, at most four changes a
+    /// minute per sensor (a flapping sensor must not flood it; the next line says how many
+    /// were not logged). `health`: the sensors left out this epoch.
     fn health_changes(&mut self, t: f64, health: BTreeMap<u16, &'static str>, quiet: bool) {
         if health == self.health {
             return;
         }
-        let mut lines = Vec::new();
+        let mut changes = Vec::new();
         for (s, now) in &health {
             if self.health.get(s) != Some(now) {
-                if !quiet {
-                    tracing::warn!(sensor = s, "monitor: t = {t:.2} s: sensor {s} {now}");
-                }
-                lines.push(format!("t={t:.3} sensor {s} {now}\n"));
+                changes.push((*s, *now));
             }
         }
         for s in self.health.keys().filter(|s| !health.contains_key(s)) {
-            if !quiet {
-                tracing::info!(sensor = s, "monitor: t = {t:.2} s: sensor {s} ok");
+            changes.push((*s, "ok"));
+        }
+        let mut lines = Vec::new();
+        for (s, now) in changes {
+            lines.push(format!("t={t:.3} sensor {s} {now}\n"));
+            if quiet {
+                continue;
             }
-            lines.push(format!("t={t:.3} sensor {s} ok\n"));
+            // (start of the minute, changes logged in it, changes not logged since)
+            let slot = self.health_logged.entry(s).or_insert((t, 0, 0));
+            if t - slot.0 >= 60.0 {
+                (slot.0, slot.1) = (t, 0);
+            }
+            if slot.1 >= 4 {
+                slot.2 += 1;
+                continue;
+            }
+            slot.1 += 1;
+            let skipped = std::mem::take(&mut slot.2);
+            let more = if skipped > 0 {
+                format!(" ({skipped} changes before not logged; all are in {EVENTS_FILE})")
+            } else {
+                String::new()
+            };
+            if now == "ok" {
+                tracing::info!(sensor = s, "monitor: t = {t:.2} s: sensor {s} ok{more}");
+            } else {
+                tracing::warn!(sensor = s, "monitor: t = {t:.2} s: sensor {s} {now}{more}");
+            }
         }
         self.health = health;
         if !quiet {
