@@ -1231,3 +1231,30 @@ fn a_flapping_sensor_does_not_flood_the_log() {
     assert!(in_events >= 90, "{events}");
     assert!((1..=4).contains(&in_log), "{log}");
 }
+
+/// An output that cannot be written (here latest.glb, a directory in the way) is an error in
+/// the log once while it lasts, not at every epoch, and the session goes on.
+#[test]
+fn an_output_that_cannot_be_written_is_said_once() {
+    use std::io::Write;
+    let (bytes, truth) = run(StructureKind::Riser, 12, 10.0, 10.0);
+    let dir = tmpdir("monitor-unwritable");
+    std::fs::create_dir_all(dir.join("session/latest.glb/in-the-way")).unwrap();
+    let (mut child, session) = start_monitoring_logged(
+        &dir,
+        "anchor = 0\nreference_s = 1.0\nlatest_every = 1\n",
+        &truth,
+        "sfs=info",
+    );
+    child.stdin.take().unwrap().write_all(&bytes).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(log.matches("latest.glb").count(), 1, "{log}");
+    assert!(log.contains("said once while it lasts"), "{log}");
+    let lines = std::fs::read_to_string(session.join("metrics.csv"))
+        .unwrap()
+        .lines()
+        .count();
+    assert!(lines > 45, "{lines} lines");
+}

@@ -177,6 +177,10 @@ pub struct Monitor {
     /// Per sensor, the log's budget of health changes: the minute's start (session time),
     /// changes logged in it, changes not logged since the last logged one.
     health_logged: BTreeMap<u16, (f64, u32, u32)>,
+    /// Outputs failing (said once while it lasts).
+    output_failing: std::collections::BTreeSet<&'static str>,
+    /// Why the latest surface could not be made.
+    surface_error: Option<String>,
     /// Epochs failing since, and why.
     failing: Option<(f64, String)>,
     csv: Option<std::fs::File>,
@@ -219,6 +223,8 @@ impl Monitor {
             known: cfg.layout.sensors.iter().map(|s| s.sensor).collect(),
             health: BTreeMap::new(),
             failing: None,
+            output_failing: Default::default(),
+            surface_error: None,
             health_logged: BTreeMap::new(),
             smoothed: BTreeMap::new(),
             csv: None,
@@ -316,24 +322,43 @@ impl Monitor {
         self.open_csv()
     }
 
+    /// The outcome of writing output `what`: an error is logged when that output starts
+    /// failing (not at every epoch: a full disk must not also flood the log), and its
+    /// recovery.
+    fn output(&mut self, what: &'static str, r: Result<(), String>) {
+        match r {
+            Ok(()) => {
+                if self.output_failing.remove(what) {
+                    tracing::info!("monitor: {what} written again");
+                }
+            }
+            Err(e) => {
+                if self.output_failing.insert(what) {
+                    tracing::error!("monitor: {what}: {e} (said once while it lasts)");
+                }
+            }
+        }
+    }
+
     /// Appends `line` to `events.log` (rotated as `metrics.csv` is, past the same size) and
     /// syncs it.
     fn event(&mut self, line: &str) {
         let path = self.dir.join(EVENTS_FILE);
         let size = std::fs::metadata(&path).map_or(0, |m| m.len());
-        if size + line.len() as u64 > self.cfg.metrics_max_bytes {
-            if let Err(e) = rotate_file(&self.dir, EVENTS_FILE, self.cfg.metrics_keep) {
-                tracing::error!("monitor: rotating {EVENTS_FILE}: {e}");
-            }
-        }
-        let written = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&path)
+        let rotated = if size + line.len() as u64 > self.cfg.metrics_max_bytes {
+            rotate_file(&self.dir, EVENTS_FILE, self.cfg.metrics_keep)
+        } else {
+            Ok(())
+        };
+        let written = rotated
+            .and_then(|()| {
+                std::fs::OpenOptions::new()
+                    .create(true)
+                    .append(true)
+                    .open(&path)
+            })
             .and_then(|mut f| f.write_all(line.as_bytes()).and_then(|_| f.sync_data()));
-        if let Err(e) = written {
-            tracing::error!("monitor: cannot append to {}: {e}", path.display());
-        }
+        self.output(EVENTS_FILE, written.map_err(|e| e.to_string()));
     }
 
     /// Feeds one sensor's epoch; windows older than the newest one seen are closed. An epoch
@@ -716,17 +741,23 @@ impl Monitor {
         if quiet {
             return;
         }
-        if self.csv_bytes + line.len() as u64 > self.cfg.metrics_max_bytes {
-            if let Err(e) = self.rotate() {
-                tracing::error!("monitor: rotating {METRICS_FILE}: {e}");
-            }
+        let written = if self.csv_bytes + line.len() as u64 > self.cfg.metrics_max_bytes {
+            self.rotate()
+        } else if self.csv.is_none() {
+            // A rotation or an earlier write failed: opened again.
+            self.open_csv()
+        } else {
+            Ok(())
         }
-        if let Some(f) = &mut self.csv {
-            match f.write_all(line.as_bytes()) {
-                Ok(()) => self.csv_bytes += line.len() as u64,
-                Err(e) => tracing::error!("monitor: cannot append to {METRICS_FILE}: {e}"),
-            }
+        .and_then(|()| match &mut self.csv {
+            Some(f) => f.write_all(line.as_bytes()),
+            None => Err(std::io::Error::other("not open")),
+        });
+        match written {
+            Ok(()) => self.csv_bytes += line.len() as u64,
+            Err(_) => self.csv = None,
         }
+        self.output(METRICS_FILE, written.map_err(|e| e.to_string()));
         if self.report.epochs % self.cfg.latest_every as u64 == 0 {
             let mesh = self.cfg.surface.as_ref().and_then(|sp| {
                 let t0 = std::time::Instant::now();
@@ -740,7 +771,7 @@ impl Monitor {
                     }
                     Err(e) => {
                         self.report.surfaces_failed += 1;
-                        tracing::warn!("monitor: t = {t:.2} s: no surface: {e}");
+                        self.surface_error = Some(format!("t = {t:.2} s: {e}"));
                         None
                     }
                 }
@@ -750,14 +781,16 @@ impl Monitor {
                 &shape.positions.nodes,
                 mesh.as_ref(),
             );
-            let path = self.dir.join(LATEST_FILE);
-            match glb
-                .map_err(|e| e.to_string())
-                .and_then(|b| crate::atomic::write_atomic(&path, &b).map_err(|e| e.to_string()))
-            {
-                Ok(()) => {}
-                Err(e) => tracing::error!("monitor: {}: {e}", path.display()),
+            if let Some(e) = self.surface_error.take() {
+                self.output("the surface", Err(e));
+            } else if self.cfg.surface.is_some() {
+                self.output("the surface", Ok(()));
             }
+            let path = self.dir.join(LATEST_FILE);
+            let written = glb
+                .map_err(|e| e.to_string())
+                .and_then(|b| crate::atomic::write_atomic(&path, &b).map_err(|e| e.to_string()));
+            self.output(LATEST_FILE, written);
         }
     }
 }
