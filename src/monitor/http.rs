@@ -25,7 +25,15 @@ pub async fn serve(
                 c = listener.accept() => c,
                 _ = shutdown.triggered() => break,
             };
-            let Ok((mut stream, _)) = conn else { continue };
+            let mut stream = match conn {
+                Ok((s, _)) => s,
+                Err(e) => {
+                    // Out of descriptors, say: do not spin on it.
+                    tracing::debug!("monitor: metrics endpoint: {e}");
+                    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+                    continue;
+                }
+            };
             let body = text.lock().map(|t| t.clone()).unwrap_or_default();
             tokio::spawn(async move {
                 // Read (and ignore) the request head, then answer and close.
@@ -37,9 +45,13 @@ pub async fn serve(
                     "HTTP/1.0 200 OK\r\nContent-Type: text/plain; version=0.0.4\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
                     body.len()
                 );
-                let _ = stream.write_all(head.as_bytes()).await;
-                let _ = stream.write_all(body.as_bytes()).await;
-                let _ = stream.shutdown().await;
+                // A client that does not read is dropped after a while.
+                let _ = tokio::time::timeout(std::time::Duration::from_secs(5), async {
+                    stream.write_all(head.as_bytes()).await?;
+                    stream.write_all(body.as_bytes()).await?;
+                    stream.shutdown().await
+                })
+                .await;
             });
         }
     }))
