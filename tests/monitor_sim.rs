@@ -189,6 +189,27 @@ fn displacement_follows_the_truth_and_the_alarm_fires_when_and_only_when_crossed
     assert_eq!(raised, episodes);
 }
 
+/// A configuration reading standard input with `monitor` (the `[monitor]` keys, alarms, and
+/// curves; `truth`'s curves when it names none) and every sensor of `truth`'s layout.
+fn config_text(monitor: &str, truth: &sfs::simulate::structure::StructureTruth) -> String {
+    let mut cfg = format!("[source]\nkind = \"stdin\"\n[monitor]\n{monitor}");
+    if !monitor.contains("[[monitor.curve]]") {
+        for c in &truth.curves {
+            cfg += &format!(
+                "[[monitor.curve]]\nnodes = {:?}\nnode_s = {:?}\nlength = {}\n",
+                c.nodes, c.node_s, c.length
+            );
+        }
+    }
+    for s in &truth.sensors {
+        cfg += &format!(
+            "[[monitor.sensor]]\nsensor = {}\ncurve = {}\ns = {}\n",
+            s.sensor, s.curve, s.s
+        );
+    }
+    cfg
+}
+
 /// `sfs run --stdin` on a monitoring configuration: `monitor` (the `[monitor]` keys, alarms
 /// and curves) plus every sensor of `truth`'s layout, in `dir/session`; standard input piped.
 fn start_monitoring(
@@ -207,21 +228,7 @@ fn start_monitoring_logged(
     truth: &sfs::simulate::structure::StructureTruth,
     log: &str,
 ) -> (std::process::Child, std::path::PathBuf) {
-    let mut cfg = format!("[source]\nkind = \"stdin\"\n[monitor]\n{monitor}");
-    if !monitor.contains("[[monitor.curve]]") {
-        for c in &truth.curves {
-            cfg += &format!(
-                "[[monitor.curve]]\nnodes = {:?}\nnode_s = {:?}\nlength = {}\n",
-                c.nodes, c.node_s, c.length
-            );
-        }
-    }
-    for s in &truth.sensors {
-        cfg += &format!(
-            "[[monitor.sensor]]\nsensor = {}\ncurve = {}\ns = {}\n",
-            s.sensor, s.curve, s.s
-        );
-    }
+    let cfg = config_text(monitor, truth);
     std::fs::create_dir_all(dir).unwrap();
     std::fs::write(dir.join("monitor.toml"), cfg).unwrap();
     let session = dir.join("session");
@@ -650,19 +657,7 @@ fn layout_config(
     keys: &str,
     truth: &sfs::simulate::structure::StructureTruth,
 ) -> sfs::config::MonitorConfig {
-    let mut text = format!("[source]\nkind = \"stdin\"\n[monitor]\nepoch_hz = 5.0\n{keys}\n");
-    for c in &truth.curves {
-        text += &format!(
-            "[[monitor.curve]]\nnodes = {:?}\nnode_s = {:?}\nlength = {}\n",
-            c.nodes, c.node_s, c.length
-        );
-    }
-    for s in &truth.sensors {
-        text += &format!(
-            "[[monitor.sensor]]\nsensor = {}\ncurve = {}\ns = {}\n",
-            s.sensor, s.curve, s.s
-        );
-    }
+    let text = config_text(&format!("epoch_hz = 5.0\n{keys}\n"), truth);
     let file = dir.join("monitor.toml");
     std::fs::write(&file, &text).unwrap();
     sfs::config::Config::load(&file)
