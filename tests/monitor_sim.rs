@@ -210,6 +210,26 @@ fn config_text(monitor: &str, truth: &sfs::simulate::structure::StructureTruth) 
     cfg
 }
 
+/// A monitoring session on standard input given `bytes` to the end, logging at `info`: its
+/// log and directory.
+fn monitor_logged(
+    dir: &std::path::Path,
+    monitor: &str,
+    truth: &sfs::simulate::structure::StructureTruth,
+    bytes: &[u8],
+) -> (String, std::path::PathBuf) {
+    use std::io::Write;
+    let (mut child, session) = start_monitoring_logged(dir, monitor, truth, "sfs=info");
+    child.stdin.take().unwrap().write_all(bytes).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (String::from_utf8_lossy(&out.stderr).into_owned(), session)
+}
+
 /// `sfs run --stdin` on a monitoring configuration: `monitor` (the `[monitor]` keys, alarms
 /// and curves) plus every sensor of `truth`'s layout, in `dir/session`; standard input piped.
 fn start_monitoring(
@@ -1178,7 +1198,6 @@ fn monitoring_a_stream_without_an_array_says_so() {
 /// does not grow by a line per epoch.
 #[test]
 fn failing_epochs_are_warned_about_once_while_it_lasts() {
-    use std::io::Write;
     let (bytes, truth) = run(StructureKind::Riser, 10, 25.0, 10.0);
     let during = |t_us: u32| (11e6..16e6).contains(&(t_us as f64));
     let bytes = edit_samples(&bytes, |s| {
@@ -1188,12 +1207,7 @@ fn failing_epochs_are_warned_about_once_while_it_lasts() {
         true
     });
     let dir = tmpdir("monitor-failing");
-    let (mut child, session) =
-        start_monitoring_logged(&dir, "anchor = 0\nreference_s = 1.0\n", &truth, "sfs=info");
-    child.stdin.take().unwrap().write_all(&bytes).unwrap();
-    let out = child.wait_with_output().unwrap();
-    assert!(out.status.success());
-    let log = String::from_utf8_lossy(&out.stderr);
+    let (log, session) = monitor_logged(&dir, "anchor = 0\nreference_s = 1.0\n", &truth, &bytes);
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(session.join("report.json")).unwrap()).unwrap();
     let failed = report["monitor"]["failed"].as_u64().unwrap();
@@ -1206,19 +1220,13 @@ fn failing_epochs_are_warned_about_once_while_it_lasts() {
 /// events.log, but the log says at most four a minute for it.
 #[test]
 fn a_flapping_sensor_does_not_flood_the_log() {
-    use std::io::Write;
     let (bytes, truth) = run(StructureKind::Riser, 11, 30.0, 10.0);
     let bytes = edit_samples(&bytes, |s| {
         let t = s.t_us as f64 * 1e-6 - 1.0;
         !(s.sensor == 7 && (5.0..25.0).contains(&t) && (t / 0.2).floor() as i64 % 2 == 0)
     });
     let dir = tmpdir("monitor-flapping");
-    let (mut child, session) =
-        start_monitoring_logged(&dir, "anchor = 0\nreference_s = 1.0\n", &truth, "sfs=info");
-    child.stdin.take().unwrap().write_all(&bytes).unwrap();
-    let out = child.wait_with_output().unwrap();
-    assert!(out.status.success());
-    let log = String::from_utf8_lossy(&out.stderr);
+    let (log, session) = monitor_logged(&dir, "anchor = 0\nreference_s = 1.0\n", &truth, &bytes);
     let events = std::fs::read_to_string(session.join("events.log")).unwrap();
     let in_events = events.matches("sensor 7 ").count();
     let in_log = log.matches("sensor 7 ").count();
@@ -1231,20 +1239,15 @@ fn a_flapping_sensor_does_not_flood_the_log() {
 /// the log once while it lasts, not at every epoch, and the session goes on.
 #[test]
 fn an_output_that_cannot_be_written_is_said_once() {
-    use std::io::Write;
     let (bytes, truth) = run(StructureKind::Riser, 12, 10.0, 10.0);
     let dir = tmpdir("monitor-unwritable");
     std::fs::create_dir_all(dir.join("session/latest.glb/in-the-way")).unwrap();
-    let (mut child, session) = start_monitoring_logged(
+    let (log, session) = monitor_logged(
         &dir,
         "anchor = 0\nreference_s = 1.0\nlatest_every = 1\n",
         &truth,
-        "sfs=info",
+        &bytes,
     );
-    child.stdin.take().unwrap().write_all(&bytes).unwrap();
-    let out = child.wait_with_output().unwrap();
-    assert!(out.status.success());
-    let log = String::from_utf8_lossy(&out.stderr);
     assert_eq!(log.matches("latest.glb").count(), 1, "{log}");
     assert!(log.contains("said once while it lasts"), "{log}");
     let lines = std::fs::read_to_string(session.join("metrics.csv"))
