@@ -394,10 +394,49 @@ fn eval(a: EvalArgs) -> i32 {
     exit::OK
 }
 
+/// `1 curve`, `2 curves`.
+fn plural(n: usize, word: &str) -> String {
+    format!("{n} {word}{}", if n == 1 { "" } else { "s" })
+}
+
 fn config_check(file: &Path) -> i32 {
     match Config::load(file) {
-        Ok(_) => {
+        Ok(cfg) => {
             say!("{}: ok", file.display());
+            // What a monitoring configuration describes, to check it against the structure.
+            if let (Ok(Some(m)), Ok(rotation)) =
+                (cfg.monitor_config(file), cfg.capture_rotation(file))
+            {
+                let nodes: std::collections::BTreeSet<u32> = m
+                    .layout
+                    .curves
+                    .iter()
+                    .flat_map(|c| c.nodes.iter().copied())
+                    .collect();
+                let reference = match &m.reference {
+                    Some(_) => "a reference file".to_string(),
+                    None => format!("the mean of the first {} s", m.reference_s),
+                };
+                say!(
+                    "monitor: {} on {} ({}, node {} at the origin, x at {}° from magnetic north); {} epochs/s; reference: {reference}; {}{}{}{}",
+                    plural(m.layout.sensors.len(), "sensor"),
+                    plural(m.layout.curves.len(), "curve"),
+                    plural(nodes.len(), "node"),
+                    m.anchor,
+                    m.x_azimuth_deg,
+                    m.epoch_hz,
+                    plural(m.alarms.len(), "alarm"),
+                    if m.surface.is_some() { "; surface" } else { "" },
+                    m.http.map(|a| format!("; metrics at http://{a}/metrics")).unwrap_or_default(),
+                    rotation
+                        .map(|r| format!(
+                            "; capture rotated at {} MB, {} kept",
+                            r.max_bytes as f64 / 1e6,
+                            r.keep
+                        ))
+                        .unwrap_or_default(),
+                );
+            }
             exit::OK
         }
         Err(e) => {

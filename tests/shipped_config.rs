@@ -87,6 +87,15 @@ fn shipped_monitoring_layouts_are_the_simulators() {
             .unwrap()
             .expect("a [monitor] section");
         let (_, truth) = run(kind, 1, 0.2, 10.0);
+        // `sfs config check` says what the layout is.
+        let out = String::from_utf8_lossy(&check(&file).stdout).into_owned();
+        let curves = truth.curves.len();
+        let summary = format!(
+            "monitor: {} sensors on {curves} curve{}",
+            truth.sensors.len(),
+            if curves == 1 { "" } else { "s" }
+        );
+        assert!(out.contains(&summary), "{name}: {out}");
         assert_eq!(m.layout.curves, truth.curves, "{name}");
         assert_eq!(m.layout.sensors.len(), truth.sensors.len(), "{name}");
         for (a, b) in m.layout.sensors.iter().zip(&truth.sensors) {
