@@ -245,6 +245,12 @@ impl Acquisition {
         &self.scan
     }
 
+    /// Sensor arrays: the session time up to which every sensor's windows are complete (the
+    /// start of the newest window a sample fell in); `None` before the first sample.
+    pub fn array_complete_until(&self) -> Option<f64> {
+        self.array_grid.map(|k| k as f64 * self.cfg.array_window)
+    }
+
     /// Takes the sensor-array epochs gathered so far (monitoring consumes them as they come,
     /// so that a month-long session does not keep them all).
     pub fn take_array(&mut self) -> Vec<ArrayEpoch> {

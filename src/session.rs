@@ -399,6 +399,9 @@ pub async fn run(
                     for e in acq.take_array() {
                         m.feed(&e);
                     }
+                    if let Some(t) = acq.array_complete_until() {
+                        m.close_until(t);
+                    }
                 }
             }
         }
@@ -455,6 +458,9 @@ pub async fn run(
                 if let Some(m) = &mut monitor {
                     for e in acq.take_array() {
                         m.feed(&e);
+                    }
+                    if let Some(t) = acq.array_complete_until() {
+                        m.close_until(t);
                     }
                 }
             }

@@ -1256,3 +1256,51 @@ fn an_output_that_cannot_be_written_is_said_once() {
         .count();
     assert!(lines > 45, "{lines} lines");
 }
+
+/// An epoch's metrics come as soon as it ends: once a sample of the next window has been
+/// decoded, every earlier window has its line in metrics.csv (the session closes the windows
+/// acquisition has completed instead of waiting for the next window's epochs).
+#[test]
+fn an_epoch_is_written_as_soon_as_it_ends() {
+    use device_protocol::{Decoder, Event, Packet};
+    let (bytes, truth) = run(StructureKind::Riser, 13, 6.0, 10.0);
+    let dir = tmpdir("monitor-prompt");
+    let cfg = layout_config(&dir, "anchor = 0\nreference_s = 0.4", &truth);
+    let mut m =
+        sfs::monitor::run::Monitor::new(cfg, &dir, sfs::monitor::run::Begin::Fresh).unwrap();
+    let mut acq = Acquisition::new(AcquisitionConfig {
+        array_window: 0.2,
+        ..Default::default()
+    });
+    let (mut first, mut windows_seen, mut checked) = (None, 0i64, 0);
+    for e in Decoder::new().feed(&bytes) {
+        acq.event(&e);
+        for x in acq.take_array() {
+            m.feed(&x);
+        }
+        if let Some(t) = acq.array_complete_until() {
+            m.close_until(t);
+        }
+        if let Event::Packet {
+            packet: Packet::ArraySample(s),
+            ..
+        } = e
+        {
+            let t0 = *first.get_or_insert(s.t_us);
+            let t = (s.t_us - t0) as f64 * 1e-6;
+            // As acquisition places it (a sample on a boundary may fall either side).
+            let complete = (t / 0.2).floor() as i64;
+            if complete > windows_seen {
+                windows_seen = complete;
+                let lines = std::fs::read_to_string(dir.join("metrics.csv"))
+                    .unwrap()
+                    .lines()
+                    .count()
+                    - 1;
+                assert_eq!(lines as i64, complete, "t = {t}: {complete} windows ended");
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked >= 25, "{checked}");
+}

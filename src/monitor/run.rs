@@ -400,6 +400,22 @@ impl Monitor {
         }
     }
 
+    /// Closes the open windows that end by `t` (every sensor has reported them: see
+    /// [`crate::acquisition::Acquisition::array_complete_until`]), without waiting for the
+    /// next window's epochs: the metrics, alarms and latest shape of an epoch come as soon as
+    /// it ends.
+    pub fn close_until(&mut self, t: f64) {
+        let last = (t * self.cfg.epoch_hz + 1e-6).floor() as i64;
+        while let Some((&k, _)) = self.open.iter().next() {
+            if k > last {
+                break;
+            }
+            let window = self.open.remove(&k).expect("present");
+            self.closed = Some(k);
+            self.close(k as f64 / self.cfg.epoch_hz, window);
+        }
+    }
+
     /// Closes the windows still open (end of the session).
     pub fn finish(&mut self) {
         for (k, w) in std::mem::take(&mut self.open) {
