@@ -3,7 +3,7 @@
 
 use std::fs::File;
 use std::io::{self, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Replaces `path` with `bytes` atomically.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
@@ -38,6 +38,28 @@ pub fn write_atomic_with(
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+/// Removes `p`; a file already absent is not an error.
+pub fn remove_if_present(p: &Path) -> io::Result<()> {
+    match std::fs::remove_file(p) {
+        Err(e) if e.kind() != io::ErrorKind::NotFound => Err(e),
+        _ => Ok(()),
+    }
+}
+
+/// Shifts the numbered generations of a rotated file: `name(keep)` is deleted, then
+/// `name(k)` → `name(k + 1)` down to `name(0)` (the current file) → `name(1)`; with `keep` = 0
+/// the current file is deleted. Absent generations are skipped.
+pub fn shift_generations(name: impl Fn(usize) -> PathBuf, keep: usize) -> io::Result<()> {
+    remove_if_present(&name(keep))?;
+    for k in (0..keep).rev() {
+        match std::fs::rename(name(k), name(k + 1)) {
+            Err(e) if e.kind() != io::ErrorKind::NotFound => return Err(e),
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 /// Removes the temporary files a killed writer left in `dir` (`.NAME.tmpPID`, of another

@@ -189,31 +189,15 @@ impl CaptureWriter {
         let (keep, mut start) = (r.keep, tracker.clock.state());
         start.hello = tracker.hello.clone();
         self.stop_syncer()?;
-        let name = |k: usize| {
-            let stem = self.path.file_stem().unwrap_or_default().to_string_lossy();
-            self.path.with_file_name(format!("{stem}.{k}.bin"))
-        };
-        let remove = |p: &Path| match std::fs::remove_file(p) {
-            Err(e) if e.kind() != io::ErrorKind::NotFound => Err(e),
-            _ => Ok(()),
-        };
-        let rename = |a: &Path, b: &Path| match std::fs::rename(a, b) {
-            Err(e) if e.kind() != io::ErrorKind::NotFound => Err(e),
-            _ => Ok(()),
-        };
-        if keep == 0 {
-            remove(&self.path)?;
-            remove(&start_path(&self.path))?;
-        } else {
-            remove(&name(keep))?;
-            remove(&start_path(&name(keep)))?;
-            for k in (1..keep).rev() {
-                rename(&name(k), &name(k + 1))?;
-                rename(&start_path(&name(k)), &start_path(&name(k + 1)))?;
+        let name = |k: usize| match k {
+            0 => self.path.clone(),
+            k => {
+                let stem = self.path.file_stem().unwrap_or_default().to_string_lossy();
+                self.path.with_file_name(format!("{stem}.{k}.bin"))
             }
-            rename(&self.path, &name(1))?;
-            rename(&start_path(&self.path), &start_path(&name(1)))?;
-        }
+        };
+        crate::atomic::shift_generations(name, keep)?;
+        crate::atomic::shift_generations(|k| start_path(&name(k)), keep)?;
         crate::atomic::write_json(&start_path(&self.path), &start, false)?;
         self.file = OpenOptions::new()
             .create(true)

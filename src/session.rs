@@ -395,14 +395,7 @@ pub async fn run(
                     stats.observe(&e);
                     acq.event(&e);
                 }
-                if let Some(m) = &mut monitor {
-                    for e in acq.take_array() {
-                        m.feed(&e);
-                    }
-                    if let Some(t) = acq.array_complete_until() {
-                        m.close_until(t);
-                    }
-                }
+                feed_monitor(&mut monitor, &mut acq);
             }
         }
         tracing::info!(
@@ -455,14 +448,7 @@ pub async fn run(
                         post(&mut live, &acq, i, &stats);
                     }
                 }
-                if let Some(m) = &mut monitor {
-                    for e in acq.take_array() {
-                        m.feed(&e);
-                    }
-                    if let Some(t) = acq.array_complete_until() {
-                        m.close_until(t);
-                    }
-                }
+                feed_monitor(&mut monitor, &mut acq);
             }
             Some(SourceEvent::Connected { .. }) => stats.connects += 1,
             Some(SourceEvent::Disconnected { .. }) => stats.disconnects += 1,
@@ -576,6 +562,19 @@ fn network_glb(
         &net.positions.nodes,
         mesh.as_ref(),
     )
+}
+
+/// Hands acquisition's sensor-array epochs to the monitor (if any), and closes the epochs
+/// acquisition has completed.
+fn feed_monitor(monitor: &mut Option<crate::monitor::run::Monitor>, acq: &mut Acquisition) {
+    if let Some(m) = monitor {
+        for e in acq.take_array() {
+            m.feed(&e);
+        }
+        if let Some(t) = acq.array_complete_until() {
+            m.close_until(t);
+        }
+    }
 }
 
 /// A capture file of a session being resumed, opened before the source appends to it.

@@ -18,6 +18,7 @@
 use super::alarm::{Alarm, Transition};
 use super::epoch::{EpochParams, EpochReconstructor};
 use super::metrics::{compare, Metrics, ReferenceBuilder, Shape};
+use crate::atomic::remove_if_present;
 use crate::config::MonitorConfig;
 use crate::orientation::flags;
 use crate::scan::ArrayEpoch;
@@ -40,23 +41,13 @@ const CSV_HEADER: &str = "t_s,max_displacement_m,mean_displacement_m,max_curvatu
 /// `dir/NAME.EXT` → `NAME.1.EXT` → … → `NAME.KEEP.EXT` (the oldest beyond is deleted).
 fn rotate_file(dir: &Path, file: &str, keep: usize) -> std::io::Result<()> {
     let (stem, ext) = file.rsplit_once('.').unwrap_or((file, ""));
-    let name = |k: usize| dir.join(format!("{stem}.{k}.{ext}"));
-    let _ = std::fs::remove_file(name(keep));
-    for k in (1..keep).rev() {
-        let _ = std::fs::rename(name(k), name(k + 1));
-    }
-    if keep > 0 {
-        std::fs::rename(dir.join(file), name(1))
-    } else {
-        std::fs::remove_file(dir.join(file))
-    }
-}
-
-fn remove_if_present(p: &Path) -> std::io::Result<()> {
-    match std::fs::remove_file(p) {
-        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
-        _ => Ok(()),
-    }
+    crate::atomic::shift_generations(
+        |k| match k {
+            0 => dir.join(file),
+            k => dir.join(format!("{stem}.{k}.{ext}")),
+        },
+        keep,
+    )
 }
 
 /// The time and the alarms raised of the last complete line of a metrics file (a line cut by
