@@ -63,7 +63,7 @@ fn panel() -> (Layout, BTreeMap<u16, UnitQuaternion<f64>>) {
 }
 
 fn bench(c: &mut Criterion) {
-    sfs::sparse_llt::single_threaded();
+    sfs_geometry::sparse_llt::single_threaded();
     let (layout, q) = panel();
     layout.validate().expect("a valid layout");
     let mut g = c.benchmark_group(format!("monitor_epoch_{}_sensors", layout.sensors.len()));
@@ -80,12 +80,12 @@ fn bench(c: &mut Criterion) {
         b.iter(|| black_box(rec.run(&layout, black_box(&q), &pr).expect("a shape")))
     });
     let shape = rec.run(&layout, &q, &p).expect("a shape");
-    let segs = sfs::surface::cycles::NetworkSegments::from_positions(&shape.positions);
-    let sp = sfs::surface::fit::SurfaceParams {
+    let segs = sfs_geometry::surface::cycles::NetworkSegments::from_positions(&shape.positions);
+    let sp = sfs_geometry::surface::fit::SurfaceParams {
         soft: sfs::session::SCAN_SOFTNESS,
         ..Default::default()
     };
-    let mut surfacer = sfs::surface::fit::Surfacer::new();
+    let mut surfacer = sfs_geometry::surface::fit::Surfacer::new();
     let s = surfacer.run(&segs, &sp).expect("a surface");
     eprintln!("surface: {} vertices", s.mesh().positions.len());
     g.bench_function("surface", |b| {

@@ -6,11 +6,11 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use device_protocol::DeviceKind;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
-use sfs::network::poisson::PoissonSolver;
-use sfs::network::prefilter::{prefilter, PrefilterParams, UniformCurve};
-use sfs::network::regression::{RegressionParams, RegressionSolver};
 use sfs::scan::Scan;
 use sfs::simulate::{self, scene, Profile};
+use sfs_geometry::network::poisson::PoissonSolver;
+use sfs_geometry::network::prefilter::{prefilter, PrefilterParams, UniformCurve};
+use sfs_geometry::network::regression::{RegressionParams, RegressionSolver};
 use std::hint::black_box;
 
 fn scan(name: &str) -> Scan {
@@ -28,7 +28,7 @@ fn uniform(scan: &Scan, p: &PrefilterParams) -> Vec<UniformCurve> {
 }
 
 fn bench(c: &mut Criterion) {
-    sfs::sparse_llt::single_threaded();
+    sfs_geometry::sparse_llt::single_threaded();
     for (name, h) in [("sphere-octa", 0.006), ("torus", 0.01), ("torus", 0.0032)] {
         let sc = scan(name);
         let p = PrefilterParams {

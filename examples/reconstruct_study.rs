@@ -3,9 +3,9 @@
 //! `cargo run --release --example reconstruct_study -- CAPTURE TRUTH [h sigma bend stretch xi]`
 //! (`bend` < 0: pre-filter only).
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
-use sfs::network::{NetworkParams, Reconstructor};
+use sfs_geometry::network::{NetworkParams, Reconstructor};
 fn main() {
-    sfs::sparse_llt::single_threaded();
+    sfs_geometry::sparse_llt::single_threaded();
     let a: Vec<String> = std::env::args().collect();
     let bytes = std::fs::read(&a[1]).expect("capture");
     let truth = sfs::simulate::truth::Truth::load(std::path::Path::new(&a[2])).expect("truth");
@@ -27,8 +27,8 @@ fn main() {
     p.regression.bend_length = (bend > 0.0).then_some(bend);
     p.regression.stretch_length = num(6, 0.0);
     p.regression.xi = num(7, p.regression.xi);
-    let net = Reconstructor::new().run(&scan, &p).expect("network");
-    let rec = net.positions.as_read_network();
+    let net = Reconstructor::new().run(&scan.curves, &p).expect("network");
+    let rec = sfs::gltf_out::as_read_network(&net.positions);
     let e = sfs::eval::evaluate(&truth, &rec).expect("eval");
     print!("{} samples: ", net.report.samples);
     println!("mean {:.4}% max {:.4}% node-normals {:.2}° iters {} E {:.3e}→{:.3e} t(pre {:.1} reg {:.1} poi {:.1} ms)",

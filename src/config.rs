@@ -221,11 +221,11 @@ pub struct MonitorConfig {
     /// `latest.glb` is replaced every this many epochs. Default 5.
     pub latest_every: usize,
     /// The surface of the shape in `latest.glb` (`None`: the network only, the default).
-    pub surface: Option<crate::surface::fit::SurfaceParams>,
+    pub surface: Option<sfs_geometry::surface::fit::SurfaceParams>,
     /// The regression over the network in each epoch (`None`: the frames interpolated
     /// between the sensors as they are, the default: on the simulator's riser and panel it
     /// changed the sensors' positions by less than 0.1 mm, at 6 ms an epoch for 200 sensors).
-    pub regression: Option<crate::network::regression::RegressionParams>,
+    pub regression: Option<sfs_geometry::network::regression::RegressionParams>,
     /// `metrics.csv` is rotated past this size (default 64 MB), keeping `metrics_keep` old
     /// files (default 4).
     pub metrics_max_bytes: u64,
@@ -626,9 +626,9 @@ impl Config {
     pub fn network_params(
         &self,
         file: &Path,
-    ) -> Result<crate::network::NetworkParams, ConfigError> {
+    ) -> Result<sfs_geometry::network::NetworkParams, ConfigError> {
         let n = &self.network;
-        let mut p = crate::network::NetworkParams::default();
+        let mut p = sfs_geometry::network::NetworkParams::default();
         let check =
             |key: &str, v: Option<f64>, lo: f64, hi: f64| -> Result<Option<f64>, ConfigError> {
                 match v {
@@ -704,12 +704,12 @@ impl Config {
     pub fn surface_params(
         &self,
         file: &Path,
-    ) -> Result<Option<crate::surface::fit::SurfaceParams>, ConfigError> {
+    ) -> Result<Option<sfs_geometry::surface::fit::SurfaceParams>, ConfigError> {
         let s = &self.surface;
         if s.enabled == Some(false) {
             return Ok(None);
         }
-        let mut p = crate::surface::fit::SurfaceParams::default();
+        let mut p = sfs_geometry::surface::fit::SurfaceParams::default();
         if let Some(e) = s.edge {
             if !(e.is_finite() && (1e-4..=10.0).contains(&e)) {
                 return Err(ConfigError {

@@ -23,6 +23,7 @@
 use gltf::json;
 use json::validation::{Checked, USize64};
 use nalgebra::Vector3;
+use sfs_geometry::network::poisson::Positions;
 use std::collections::BTreeMap;
 
 /// A reconstructed curve, world frame (z up).
@@ -36,16 +37,7 @@ pub struct NetworkCurve {
     pub normals: Vec<Vector3<f64>>,
 }
 
-/// A triangle mesh, world frame (z up).
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct SurfaceMesh {
-    /// #V positions.
-    pub positions: Vec<Vector3<f64>>,
-    /// #V unit normals.
-    pub normals: Vec<Vector3<f64>>,
-    /// #F triangles, counter-clockwise seen from the normals' side.
-    pub triangles: Vec<[u32; 3]>,
-}
+pub use sfs_geometry::surface::SurfaceMesh;
 
 /// What cannot be written.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -368,6 +360,29 @@ pub fn network_glb(
     };
     glb.to_vec()
         .map_err(|e| GltfError::Serialise(e.to_string()))
+}
+
+/// The curves of a reconstructed network as they are written.
+pub fn network_curves(p: &Positions) -> Vec<NetworkCurve> {
+    p.curves
+        .iter()
+        .map(|c| NetworkCurve {
+            index: c.index,
+            boundary: c.boundary,
+            nodes: c.nodes.iter().map(|n| n.1).collect(),
+            points: c.points.clone(),
+            normals: c.normals.clone(),
+        })
+        .collect()
+}
+
+/// A reconstructed network as `sfs eval` reads it back from its glb (no surface).
+pub fn as_read_network(p: &Positions) -> ReadNetwork {
+    ReadNetwork {
+        curves: network_curves(p),
+        nodes: p.nodes.clone(),
+        surface: None,
+    }
 }
 
 /// A network read back from a glb (world frame, z up).

@@ -93,14 +93,10 @@ pub enum KeyEvent {
 /// Largest node index accepted (six digits).
 pub const MAX_NODE: u32 = 999_999;
 
-/// First index given to anonymous nodes (tags whose index was lost on the link); they are
-/// numbered upwards in the order they occur and can never collide with a typed index.
-pub const ANONYMOUS_NODE_BASE: u32 = MAX_NODE + 1;
-
-/// Whether `node` is an anonymous node (see [`ANONYMOUS_NODE_BASE`]).
-pub fn is_anonymous(node: u32) -> bool {
-    node >= ANONYMOUS_NODE_BASE
-}
+/// Anonymous nodes (tags whose index was lost on the link) are numbered from
+/// [`ANONYMOUS_NODE_BASE`] up, above every index the keypad accepts.
+pub use sfs_geometry::curve::{is_anonymous, ANONYMOUS_NODE_BASE};
+const _: () = assert!(MAX_NODE < ANONYMOUS_NODE_BASE);
 
 #[derive(Debug, Clone)]
 struct Open {

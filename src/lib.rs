@@ -13,12 +13,10 @@
 //! - [`orientation`]: samples → orientations of the frame [T B N] (TRIAD, the phone's
 //!   filter, the q-method mean, disturbance tests).
 //! - [`keypad`], [`acquisition`], [`scan`]: orientations and key presses → tagged curves.
-//! - [`network`]: tagged curves → filtered frames (pre-filter, regression on SO(3)) →
-//!   positions of the network (Poisson), with the loop-closure test of the tags;
-//!   [`sparse_llt`]: the sparse Cholesky they share (symbolic factorisation reused);
-//!   [`union_find`]: connected components.
-//! - [`surface`]: network → surface (cycles from normals, tessellation per cycle, cotangent
-//!   Laplacian, biharmonic propagation, the mean-curvature-guided fit).
+//! - `sfs-geometry` (its own crate, `geometry/`, no I/O): tagged curves → filtered frames
+//!   (pre-filter, loop-closure test of the tags, regression on SO(3)) → positions of the
+//!   network (Poisson) → surface (cycles, tessellation, cotangent Laplacian, biharmonic
+//!   propagation, the mean-curvature-guided fit), with the sparse Cholesky they share.
 //! - [`gltf_out`]: network (and surface) → `network.glb`; [`eval`]: scoring against a truth.
 //! - [`session`]: one run of the pipeline, source → decoder → acquisition → outputs;
 //!   [`live`]: the worker that rebuilds the outputs after every curve (coalescing).
@@ -43,7 +41,6 @@ pub mod keypad;
 pub mod link;
 pub mod live;
 pub mod monitor;
-pub mod network;
 pub mod orientation;
 pub mod report;
 pub mod scan;
@@ -52,9 +49,6 @@ pub mod session;
 pub mod shutdown;
 pub mod simulate;
 pub mod source;
-pub mod sparse_llt;
-pub mod surface;
-pub mod union_find;
 
 /// Exit codes of the `sfs` binary (a stated policy, also in the README).
 pub mod exit {

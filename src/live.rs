@@ -19,11 +19,11 @@
 //! files out whatever the timing was.
 
 use crate::link::LinkStats;
-use crate::network::Reconstructor;
 use crate::scan::{Counts, Curve, Scan};
 use crate::session::{self, Options};
-use crate::surface::fit::Surfacer;
 use serde::Serialize;
+use sfs_geometry::network::Reconstructor;
+use sfs_geometry::surface::fit::Surfacer;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Condvar, Mutex};

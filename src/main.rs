@@ -15,7 +15,7 @@ use std::path::Path;
 use std::time::Duration;
 
 fn main() {
-    sfs::sparse_llt::single_threaded();
+    sfs_geometry::sparse_llt::single_threaded();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {

@@ -27,11 +27,11 @@ pub struct Report {
     /// Reconstructed node positions in the glb's frame (y up), by node index.
     pub nodes: std::collections::BTreeMap<String, [f32; 3]>,
     /// Wall time per reconstruction stage, ms.
-    pub timings_ms: Option<crate::network::Timings>,
+    pub timings_ms: Option<sfs_geometry::network::Timings>,
     /// What the reconstruction did (curves used, samples, components, node normal agreement).
-    pub network: Option<crate::network::NetworkReport>,
+    pub network: Option<sfs_geometry::network::NetworkReport>,
     /// What the surfacer did (patches, holes, problems naming nodes and curves).
-    pub surface: Option<crate::surface::fit::SurfaceReport>,
+    pub surface: Option<sfs_geometry::surface::fit::SurfaceReport>,
     /// What the live updates measured (latency from the E key to `network.glb`, memory).
     pub live: Option<crate::live::LiveReport>,
     /// What monitoring did (epochs, alarms, the last metrics).

@@ -26,9 +26,9 @@ pub const NETWORK_FILE: &str = "network.glb";
 #[derive(Debug, Clone)]
 pub struct Options {
     pub acquisition: AcquisitionConfig,
-    pub network: crate::network::NetworkParams,
+    pub network: sfs_geometry::network::NetworkParams,
     /// Surfacing settings; `None` writes the network only.
-    pub surface: Option<crate::surface::fit::SurfaceParams>,
+    pub surface: Option<sfs_geometry::surface::fit::SurfaceParams>,
     /// Reconstruct after every finished curve ([`crate::live`]), not only at the end.
     pub live: bool,
     /// Keep a copy of `network.glb` per curve (`snapshots/curve-NNN.glb`), live updates only.
@@ -51,8 +51,8 @@ impl Default for Options {
     fn default() -> Self {
         Options {
             acquisition: AcquisitionConfig::default(),
-            network: crate::network::NetworkParams::default(),
-            surface: Some(crate::surface::fit::SurfaceParams {
+            network: sfs_geometry::network::NetworkParams::default(),
+            surface: Some(sfs_geometry::surface::fit::SurfaceParams {
                 soft: SCAN_SOFTNESS,
                 ..Default::default()
             }),
@@ -71,8 +71,8 @@ pub const SNAPSHOT_DIR: &str = "snapshots";
 /// written: shared by the live updates and the session's final outputs.
 #[derive(Debug, Default)]
 pub struct Products {
-    pub network: Option<crate::network::Network>,
-    pub surface: Option<crate::surface::fit::SurfaceReport>,
+    pub network: Option<sfs_geometry::network::Network>,
+    pub surface: Option<sfs_geometry::surface::fit::SurfaceReport>,
     /// Node positions in the glb's frame (y up), by node index.
     pub nodes: std::collections::BTreeMap<String, [f32; 3]>,
     /// The reconstruction's and the surfacer's warnings (naming curves and nodes).
@@ -114,11 +114,11 @@ impl Products {
 pub fn reconstruct(
     scan: &crate::scan::Scan,
     options: &Options,
-    rec: &mut crate::network::Reconstructor,
-    surfacer: &mut crate::surface::fit::Surfacer,
+    rec: &mut sfs_geometry::network::Reconstructor,
+    surfacer: &mut sfs_geometry::surface::fit::Surfacer,
 ) -> Products {
     let t0 = Instant::now();
-    let network = rec.run(scan, &options.network);
+    let network = rec.run(&scan.curves, &options.network);
     let mut out = Products {
         network_ms: t0.elapsed().as_secs_f64() * 1e3,
         ..Default::default()
@@ -129,7 +129,7 @@ pub fn reconstruct(
     out.warnings.extend(net.warnings.iter().cloned());
     let surfaced = options.surface.as_ref().and_then(|sp| {
         let t1 = Instant::now();
-        let segs = crate::surface::cycles::NetworkSegments::from_positions(&net.positions);
+        let segs = sfs_geometry::surface::cycles::NetworkSegments::from_positions(&net.positions);
         let result = surfacer.run(&segs, sp);
         out.surface_ms = t1.elapsed().as_secs_f64() * 1e3;
         match result {
@@ -495,8 +495,8 @@ pub async fn run(
             reconstruct(
                 &scan,
                 options,
-                &mut crate::network::Reconstructor::new(),
-                &mut crate::surface::fit::Surfacer::new(),
+                &mut sfs_geometry::network::Reconstructor::new(),
+                &mut sfs_geometry::surface::fit::Surfacer::new(),
             ),
             other.map(|o| o.report),
         ),
@@ -553,12 +553,12 @@ pub async fn run(
 
 /// The glb of a reconstruction.
 fn network_glb(
-    net: &crate::network::Network,
-    surface: Option<&crate::surface::fit::Surfaced>,
+    net: &sfs_geometry::network::Network,
+    surface: Option<&sfs_geometry::surface::fit::Surfaced>,
 ) -> Result<Vec<u8>, crate::gltf_out::GltfError> {
     let mesh = surface.map(|s| s.mesh());
     crate::gltf_out::network_glb(
-        &net.positions.network_curves(),
+        &crate::gltf_out::network_curves(&net.positions),
         &net.positions.nodes,
         mesh.as_ref(),
     )

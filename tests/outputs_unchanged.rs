@@ -98,8 +98,11 @@ fn sfs(args: &[&str], paths: &[(&str, &Path)]) {
     );
 }
 
-/// Digests of the outputs of one case: `file -> (length, digest)`.
-fn outputs(dir: &Path, files: &[&str]) -> BTreeMap<String, (usize, String)> {
+/// The outputs of one case: `file -> (length, digest)`.
+type Digests = BTreeMap<String, (usize, String)>;
+
+/// Digests of the outputs of one case.
+fn outputs(dir: &Path, files: &[&str]) -> Digests {
     files
         .iter()
         .map(|f| {
@@ -126,7 +129,7 @@ const MONITOR_OUTPUTS: &[&str] = &[
 ];
 
 /// Every case: its name and its outputs' digests.
-fn all_cases() -> Vec<(String, BTreeMap<String, (usize, String)>)> {
+fn all_cases() -> Vec<(String, Digests)> {
     let tmp = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
         .join(format!("outputs-unchanged-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
@@ -194,7 +197,7 @@ fn all_cases() -> Vec<(String, BTreeMap<String, (usize, String)>)> {
     cases
 }
 
-fn render(cases: &[(String, BTreeMap<String, (usize, String)>)]) -> String {
+fn render(cases: &[(String, Digests)]) -> String {
     let mut s = format!(
         "# Digests of sfs replay's outputs (tests/outputs_unchanged.rs); made on {}\n",
         simd_level()

@@ -4,11 +4,11 @@
 //! cannot be used are left out with a reason, a network in two parts is placed per part.
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
-use sfs::network::{NetworkParams, Reconstructor};
 use sfs::scan::{Curve, Samples, Scan, Tag};
 use sfs::simulate::scene::{self, Scene};
 use sfs::simulate::truth::Truth;
 use sfs::simulate::{self, Profile};
+use sfs_geometry::network::{NetworkParams, Reconstructor};
 use std::path::Path;
 
 fn load(name: &str) -> Option<(Scene, Truth)> {
@@ -72,8 +72,10 @@ fn exact_scan(s: &Scene) -> Scan {
 fn score(t: &Truth, scan: &Scan, h: f64) -> f64 {
     let mut p = NetworkParams::default();
     p.prefilter.h = h;
-    let net = Reconstructor::new().run(scan, &p).expect("a network");
-    let rec = net.positions.as_read_network();
+    let net = Reconstructor::new()
+        .run(&scan.curves, &p)
+        .expect("a network");
+    let rec = sfs::gltf_out::as_read_network(&net.positions);
     sfs::eval::evaluate(t, &rec).unwrap().curves.mean_pct
 }
 
@@ -127,7 +129,7 @@ fn unusable_curves_are_left_out_with_a_reason_and_parts_placed_separately() {
     }
     scan.curves.extend([one_tag, short, apart]);
     let net = Reconstructor::new()
-        .run(&scan, &NetworkParams::default())
+        .run(&scan.curves, &NetworkParams::default())
         .unwrap();
     assert_eq!(net.report.curves_used, 4);
     assert_eq!(net.report.curves_left_out, 2);

@@ -3,9 +3,9 @@
 
 use device_protocol::DeviceKind;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
-use sfs::network::{NetworkParams, Reconstructor};
 use sfs::scan::Scan;
 use sfs::simulate::{self, scene, Profile};
+use sfs_geometry::network::{NetworkParams, Reconstructor};
 use std::path::Path;
 
 fn decode(bytes: &[u8]) -> Scan {
@@ -48,7 +48,7 @@ fn issue5_lost_index_digits_do_not_distort_the_network() {
         tags(3)
     );
     let net = Reconstructor::new()
-        .run(&scan, &NetworkParams::default())
+        .run(&scan.curves, &NetworkParams::default())
         .unwrap();
     assert_eq!(net.report.tags_detached, 1, "{:?}", net.warnings);
     assert!(
@@ -58,7 +58,8 @@ fn issue5_lost_index_digits_do_not_distort_the_network() {
         "{:?}",
         net.warnings
     );
-    let e = sfs::eval::evaluate(&sim.truth, &net.positions.as_read_network()).unwrap();
+    let e =
+        sfs::eval::evaluate(&sim.truth, &sfs::gltf_out::as_read_network(&net.positions)).unwrap();
     assert!(
         e.curves.mean_pct <= 0.40,
         "mean {} % of the diagonal (phone target 0.40 %)",
@@ -69,8 +70,9 @@ fn issue5_lost_index_digits_do_not_distort_the_network() {
         no_closure_check: true,
         ..Default::default()
     };
-    let net = Reconstructor::new().run(&scan, &p).unwrap();
-    let e = sfs::eval::evaluate(&sim.truth, &net.positions.as_read_network()).unwrap();
+    let net = Reconstructor::new().run(&scan.curves, &p).unwrap();
+    let e =
+        sfs::eval::evaluate(&sim.truth, &sfs::gltf_out::as_read_network(&net.positions)).unwrap();
     assert!(e.curves.mean_pct > 1.0, "{}", e.curves.mean_pct);
 }
 
@@ -93,10 +95,10 @@ fn a_growing_scan_is_reconstructed_incrementally() {
             curves: full.curves[..k].to_vec(),
             ..full.clone()
         };
-        let a = cold.run(&scan, &p);
+        let a = cold.run(&scan.curves, &p);
         assert_eq!(cold.prefiltered_last, 1, "after {k} curves");
-        let b = warm.run_warm(&scan, &p);
-        let fresh = Reconstructor::new().run(&scan, &p);
+        let b = warm.run_warm(&scan.curves, &p);
+        let fresh = Reconstructor::new().run(&scan.curves, &p);
         let (Some(a), Some(b), Some(fresh)) = (a, b, fresh) else {
             continue;
         };

@@ -7,7 +7,7 @@ mod common;
 use device_protocol::*;
 use proptest::prelude::*;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
-use sfs::network::{NetworkParams, Reconstructor};
+use sfs_geometry::network::{NetworkParams, Reconstructor};
 
 fn packet() -> impl Strategy<Value = Packet> {
     let v3 = any::<[i16; 3]>();
@@ -69,8 +69,8 @@ proptest! {
             }
             prop_assert!(c.samples.d.iter().all(|x| x.is_finite()));
         }
-        if let Some(net) = Reconstructor::new().run(&scan, &NetworkParams::default()) {
-            let glb = sfs::gltf_out::network_glb(&net.positions.network_curves(), &net.positions.nodes, None);
+        if let Some(net) = Reconstructor::new().run(&scan.curves, &NetworkParams::default()) {
+            let glb = sfs::gltf_out::network_glb(&sfs::gltf_out::network_curves(&net.positions), &net.positions.nodes, None);
             if let Ok(bytes) = glb {
                 let back = sfs::gltf_out::read_glb(&bytes).unwrap();
                 for c in &back.curves {
@@ -124,11 +124,11 @@ proptest! {
         }
         let scan = acq.finish();
         prop_assert!(scan.curves.len() <= curves);
-        if let Some(net) = Reconstructor::new().run(&scan, &NetworkParams::default()) {
+        if let Some(net) = Reconstructor::new().run(&scan.curves, &NetworkParams::default()) {
             for c in &net.positions.curves {
                 prop_assert!(c.points.iter().chain(&c.normals).all(|v| v.iter().all(|x| x.is_finite())));
             }
-            let glb = sfs::gltf_out::network_glb(&net.positions.network_curves(), &net.positions.nodes, None);
+            let glb = sfs::gltf_out::network_glb(&sfs::gltf_out::network_curves(&net.positions), &net.positions.nodes, None);
             prop_assert!(glb.is_ok(), "{:?}", glb.err());
         }
     }
@@ -149,8 +149,8 @@ proptest! {
         collapse in 0usize..4,
         seed in any::<u64>(),
     ) {
-        use sfs::surface::fit::{surface, SurfaceParams};
-        let mut net = sfs::surface::analytic::sphere_circles(0.15);
+        use sfs_geometry::surface::fit::{surface, SurfaceParams};
+        let mut net = sfs_geometry::surface::analytic::sphere_circles(0.15);
         let mut s = seed | 1;
         let mut r = move || {
             s ^= s << 13;

@@ -3,7 +3,7 @@
 //! torus), every segment in exactly two faces, and no problem reported.
 
 use sfs::simulate::scene;
-use sfs::surface::cycles::{cycles, HalfEdge, NetworkSegments};
+use sfs_geometry::surface::cycles::{cycles, HalfEdge, NetworkSegments};
 use std::collections::BTreeMap;
 use std::path::Path;
 

@@ -2,11 +2,11 @@
 //! finite, no degenerate triangle, valid glb; accuracy on the unit sphere against the paper's
 //! Table 1 target; bad input (an open network, a dangling curve) surfaces what it can.
 
-use sfs::surface::analytic::{
+use sfs_geometry::surface::analytic::{
     sphere_circles, sphere_cube, sphere_distance, torus, torus_distance, torus_with_parallels,
 };
-use sfs::surface::cycles::NetworkSegments;
-use sfs::surface::fit::{surface, Method, SurfaceParams, Surfaced};
+use sfs_geometry::surface::cycles::NetworkSegments;
+use sfs_geometry::surface::fit::{surface, Method, SurfaceParams, Surfaced};
 use std::collections::BTreeMap;
 
 /// Every directed edge once and its twin once (closed, consistently oriented, watertight),
@@ -123,7 +123,7 @@ fn an_open_network_and_a_dangling_curve_surface_what_they_can() {
     let mut net = sphere_cube(0.05);
     // Remove the four edges of the top face (z > 0 corners 4..7) but one: the top is open,
     // and the last top edge dangles.
-    let top = |s: &sfs::surface::cycles::Segment| s.a >= 4 && s.b >= 4;
+    let top = |s: &sfs_geometry::surface::cycles::Segment| s.a >= 4 && s.b >= 4;
     let mut kept = NetworkSegments {
         segments: Vec::new(),
         normals: net.normals.clone(),

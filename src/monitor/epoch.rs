@@ -21,10 +21,10 @@
 //! ```
 
 use super::layout::{Layout, LayoutCurve};
-use crate::network::poisson::{PoissonSolver, Positions};
-use crate::network::prefilter::UniformCurve;
-use crate::network::regression::{RegressionParams, RegressionSolver};
 use nalgebra::UnitQuaternion;
+use sfs_geometry::network::poisson::{PoissonSolver, Positions};
+use sfs_geometry::network::prefilter::UniformCurve;
+use sfs_geometry::network::regression::{RegressionParams, RegressionSolver};
 use std::collections::BTreeMap;
 
 /// Settings of an epoch's reconstruction.

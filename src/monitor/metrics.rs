@@ -5,8 +5,8 @@
 //!
 //! The reference is the mean shape over the first epochs ([`ReferenceBuilder`]), or any shape.
 
-use crate::network::poisson::Positions;
 use nalgebra::Vector3;
+use sfs_geometry::network::poisson::Positions;
 
 /// A shape relative to its anchor: per curve (by layout index), its points and curvatures.
 #[derive(Debug, Clone, PartialEq)]

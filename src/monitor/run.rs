@@ -147,7 +147,7 @@ pub struct Monitor {
     cfg: MonitorConfig,
     dir: PathBuf,
     rec: EpochReconstructor,
-    surfacer: crate::surface::fit::Surfacer,
+    surfacer: sfs_geometry::surface::fit::Surfacer,
     reference: ReferenceBuilder,
     reference_epochs: usize,
     /// The reference once complete (from the configuration, or built).
@@ -768,8 +768,9 @@ impl Monitor {
         if self.report.epochs % self.cfg.latest_every as u64 == 0 {
             let mesh = self.cfg.surface.as_ref().and_then(|sp| {
                 let t0 = std::time::Instant::now();
-                let segs =
-                    crate::surface::cycles::NetworkSegments::from_positions(&shape.positions);
+                let segs = sfs_geometry::surface::cycles::NetworkSegments::from_positions(
+                    &shape.positions,
+                );
                 match self.surfacer.run(&segs, sp) {
                     Ok(s) => {
                         self.report.surfaces += 1;
@@ -784,7 +785,7 @@ impl Monitor {
                 }
             });
             let glb = crate::gltf_out::network_glb(
-                &shape.positions.network_curves(),
+                &crate::gltf_out::network_curves(&shape.positions),
                 &shape.positions.nodes,
                 mesh.as_ref(),
             );

@@ -10,7 +10,7 @@
 
 pub mod ahrs;
 pub mod disturbance;
-pub mod qmethod;
+pub use sfs_geometry::qmethod;
 pub mod triad;
 
 /// Per-sample flags (bit set), stored with each raw sample of a scan.

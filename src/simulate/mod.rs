@@ -17,7 +17,7 @@
 pub mod device;
 pub mod mesh;
 pub mod operator;
-pub mod rng;
+pub use sfs_geometry::rng;
 pub mod scene;
 pub mod shapes;
 pub mod structure;

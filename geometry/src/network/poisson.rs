@@ -32,31 +32,6 @@ pub struct Positions {
     pub components: usize,
 }
 
-impl Positions {
-    /// The curves as written to `network.glb`.
-    pub fn network_curves(&self) -> Vec<crate::gltf_out::NetworkCurve> {
-        self.curves
-            .iter()
-            .map(|c| crate::gltf_out::NetworkCurve {
-                index: c.index,
-                boundary: c.boundary,
-                nodes: c.nodes.iter().map(|n| n.1).collect(),
-                points: c.points.clone(),
-                normals: c.normals.clone(),
-            })
-            .collect()
-    }
-
-    /// The network as `sfs eval` reads it back from a glb (no surface).
-    pub fn as_read_network(&self) -> crate::gltf_out::ReadNetwork {
-        crate::gltf_out::ReadNetwork {
-            curves: self.network_curves(),
-            nodes: self.nodes.clone(),
-            surface: None,
-        }
-    }
-}
-
 /// Keeps the symbolic factorisation between solves.
 #[derive(Debug, Default)]
 pub struct PoissonSolver {

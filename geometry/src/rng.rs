@@ -1,4 +1,4 @@
-//! Seeded random numbers for the simulator: xoshiro256** seeded through SplitMix64, Gaussian by
+//! Seeded random numbers for the simulator and the tests: xoshiro256** seeded through SplitMix64, Gaussian by
 //! Box–Muller. The same seed gives the same stream on every machine.
 
 use nalgebra::Vector3;

@@ -4,7 +4,7 @@
 //!
 //! ```
 //! use nalgebra::{UnitQuaternion, Vector3};
-//! use sfs::orientation::qmethod::mean;
+//! use sfs_geometry::qmethod::mean;
 //! let a = UnitQuaternion::from_scaled_axis(Vector3::new(0.0, 0.0, 0.1));
 //! let b = UnitQuaternion::from_scaled_axis(Vector3::new(0.0, 0.0, 0.3));
 //! let neg_b = UnitQuaternion::new_unchecked(-b.into_inner());

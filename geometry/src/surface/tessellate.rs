@@ -16,7 +16,7 @@
 //!
 //! ```
 //! use nalgebra::Vector3;
-//! use sfs::surface::tessellate::{tessellate, Embedding};
+//! use sfs_geometry::surface::tessellate::{tessellate, Embedding};
 //! // A unit square at z = 1 seen from +z, boundary sampled every 0.25.
 //! let mut b = Vec::new();
 //! for k in 0..16 {

@@ -15,7 +15,7 @@
 //!
 //! ```
 //! use nalgebra::Vector3;
-//! use sfs::surface::cycles::{cycles, NetworkSegments};
+//! use sfs_geometry::surface::cycles::{cycles, NetworkSegments};
 //! // A square in the plane z = 0 seen from +z: χ = 4 − 4 + 2 = 2.
 //! let p = |x: f64, y: f64| Vector3::new(x, y, 0.0);
 //! let mut net = NetworkSegments::default();

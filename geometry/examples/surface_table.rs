@@ -2,22 +2,22 @@
 //! vertices, for the unit sphere (cube network and three great circles) and the torus
 //! R = 4, r = 2 (4 meridians + 2 parallels), by biharmonic, triharmonic and the paper's method.
 //!
-//! `cargo run --release --example surface_table [-- SPACING]` (default: network samples every
+//! `cargo run --release -p sfs-geometry --example surface_table [-- SPACING]` (default: network samples every
 //! 0.02 on the sphere, 0.1 on the torus, interior edges 1.35× that, about the paper's counts).
 //! `SFS_REWEIGHT=N` sets the reweighting passes of "ours"; `SFS_SPLIT=1` also prints, for the
 //! tori, the errors of the free vertices outside and inside the tube's axis circle (distance,
 //! signed distance, propagated-normal angle).
 
 use nalgebra::Vector3;
-use sfs::surface::analytic::{
+use sfs_geometry::surface::analytic::{
     sphere_circles, sphere_cube, sphere_distance, torus, torus_distance, torus_with_parallels, R,
 };
-use sfs::surface::cycles::NetworkSegments;
-use sfs::surface::fit::{surface, Method, SurfaceParams};
+use sfs_geometry::surface::cycles::NetworkSegments;
+use sfs_geometry::surface::fit::{surface, Method, SurfaceParams};
 use std::time::Instant;
 
 fn main() {
-    sfs::sparse_llt::single_threaded();
+    sfs_geometry::sparse_llt::single_threaded();
     let s: f64 = std::env::args()
         .nth(1)
         .and_then(|a| a.parse().ok())

@@ -2,7 +2,7 @@
 //! so a component's root is its lowest unknown).
 //!
 //! ```
-//! use sfs::union_find::UnionFind;
+//! use sfs_geometry::union_find::UnionFind;
 //! let mut u = UnionFind::new(4);
 //! assert!(u.union(3, 1));
 //! assert!(!u.union(1, 3));

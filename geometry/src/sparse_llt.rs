@@ -3,7 +3,7 @@
 //! reused for every numeric factorisation with new values ([`SpdPattern::factor`]).
 //!
 //! ```
-//! use sfs::sparse_llt::SpdPattern;
+//! use sfs_geometry::sparse_llt::SpdPattern;
 //! // [[4, 1], [1, 3]] x = [1, 2]: lower-triangle entries, in any order, duplicates summed.
 //! let pat = SpdPattern::new(2, &[(0, 0), (1, 0), (1, 1)]).unwrap();
 //! let f = pat.factor(&[4.0, 1.0, 3.0]).unwrap();

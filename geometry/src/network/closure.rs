@@ -26,7 +26,7 @@
 //! degree of freedom left in the other loops (a 3-dof χ² at that ratio is far beyond noise).
 
 use super::prefilter::UniformCurve;
-use crate::keypad::ANONYMOUS_NODE_BASE;
+use crate::curve::ANONYMOUS_NODE_BASE;
 use crate::sparse_llt::SpdPattern;
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
@@ -327,7 +327,7 @@ pub fn detach_outlier_tags(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::simulate::rng::Rng;
+    use crate::rng::Rng;
     use nalgebra::UnitQuaternion;
 
     /// A planar grid of `k` curves along x and `k` along y (spacing 1 m, step 1 cm) through
@@ -441,7 +441,7 @@ mod tests {
             let d = detach_outlier_tags(&mut g, |c, k| (c, k) == (2, 2)).detached;
             assert_eq!(d.len(), 1, "seed {seed}: {d:?}");
             assert_eq!((d[0].curve, d[0].tag, d[0].node), (2, 2, 5));
-            assert!(crate::keypad::is_anonymous(d[0].anonymous));
+            assert!(crate::curve::is_anonymous(d[0].anonymous));
             assert_eq!(g[2].nodes[2].1, d[0].anonymous);
             // The curve had to reach 1 m sideways (spread over its segments and the others).
             assert!(d[0].offset_m > 0.5 && d[0].share > 0.9, "{}", d[0]);

@@ -8,8 +8,8 @@
 //! quadrature weight, so that where the operator slowed down the denser samples do not pull
 //! the mean; the paper weights by the kernel alone) multiply the kernel.
 
-use crate::orientation::qmethod::StructureTensor;
-use crate::scan::Curve;
+use crate::curve::Curve;
+use crate::qmethod::StructureTensor;
 use nalgebra::{Quaternion, UnitQuaternion};
 
 /// Pre-filter parameters (documented defaults).
@@ -298,7 +298,7 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scan::{Samples, Tag};
+    use crate::curve::{Samples, Tag};
     use nalgebra::Vector3;
 
     fn curve(n: usize, speed_profile: impl Fn(f64) -> f64) -> Curve {

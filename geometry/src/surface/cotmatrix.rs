@@ -12,7 +12,7 @@
 //!
 //! ```
 //! use nalgebra::Vector3;
-//! use sfs::surface::cotmatrix::{cotmatrix, voronoi_areas};
+//! use sfs_geometry::surface::cotmatrix::{cotmatrix, voronoi_areas};
 //! // Two triangles forming the unit square.
 //! let v = [Vector3::new(0.0, 0.0, 0.0), Vector3::new(1.0, 0.0, 0.0),
 //!          Vector3::new(1.0, 1.0, 0.0), Vector3::new(0.0, 1.0, 0.0)];

@@ -15,3 +15,16 @@ pub mod cotmatrix;
 pub mod cycles;
 pub mod fit;
 pub mod tessellate;
+
+use nalgebra::Vector3;
+
+/// A triangle mesh, world frame (z up): the surfacer's output.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SurfaceMesh {
+    /// #V positions.
+    pub positions: Vec<Vector3<f64>>,
+    /// #V unit normals.
+    pub normals: Vec<Vector3<f64>>,
+    /// #F triangles, counter-clockwise seen from the normals' side.
+    pub triangles: Vec<[u32; 3]>,
+}

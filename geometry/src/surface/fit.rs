@@ -45,7 +45,7 @@ pub struct SurfaceParams {
     /// pass (the paper's weights come from the planar triangulations, its stated weakness):
     /// the normals are propagated again, the guide recomputed on the previous surface and the
     /// fit solved again. Default 1: on the unit sphere's cube network it takes the mean
-    /// distance from 0.019 to 0.0002 (`cargo run --release --example surface_table`); more
+    /// distance from 0.019 to 0.0002 (`cargo run --release -p sfs-geometry --example surface_table`); more
     /// passes measured worse there.
     pub reweight: usize,
     /// The positional constraints on the network's samples: `None` hard (they are
@@ -100,7 +100,8 @@ pub struct Surfaced {
 }
 
 /// What the surfacer did, for `report.json`.
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct SurfaceReport {
     pub patches: usize,
     pub holes: usize,
@@ -134,9 +135,9 @@ impl Surfaced {
         }
     }
 
-    /// The mesh as `network.glb` writes it.
-    pub fn mesh(&self) -> crate::gltf_out::SurfaceMesh {
-        crate::gltf_out::SurfaceMesh {
+    /// The output mesh.
+    pub fn mesh(&self) -> super::SurfaceMesh {
+        super::SurfaceMesh {
             positions: self.positions.clone(),
             normals: self.normals.clone(),
             triangles: self.triangles.clone(),

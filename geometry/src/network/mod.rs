@@ -14,12 +14,11 @@ pub mod poisson;
 pub mod prefilter;
 pub mod regression;
 
-use crate::scan::Scan;
+use crate::curve::Curve;
 use nalgebra::UnitQuaternion;
 use poisson::{PoissonSolver, Positions};
 use prefilter::{prefilter, PrefilterParams, UniformCurve};
 use regression::{RegressionParams, RegressionReport, RegressionSolver};
-use serde::Serialize;
 use std::collections::HashMap;
 use std::time::Instant;
 
@@ -35,7 +34,8 @@ pub struct NetworkParams {
 }
 
 /// What a reconstruction did, for `report.json`.
-#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct NetworkReport {
     pub curves_used: usize,
     pub curves_left_out: usize,
@@ -52,7 +52,8 @@ pub struct NetworkReport {
 }
 
 /// Wall time per stage, ms.
-#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct Timings {
     pub prefilter: f64,
     pub regression: f64,
@@ -92,7 +93,7 @@ struct CurveKey {
 }
 
 impl CurveKey {
-    fn of(c: &crate::scan::Curve, p: &PrefilterParams) -> Self {
+    fn of(c: &Curve, p: &PrefilterParams) -> Self {
         CurveKey {
             samples: c.samples.len(),
             last: c
@@ -121,11 +122,11 @@ impl Reconstructor {
         Self::default()
     }
 
-    /// Reconstructs the accepted curves of `scan`; `None` when no curve can be used. The
-    /// result depends only on `scan` and `p` (the caches change the time it takes, not the
+    /// Reconstructs the network of `curves` (a scan's accepted curves); `None` when no curve
+    /// can be used. The result depends only on `curves` and `p` (the caches change the time it takes, not the
     /// bits).
-    pub fn run(&mut self, scan: &Scan, p: &NetworkParams) -> Option<Network> {
-        self.run_inner(scan, p, false)
+    pub fn run(&mut self, curves: &[Curve], p: &NetworkParams) -> Option<Network> {
+        self.run_inner(curves, p, false)
     }
 
     /// As [`run`](Self::run), with the regression warm-started from the previous run's
@@ -133,19 +134,19 @@ impl Reconstructor {
     /// Measured on a growing scan it starts lower but takes as many iterations (Gauss–Newton
     /// needs about three either way), so the live worker uses [`run`](Self::run), whose
     /// result depends on the curves alone.
-    pub fn run_warm(&mut self, scan: &Scan, p: &NetworkParams) -> Option<Network> {
-        self.run_inner(scan, p, true)
+    pub fn run_warm(&mut self, curves: &[Curve], p: &NetworkParams) -> Option<Network> {
+        self.run_inner(curves, p, true)
     }
 
-    fn run_inner(&mut self, scan: &Scan, p: &NetworkParams, warm: bool) -> Option<Network> {
+    fn run_inner(&mut self, curves: &[Curve], p: &NetworkParams, warm: bool) -> Option<Network> {
         let mut warnings = Vec::new();
         let t0 = Instant::now();
         let mut uniform: Vec<UniformCurve> = Vec::new();
-        let live: std::collections::HashSet<usize> = scan.curves.iter().map(|c| c.index).collect();
+        let live: std::collections::HashSet<usize> = curves.iter().map(|c| c.index).collect();
         self.prefiltered.retain(|k, _| live.contains(k));
         self.regressed.retain(|k, _| live.contains(k));
         self.prefiltered_last = 0;
-        for c in &scan.curves {
+        for c in curves {
             let key = CurveKey::of(c, &p.prefilter);
             let fresh = !matches!(self.prefiltered.get(&c.index), Some((k, _)) if *k == key);
             if fresh {
@@ -161,7 +162,7 @@ impl Reconstructor {
         }
         let t1 = Instant::now();
         if uniform.is_empty() {
-            if !scan.curves.is_empty() {
+            if !curves.is_empty() {
                 warnings.push("no curve could be used: nothing reconstructed".into());
             }
             for w in &warnings {
@@ -172,8 +173,7 @@ impl Reconstructor {
         let closure = if p.no_closure_check {
             closure::ClosureReport::default()
         } else {
-            let uncertain: std::collections::BTreeSet<(usize, usize)> = scan
-                .curves
+            let uncertain: std::collections::BTreeSet<(usize, usize)> = curves
                 .iter()
                 .flat_map(|c| {
                     c.tags
@@ -223,7 +223,7 @@ impl Reconstructor {
         }
         let report = NetworkReport {
             curves_used: uniform.len(),
-            curves_left_out: scan.curves.len() - uniform.len(),
+            curves_left_out: curves.len() - uniform.len(),
             samples: uniform.iter().map(|u| u.q.len()).sum(),
             components: positions.components,
             outliers_removed: uniform.iter().map(|u| u.outliers).sum(),

@@ -1,5 +1,5 @@
 //! Analytic curve networks with exact normals (the paper's Table 1 test shapes), for tests,
-//! benchmarks and `examples/surface_table.rs`, with the distance to their true surface.
+//! benchmarks and `geometry/examples/surface_table.rs`, with the distance to their true surface.
 
 use super::cycles::NetworkSegments;
 use nalgebra::Vector3;

@@ -4,12 +4,12 @@
 //! `cargo bench --bench surface`; targets in BENCHMARKS.md.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use sfs::surface::analytic::sphere_cube;
-use sfs::surface::fit::{surface, SurfaceParams, Surfacer};
+use sfs_geometry::surface::analytic::sphere_cube;
+use sfs_geometry::surface::fit::{surface, SurfaceParams, Surfacer};
 use std::hint::black_box;
 
 fn bench(c: &mut Criterion) {
-    sfs::sparse_llt::single_threaded();
+    sfs_geometry::sparse_llt::single_threaded();
     for (spacing, edge) in [(0.026, 0.035), (0.0083, 0.0112)] {
         let net = sphere_cube(spacing);
         let p = SurfaceParams {

@@ -57,7 +57,8 @@ impl Default for RegressionParams {
 }
 
 /// What the regression did.
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct RegressionReport {
     pub iterations: usize,
     pub energy_initial: f64,
@@ -518,7 +519,7 @@ impl RegressionSolver {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::simulate::rng::Rng;
+    use crate::rng::Rng;
 
     fn arc(
         noise: f64,

@@ -1,0 +1,111 @@
+//! The input of the reconstruction: tagged curves of frames. Per curve, the raw samples
+//! (session time, distance along the curve, orientation of the frame `[T B N]`, flags,
+//! weight) and the node tags, as acquisition hands them over (the application writes them as
+//! `scan.json`: columnar arrays, so a long scan stays compact).
+//!
+//! Distances `d` are metres from the curve's first tag (the start node): samples taken while
+//! the device stood at the start node before its tag have `d ≈ 0`, and the curve runs over
+//! `[tags[0].d, tags.last().d]`. Quaternions are `[w, x, y, z]`, frame → world (x east,
+//! y magnetic north, z up).
+//!
+//! ```
+//! use sfs_geometry::curve::{Curve, Samples, Tag};
+//! let tag = |node, d| Tag { node, d, t: d, uncertain: false };
+//! let c = Curve {
+//!     index: 0, boundary: false, closed: false,
+//!     tags: vec![tag(1, 0.0), tag(2, 0.5)],
+//!     segment_lengths: vec![None],
+//!     samples: Samples::default(),
+//! };
+//! assert_eq!(c.nodes(), [1, 2]);
+//! assert_eq!(c.length(), 0.5);
+//! ```
+
+#[cfg(feature = "serde")]
+use serde::{Deserialize, Serialize};
+
+/// First index given to anonymous nodes (tags whose index was lost on the link); they are
+/// numbered upwards in the order they occur and can never collide with a typed index (the
+/// keypad's largest is 999 999).
+pub const ANONYMOUS_NODE_BASE: u32 = 1_000_000;
+
+/// Whether `node` is an anonymous node (see [`ANONYMOUS_NODE_BASE`]).
+pub fn is_anonymous(node: u32) -> bool {
+    node >= ANONYMOUS_NODE_BASE
+}
+
+/// A node tag: the operator pressed Enter at node `node`.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(Serialize, Deserialize))]
+pub struct Tag {
+    pub node: u32,
+    /// Distance along the curve, m.
+    pub d: f64,
+    /// Session time of the Enter press, s.
+    pub t: f64,
+    /// Packets were lost on the link while this index was typed (a digit may be missing):
+    /// the reconstruction detaches such a tag if the network's loops refuse it.
+    #[cfg_attr(
+        feature = "serde",
+        serde(default, skip_serializing_if = "std::ops::Not::not")
+    )]
+    pub uncertain: bool,
+}
+
+/// Raw samples of one curve, as parallel arrays.
+#[derive(Debug, Clone, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(Serialize, Deserialize))]
+pub struct Samples {
+    /// Session time, s (monotonic across clock wraps and reboots).
+    pub t: Vec<f64>,
+    /// Distance along the curve, m (may decrease when the device rolls backwards).
+    pub d: Vec<f64>,
+    /// Orientation `[w, x, y, z]`, frame → world.
+    pub q: Vec<[f64; 4]>,
+    /// Flag bits of the sample (the application's orientation flags: standing, disturbed, …).
+    pub flags: Vec<u8>,
+    /// Weight of each orientation in averaging, in [0, 1], from the flags.
+    pub w: Vec<f64>,
+}
+
+impl Samples {
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+}
+
+/// One accepted curve.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(Serialize, Deserialize))]
+pub struct Curve {
+    /// Index in scan order (accepted curves only).
+    pub index: usize,
+    /// Lies on the boundary of the surface (`B`), else interior (`I`).
+    pub boundary: bool,
+    /// First and last tag are the same node.
+    pub closed: bool,
+    /// Node tags in order of travel (at least two).
+    pub tags: Vec<Tag>,
+    /// Measured segment lengths (m), one per pair of consecutive tags, when known
+    /// (SEGMENT_LENGTH packets or configuration; phone).
+    pub segment_lengths: Vec<Option<f64>>,
+    pub samples: Samples,
+}
+
+impl Curve {
+    /// The node sequence as scanned.
+    pub fn nodes(&self) -> Vec<u32> {
+        self.tags.iter().map(|t| t.node).collect()
+    }
+
+    /// Length from the first to the last tag, m.
+    pub fn length(&self) -> f64 {
+        match (self.tags.first(), self.tags.last()) {
+            (Some(a), Some(b)) => b.d - a.d,
+            _ => 0.0,
+        }
+    }
+}

@@ -1,0 +1,27 @@
+//! sfs-geometry: the geometry of shape from sensors, without I/O. Tagged curves of frames in,
+//! a curve network and its surface out; no files, sockets, threads or logging set-up here
+//! (the application crate `sfs` does those).
+//!
+//! # Layout, in the order the data flows
+//!
+//! - [`curve`]: the input, tagged curves of frames (samples: time, distance, orientation,
+//!   weight; node tags).
+//! - [`qmethod`]: the weighted mean of orientations on SO(3) (Davenport's q-method).
+//! - [`network`]: tagged curves → filtered frames (pre-filter, loop-closure test of the tags,
+//!   regression on SO(3)) → positions of the network (Poisson), nodes shared.
+//! - [`surface`]: network → surface (cycles from normals, tessellation per cycle, cotangent
+//!   Laplacian, biharmonic propagation, the mean-curvature-guided fit); [`surface::SurfaceMesh`]
+//!   is the output mesh.
+//! - Shared tools: [`sparse_llt`], the sparse Cholesky with a cached symbolic factorisation
+//!   ([`sparse_llt::SpdPattern`]) reused while only values change; [`union_find`], connected
+//!   components; [`rng`], the seeded random numbers of the tests and the simulator.
+//!
+//! Feature `serde`: `Serialize`/`Deserialize` for the input curves and the reports.
+
+pub mod curve;
+pub mod network;
+pub mod qmethod;
+pub mod rng;
+pub mod sparse_llt;
+pub mod surface;
+pub mod union_find;
