@@ -82,7 +82,7 @@ fn bench(c: &mut Criterion) {
     let shape = rec.run(&layout, &q, &p).expect("a shape");
     let segs = sfs_geometry::surface::cycles::NetworkSegments::from_positions(&shape.positions);
     let sp = sfs_geometry::surface::fit::SurfaceParams {
-        soft: sfs::session::SCAN_SOFTNESS,
+        soft: sfs::pipeline::SCAN_SOFTNESS,
         ..Default::default()
     };
     let mut surfacer = sfs_geometry::surface::fit::Surfacer::new();

@@ -108,53 +108,6 @@ struct OpenCurve {
     segment_lengths: BTreeMap<u16, f64>,
 }
 
-/// Monotonic session time from the device clock: increments are `t_us` differences (wraps
-/// included); after a reboot ([`Clock::restart`]) the next stamp adds nothing.
-#[derive(Debug, Clone, Default)]
-pub(crate) struct Clock {
-    last: Option<u32>,
-    elapsed_us: u64,
-    restart: bool,
-}
-
-impl Clock {
-    /// The clock where a capture file starts (see [`crate::capture::CaptureStart`]).
-    pub(crate) fn at(start: &crate::capture::CaptureStart) -> Clock {
-        Clock {
-            last: start.last_t_us,
-            elapsed_us: start.elapsed_us,
-            restart: start.restart,
-        }
-    }
-
-    /// The state to start another capture file from.
-    pub(crate) fn state(&self) -> crate::capture::CaptureStart {
-        crate::capture::CaptureStart {
-            elapsed_us: self.elapsed_us,
-            last_t_us: self.last,
-            restart: self.restart,
-            hello: None,
-        }
-    }
-
-    /// The device restarted: its clock starts over.
-    pub(crate) fn restart(&mut self) {
-        self.restart = true;
-    }
-
-    /// Session time, s, of a packet stamped `t_us`.
-    pub(crate) fn advance(&mut self, t_us: u32) -> f64 {
-        if let Some(last) = self.last {
-            if !self.restart {
-                self.elapsed_us += t_us.wrapping_sub(last) as u64;
-            }
-        }
-        self.restart = false;
-        self.last = Some(t_us);
-        self.elapsed_us as f64 * 1e-6
-    }
-}
-
 #[derive(Debug, Clone, Default)]
 struct ArraySensor {
     /// The window being averaged: `[window · W, (window + 1) · W)` of session time.
@@ -171,7 +124,7 @@ pub struct Acquisition {
     cfg: AcquisitionConfig,
     model: Option<SensorModel>,
     kind: Option<DeviceKind>,
-    clock: Clock,
+    clock: crate::clock::Clock,
     wheel_last: Option<i32>,
     wheel_m: f64,
     wheel_reset: bool,
@@ -206,18 +159,18 @@ impl Acquisition {
     }
 
     pub fn new(cfg: AcquisitionConfig) -> Self {
-        Self::starting_at(cfg, &crate::capture::CaptureStart::default())
+        Self::starting_at(cfg, &crate::clock::CaptureStart::default())
     }
 
     /// Acquisition of a capture file that continues an earlier one (a rotated capture: its
     /// session time goes on from `start`).
-    pub fn starting_at(cfg: AcquisitionConfig, start: &crate::capture::CaptureStart) -> Self {
+    pub fn starting_at(cfg: AcquisitionConfig, start: &crate::clock::CaptureStart) -> Self {
         let ahrs = Ahrs::new(cfg.ahrs);
         let mut acq = Acquisition {
             cfg,
             model: None,
             kind: None,
-            clock: Clock::at(start),
+            clock: crate::clock::Clock::at(start),
             wheel_last: None,
             wheel_m: 0.0,
             wheel_reset: false,
@@ -269,7 +222,7 @@ impl Acquisition {
             Event::DeviceReboot => {
                 self.clock.restart();
                 self.wheel_reset = true;
-                let t = self.clock.elapsed_us as f64 * 1e-6;
+                let t = self.clock.now();
                 if let Some(o) = &self.open {
                     let msg = format!(
                         "curve {}, t = {t:.3} s: the device rebooted during the curve; its distance and time are bridged",
@@ -281,7 +234,7 @@ impl Acquisition {
             }
             Event::SequenceGap { .. } => {
                 self.gap = true;
-                self.keypad.link_gap(self.clock.elapsed_us as f64 * 1e-6);
+                self.keypad.link_gap(self.clock.now());
                 None
             }
             _ => None,
@@ -1019,15 +972,5 @@ mod tests {
         assert_eq!(interp(&x, &y, -1.0), 10.0);
         assert_eq!(interp(&x, &y, 1.5), 30.0);
         assert_eq!(interp(&x, &y, 3.0), 40.0);
-    }
-
-    #[test]
-    fn clock_is_monotonic_across_wraps_and_restarts() {
-        let mut c = Clock::default();
-        assert_eq!(c.advance(u32::MAX - 999), 0.0);
-        assert!((c.advance(1000) - 0.002).abs() < 1e-9); // wrapped: +2000 µs
-        c.restart();
-        assert!((c.advance(5) - 0.002).abs() < 1e-9); // reboot adds nothing
-        assert!((c.advance(10_005) - 0.012).abs() < 1e-9);
     }
 }

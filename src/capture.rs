@@ -33,38 +33,7 @@ pub struct Rotation {
     pub keep: usize,
 }
 
-/// The session clock where a capture file starts: its sidecar `NAME.start.json` (absent for
-/// the first file of a session, which starts at zero).
-#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub struct CaptureStart {
-    /// Session time, µs.
-    pub elapsed_us: u64,
-    /// The device stamp it was reached at.
-    pub last_t_us: Option<u32>,
-    /// A device reboot was seen and its first stamp not yet.
-    #[serde(default)]
-    pub restart: bool,
-    /// The last HELLO before the file, as a frame (the device repeats it only every 5 s,
-    /// and samples cannot be read without it).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub hello: Option<Vec<u8>>,
-}
-
-impl CaptureStart {
-    /// The HELLO it carries.
-    pub fn hello(&self) -> Option<device_protocol::Hello> {
-        let frame = self.hello.as_ref()?;
-        device_protocol::Decoder::new()
-            .feed(frame)
-            .find_map(|e| match e {
-                device_protocol::Event::Packet {
-                    packet: device_protocol::Packet::Hello(h),
-                    ..
-                } => Some(h),
-                _ => None,
-            })
-    }
-}
+pub use crate::clock::CaptureStart;
 
 /// The sidecar of capture file `path` (`capture.bin` → `capture.start.json`).
 pub fn start_path(path: &Path) -> PathBuf {
@@ -84,7 +53,7 @@ pub fn read_start(path: &Path) -> io::Result<CaptureStart> {
 #[derive(Debug, Default)]
 struct ClockTracker {
     decoder: device_protocol::Decoder,
-    clock: crate::acquisition::Clock,
+    clock: crate::clock::Clock,
     hello: Option<Vec<u8>>,
 }
 
@@ -153,7 +122,7 @@ impl CaptureWriter {
         let mut w = Self::open_append(path)?;
         let start = read_start(path)?;
         let mut tracker = ClockTracker {
-            clock: crate::acquisition::Clock::at(&start),
+            clock: crate::clock::Clock::at(&start),
             hello: start.hello,
             ..Default::default()
         };

@@ -91,6 +91,8 @@
 //! ```
 
 use crate::acquisition::AcquisitionConfig;
+use crate::monitor::alarm::AlarmMetric;
+use crate::monitor::settings::{AlarmSpec, MonitorConfig};
 use crate::sensor::{AxisMap, CalibrationSpec};
 use crate::source::{Pace, SerialSpec, SourceSpec};
 use nalgebra::{Matrix3, Rotation3, Vector3};
@@ -175,21 +177,6 @@ pub struct AlarmToml {
     pub hysteresis: Option<f64>,
 }
 
-/// An alarm of the resolved `[monitor]` section.
-#[derive(Debug, Clone, PartialEq)]
-pub struct AlarmSpec {
-    pub metric: String,
-    pub threshold: f64,
-    pub hysteresis: f64,
-}
-
-/// The metrics an alarm can watch.
-pub const ALARM_METRICS: [&str; 3] = [
-    "max_displacement",
-    "mean_displacement",
-    "max_curvature_change",
-];
-
 /// `[[monitor.curve]]`: its index is its place in the list.
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -197,42 +184,6 @@ pub struct MonitorCurveToml {
     pub nodes: Vec<u32>,
     pub node_s: Vec<f64>,
     pub length: f64,
-}
-
-/// The resolved `[monitor]` section.
-#[derive(Debug, Clone, PartialEq)]
-pub struct MonitorConfig {
-    pub layout: crate::monitor::layout::Layout,
-    /// Epochs per second. Default 5.
-    pub epoch_hz: f64,
-    /// The node at the origin; default the first curve's first node.
-    pub anchor: u32,
-    /// The reference frame's x axis: its azimuth, degrees clockwise from magnetic north
-    /// (default 90: x east, y magnetic north, z up, the sensors' own world frame). Shapes,
-    /// `latest.glb` and reference files are in this frame.
-    pub x_azimuth_deg: f64,
-    /// Seconds at the start whose mean shape is the reference. Default 10.
-    pub reference_s: f64,
-    /// A fixed reference instead (`reference_file`), sampled as the epochs are.
-    pub reference: Option<crate::monitor::metrics::Shape>,
-    /// Time constant of the smoothing of each sensor's orientation across epochs, s
-    /// (0: none, the default).
-    pub smoothing_s: f64,
-    /// `latest.glb` is replaced every this many epochs. Default 5.
-    pub latest_every: usize,
-    /// The surface of the shape in `latest.glb` (`None`: the network only, the default).
-    pub surface: Option<sfs_geometry::surface::fit::SurfaceParams>,
-    /// The regression over the network in each epoch (`None`: the frames interpolated
-    /// between the sensors as they are, the default: on the simulator's riser and panel it
-    /// changed the sensors' positions by less than 0.1 mm, at 6 ms an epoch for 200 sensors).
-    pub regression: Option<sfs_geometry::network::regression::RegressionParams>,
-    /// `metrics.csv` is rotated past this size (default 64 MB), keeping `metrics_keep` old
-    /// files (default 4).
-    pub metrics_max_bytes: u64,
-    pub metrics_keep: usize,
-    pub alarms: Vec<AlarmSpec>,
-    /// Where the Prometheus endpoint listens (`None`: off).
-    pub http: Option<std::net::SocketAddr>,
 }
 
 /// `[output]`, as written (see the module documentation).
@@ -560,12 +511,16 @@ impl Config {
         let mut alarms = Vec::new();
         for (k, a) in m.alarm.iter().enumerate() {
             let key = |f: &str| format!("monitor.alarm[{k}].{f}");
-            if !ALARM_METRICS.contains(&a.metric.as_str()) {
+            let Some(metric) = AlarmMetric::from_name(&a.metric) else {
                 return Err(err(
                     key("metric"),
-                    format!("{:?} is not one of {ALARM_METRICS:?}", a.metric),
+                    format!(
+                        "{:?} is not one of {:?}",
+                        a.metric,
+                        AlarmMetric::ALL.map(AlarmMetric::name)
+                    ),
                 ));
-            }
+            };
             if !(a.threshold.is_finite() && a.threshold > 0.0) {
                 return Err(err(
                     key("threshold"),
@@ -580,7 +535,7 @@ impl Config {
                 ));
             }
             alarms.push(AlarmSpec {
-                metric: a.metric.clone(),
+                metric,
                 threshold: a.threshold,
                 hysteresis: h,
             });
@@ -740,7 +695,7 @@ impl Config {
             }
             p.reweight = r;
         }
-        p.soft = crate::session::SCAN_SOFTNESS;
+        p.soft = crate::pipeline::SCAN_SOFTNESS;
         if let Some(w) = s.soft {
             if !(w.is_finite() && (0.0..=1e6).contains(&w)) {
                 return Err(ConfigError {

@@ -19,11 +19,9 @@
 //! files out whatever the timing was.
 
 use crate::link::LinkStats;
+use crate::pipeline::{Pipeline, Products, REPORT_FILE};
+use crate::report::{LiveReport, Percentiles};
 use crate::scan::{Counts, Curve, Scan};
-use crate::session::{self, Options};
-use serde::Serialize;
-use sfs_geometry::network::Reconstructor;
-use sfs_geometry::surface::fit::Surfacer;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Condvar, Mutex};
@@ -38,95 +36,13 @@ pub struct Snapshot {
     pub warnings: Vec<String>,
 }
 
-/// What the live updates measured, for `report.json` and `BENCHMARKS.md`.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
-pub struct LiveReport {
-    /// Reconstructions run (each wrote `network.glb`).
-    pub updates: usize,
-    /// Curves that ended (or changed) and were sent to the worker.
-    pub curves_posted: usize,
-    /// Curves merged into an update that was already pending (coalesced).
-    pub coalesced: usize,
-    /// From the E key packet (the pipeline seeing the curve end) to the `network.glb` that
-    /// contains the curve in place, ms.
-    pub latency_ms: Percentiles,
-    /// Reconstruction (network and surface) time per update, ms.
-    pub update_ms: Percentiles,
-    /// Resident memory after the last update, and its peak, MB (Linux `/proc/self/status`).
-    pub rss_mb: Option<f64>,
-    pub peak_rss_mb: Option<f64>,
-    /// Every latency, ms (summarised in `latency_ms`).
-    #[serde(skip)]
-    pub latencies: Vec<f64>,
-}
-
 /// What the worker leaves when it is closed.
 #[derive(Debug, Default)]
 pub struct LiveOutcome {
     pub report: LiveReport,
     /// The last reconstruction (its `network.glb` is in place), of `curves` curves.
-    pub products: Option<session::Products>,
+    pub products: Option<Products>,
     pub curves: usize,
-}
-
-/// A distribution summarised.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
-pub struct Percentiles {
-    pub n: usize,
-    pub p50: f64,
-    pub p95: f64,
-    pub max: f64,
-}
-
-impl Percentiles {
-    /// Nearest-rank percentiles of `v`.
-    pub fn of(v: &[f64]) -> Self {
-        if v.is_empty() {
-            return Percentiles::default();
-        }
-        let mut s = v.to_vec();
-        s.sort_by(f64::total_cmp);
-        let rank = |p: f64| s[((p * s.len() as f64).ceil() as usize).clamp(1, s.len()) - 1];
-        Percentiles {
-            n: s.len(),
-            p50: rank(0.5),
-            p95: rank(0.95),
-            max: *s.last().expect("not empty"),
-        }
-    }
-}
-
-/// Returns memory the allocator holds but no longer uses to the operating system (glibc keeps
-/// freed blocks in per-thread arenas; after a reconstruction of an hour-long scan that is
-/// ~40 MB that a long-running daemon would otherwise keep). A no-op elsewhere.
-pub fn release_free_memory() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    {
-        extern "C" {
-            fn malloc_trim(pad: usize) -> i32;
-        }
-        // SAFETY: glibc's malloc_trim only releases free pages of its own arenas; it takes no
-        // pointers and is safe to call at any time from any thread.
-        unsafe {
-            malloc_trim(0);
-        }
-    }
-}
-
-/// Resident and peak resident memory of this process, MB (`None` off Linux).
-pub fn rss_mb() -> (Option<f64>, Option<f64>) {
-    let Ok(status) = std::fs::read_to_string("/proc/self/status") else {
-        return (None, None);
-    };
-    let field = |name: &str| {
-        status
-            .lines()
-            .find(|l| l.starts_with(name))
-            .and_then(|l| l.split_whitespace().nth(1))
-            .and_then(|kb| kb.parse::<f64>().ok())
-            .map(|kb| kb / 1024.0)
-    };
-    (field("VmRSS:"), field("VmHWM:"))
 }
 
 #[derive(Default)]
@@ -156,7 +72,11 @@ pub struct Live {
 #[derive(Debug, Clone)]
 pub struct LiveSettings {
     pub out_dir: PathBuf,
-    pub options: Options,
+    pub network: sfs_geometry::network::NetworkParams,
+    /// Surfacing settings; `None`: the network only.
+    pub surface: Option<sfs_geometry::surface::fit::SurfaceParams>,
+    /// Keep a copy of `network.glb` per curve (`snapshots/curve-NNN.glb`).
+    pub snapshots: bool,
     pub source: String,
     pub started: Instant,
 }
@@ -221,8 +141,7 @@ fn lock(m: &Mutex<Mail>) -> std::sync::MutexGuard<'_, Mail> {
 
 fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
     let mut scan = Scan::default();
-    let mut rec = Reconstructor::new();
-    let mut surfacer = Surfacer::new();
+    let mut pipeline = Pipeline::new();
     let mut update_ms = Vec::new();
     let mut report = LiveReport::default();
     let mut last = None;
@@ -248,7 +167,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
             }
         }
         let t0 = Instant::now();
-        let products = session::reconstruct(&scan, &settings.options, &mut rec, &mut surfacer);
+        let products = pipeline.run(&scan.curves, &settings.network, settings.surface.as_ref());
         let compute_ms = t0.elapsed().as_secs_f64() * 1e3;
         if let Err(e) = products.write_glb(&settings.out_dir) {
             tracing::error!("live update: {e}");
@@ -265,44 +184,29 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
         report.latencies.extend(lat.iter().map(|l| l.1));
         report.latency_ms = Percentiles::of(&report.latencies);
         report.update_ms = Percentiles::of(&update_ms);
-        release_free_memory();
-        (report.rss_mb, report.peak_rss_mb) = rss_mb();
-        if settings.options.snapshots {
+        crate::memory::release_free_memory();
+        (report.rss_mb, report.peak_rss_mb) = crate::memory::rss_mb();
+        if settings.snapshots {
             for (i, _) in &lat {
                 if let Err(e) = products.write_snapshot(&settings.out_dir, *i) {
                     tracing::warn!("snapshot of curve {i}: {e}");
                 }
             }
         }
-        let live_report = crate::report::Report {
-            sfs_version: env!("CARGO_PKG_VERSION"),
-            source: settings.source.clone(),
-            ended: "running",
-            wall_time_s: settings.started.elapsed().as_secs_f64(),
-            link: snapshot.link.clone(),
-            curves: scan
-                .curves
-                .iter()
-                .map(crate::report::CurveSummary::from)
-                .collect(),
-            acquisition: snapshot.counts.clone(),
-            warnings: snapshot
-                .warnings
-                .iter()
-                .chain(&products.warnings)
-                .cloned()
-                .collect(),
-            nodes: products.nodes.clone(),
-            timings_ms: products
-                .network
-                .as_ref()
-                .map(|n| n.report.timings_ms.clone()),
-            network: products.network.as_ref().map(|n| n.report.clone()),
-            surface: products.surface.clone(),
-            live: Some(report.clone()),
-            monitor: None,
-        };
-        let path = settings.out_dir.join(session::REPORT_FILE);
+        let mut live_report = crate::report::Report::assemble(
+            crate::report::Progress {
+                source: &settings.source,
+                ended: "running",
+                started: settings.started,
+                link: &snapshot.link,
+                curves: &scan.curves,
+                counts: &snapshot.counts,
+                warnings: &snapshot.warnings,
+            },
+            &products,
+        );
+        live_report.live = Some(report.clone());
+        let path = settings.out_dir.join(REPORT_FILE);
         if let Err(e) = live_report.write(&path) {
             tracing::error!("live update: cannot write {}: {e}", path.display());
         }
@@ -319,7 +223,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
 }
 
 /// One line per curve the update brought in.
-fn status_lines(scan: &Scan, p: &session::Products, lat: &[(usize, f64)], compute_ms: f64) {
+fn status_lines(scan: &Scan, p: &Products, lat: &[(usize, f64)], compute_ms: f64) {
     let (net_curves, samples, max_angle) = p.network.as_ref().map_or((0, 0, 0.0), |n| {
         (
             n.report.curves_used,

@@ -476,7 +476,7 @@ fn run_session(
                 match e {
                     SessionError::Source(SourceError::Thread(_)) => exit::INTERNAL,
                     SessionError::Source(_) => exit::INPUT,
-                    SessionError::Output { .. } | SessionError::Metrics { .. } => exit::OUTPUT,
+                    SessionError::Output(_) | SessionError::Metrics { .. } => exit::OUTPUT,
                     SessionError::CaptureExists { .. } | SessionError::Resume(_) => exit::USAGE,
                 }
             }

@@ -33,7 +33,7 @@ pub struct Report {
     /// What the surfacer did (patches, holes, problems naming nodes and curves).
     pub surface: Option<sfs_geometry::surface::fit::SurfaceReport>,
     /// What the live updates measured (latency from the E key to `network.glb`, memory).
-    pub live: Option<crate::live::LiveReport>,
+    pub live: Option<LiveReport>,
     /// What monitoring did (epochs, alarms, the last metrics).
     pub monitor: Option<crate::monitor::run::MonitorReport>,
 }
@@ -61,7 +61,100 @@ impl From<&Curve> for CurveSummary {
     }
 }
 
+/// What the live updates measured, for `report.json` and `BENCHMARKS.md`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct LiveReport {
+    /// Reconstructions run (each wrote `network.glb`).
+    pub updates: usize,
+    /// Curves that ended (or changed) and were sent to the worker.
+    pub curves_posted: usize,
+    /// Curves merged into an update that was already pending (coalesced).
+    pub coalesced: usize,
+    /// From the E key packet (the pipeline seeing the curve end) to the `network.glb` that
+    /// contains the curve in place, ms.
+    pub latency_ms: Percentiles,
+    /// Reconstruction (network and surface) time per update, ms.
+    pub update_ms: Percentiles,
+    /// Resident memory after the last update, and its peak, MB (Linux `/proc/self/status`).
+    pub rss_mb: Option<f64>,
+    pub peak_rss_mb: Option<f64>,
+    /// Every latency, ms (summarised in `latency_ms`).
+    #[serde(skip)]
+    pub latencies: Vec<f64>,
+}
+
+/// A distribution summarised.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Percentiles {
+    pub n: usize,
+    pub p50: f64,
+    pub p95: f64,
+    pub max: f64,
+}
+
+impl Percentiles {
+    /// Nearest-rank percentiles of `v`.
+    pub fn of(v: &[f64]) -> Self {
+        if v.is_empty() {
+            return Percentiles::default();
+        }
+        let mut s = v.to_vec();
+        s.sort_by(f64::total_cmp);
+        let rank = |p: f64| s[((p * s.len() as f64).ceil() as usize).clamp(1, s.len()) - 1];
+        Percentiles {
+            n: s.len(),
+            p50: rank(0.5),
+            p95: rank(0.95),
+            max: *s.last().expect("not empty"),
+        }
+    }
+}
+
+/// A session's state at the time of a report, besides the pipeline's products.
+#[derive(Debug, Clone, Copy)]
+pub struct Progress<'a> {
+    /// The source, as described to the operator.
+    pub source: &'a str,
+    /// `"running"` for a live update, else why the session ended
+    /// ([`crate::source::EndReason::name`]).
+    pub ended: &'static str,
+    pub started: std::time::Instant,
+    pub link: &'a LinkStats,
+    /// The accepted curves so far.
+    pub curves: &'a [Curve],
+    pub counts: &'a Counts,
+    /// Acquisition's warnings so far (the products' follow them).
+    pub warnings: &'a [String],
+}
+
 impl Report {
+    /// The report of a session's state and the products of its last reconstruction (without
+    /// the live and monitoring sections, which their owners add).
+    pub fn assemble(p: Progress<'_>, products: &crate::pipeline::Products) -> Report {
+        let network = products.network.as_ref().map(|n| &n.report);
+        Report {
+            sfs_version: env!("CARGO_PKG_VERSION"),
+            source: p.source.to_owned(),
+            ended: p.ended,
+            wall_time_s: p.started.elapsed().as_secs_f64(),
+            link: p.link.clone(),
+            curves: p.curves.iter().map(CurveSummary::from).collect(),
+            acquisition: p.counts.clone(),
+            warnings: p
+                .warnings
+                .iter()
+                .chain(&products.warnings)
+                .cloned()
+                .collect(),
+            nodes: products.nodes.clone(),
+            timings_ms: network.map(|n| n.timings_ms.clone()),
+            network: network.cloned(),
+            surface: products.surface.clone(),
+            live: None,
+            monitor: None,
+        }
+    }
+
     /// Writes the report as pretty JSON, atomically.
     pub fn write(&self, path: &Path) -> std::io::Result<()> {
         crate::atomic::write_json(path, self, true)

@@ -4,9 +4,11 @@
 //! Later stages (acquisition, reconstruction) hang off the decoder's packets here.
 
 use crate::acquisition::{Acquisition, AcquisitionConfig, Update};
+use crate::atomic::OutputError;
 use crate::capture::CaptureWriter;
 use crate::link::LinkStats;
-use crate::report::{CurveSummary, Report};
+use crate::pipeline::{Pipeline, REPORT_FILE, SCAN_FILE};
+use crate::report::{Progress, Report};
 use crate::shutdown::Shutdown;
 use crate::source::{self, EndReason, SourceError, SourceEvent, SourceSpec};
 use device_protocol::Decoder;
@@ -15,13 +17,6 @@ use std::time::{Duration, Instant};
 
 /// Name of the lossless capture in a session directory.
 pub const CAPTURE_FILE: &str = "capture.bin";
-/// Name of the report in a session (or replay output) directory.
-pub const REPORT_FILE: &str = "report.json";
-/// Name of the acquired scan (curves of raw samples and tags).
-pub const SCAN_FILE: &str = "scan.json";
-/// Name of the reconstructed network (glTF binary).
-pub const NETWORK_FILE: &str = "network.glb";
-
 /// What a session does with the packets (everything but the source).
 #[derive(Debug, Clone)]
 pub struct Options {
@@ -34,17 +29,10 @@ pub struct Options {
     /// Keep a copy of `network.glb` per curve (`snapshots/curve-NNN.glb`), live updates only.
     pub snapshots: bool,
     /// Monitoring of an instrumented structure ([`crate::monitor::run`]).
-    pub monitor: Option<crate::config::MonitorConfig>,
+    pub monitor: Option<crate::monitor::settings::MonitorConfig>,
     /// Rotation of a live session's capture ([`crate::capture::Rotation`]); `None`: one file.
     pub capture_rotation: Option<crate::capture::Rotation>,
 }
-
-/// The soft-constraint weight ω of the surface fit for scans (measured data). On a noisy
-/// sphere network (2 cm noise on a unit sphere) it takes the surface's mean distance from
-/// 0.0109 (hard) to about 0.004; on simulated scans, whose curve errors are smooth drifts
-/// rather than noise, it costs little (lilium 0.065 % hard, 0.067 %; weaker weights cost
-/// more there: 0.077 % at 0.01). BENCHMARKS.md, "Soft constraints".
-pub const SCAN_SOFTNESS: Option<f64> = Some(0.3);
 
 impl Default for Options {
     /// Documented defaults; the surface is made, with soft constraints ([`SCAN_SOFTNESS`]).
@@ -53,7 +41,7 @@ impl Default for Options {
             acquisition: AcquisitionConfig::default(),
             network: sfs_geometry::network::NetworkParams::default(),
             surface: Some(sfs_geometry::surface::fit::SurfaceParams {
-                soft: SCAN_SOFTNESS,
+                soft: crate::pipeline::SCAN_SOFTNESS,
                 ..Default::default()
             }),
             live: true,
@@ -62,102 +50,6 @@ impl Default for Options {
             capture_rotation: None,
         }
     }
-}
-
-/// Name of the folder of per-curve snapshots in a session directory.
-pub const SNAPSHOT_DIR: &str = "snapshots";
-
-/// What one reconstruction of a scan produced (network, surface, the glb bytes), before it is
-/// written: shared by the live updates and the session's final outputs.
-#[derive(Debug, Default)]
-pub struct Products {
-    pub network: Option<sfs_geometry::network::Network>,
-    pub surface: Option<sfs_geometry::surface::fit::SurfaceReport>,
-    /// Node positions in the glb's frame (y up), by node index.
-    pub nodes: std::collections::BTreeMap<String, [f32; 3]>,
-    /// The reconstruction's and the surfacer's warnings (naming curves and nodes).
-    pub warnings: Vec<String>,
-    /// `network.glb`, when there is a network and it could be encoded.
-    pub glb: Option<Vec<u8>>,
-    pub network_ms: f64,
-    pub surface_ms: f64,
-}
-
-impl Products {
-    /// Replaces `dir/network.glb` atomically (nothing when there is no network).
-    pub fn write_glb(&self, dir: &Path) -> Result<(), SessionError> {
-        match &self.glb {
-            Some(bytes) => {
-                let path = dir.join(NETWORK_FILE);
-                crate::atomic::write_atomic(&path, bytes)
-                    .map_err(|source| SessionError::Output { path, source })
-            }
-            None => Ok(()),
-        }
-    }
-
-    /// Writes `dir/snapshots/curve-NNN.glb`.
-    pub fn write_snapshot(&self, dir: &Path, curve: usize) -> Result<(), SessionError> {
-        let Some(bytes) = &self.glb else {
-            return Ok(());
-        };
-        let folder = dir.join(SNAPSHOT_DIR);
-        let path = folder.join(format!("curve-{curve:03}.glb"));
-        std::fs::create_dir_all(&folder)
-            .and_then(|_| crate::atomic::write_atomic(&path, bytes))
-            .map_err(|source| SessionError::Output { path, source })
-    }
-}
-
-/// Reconstructs the network of `scan` (and its surface, if `options` ask for it) with the
-/// caches in `rec` and `surfacer` (which change the time it takes, not the result).
-pub fn reconstruct(
-    scan: &crate::scan::Scan,
-    options: &Options,
-    rec: &mut sfs_geometry::network::Reconstructor,
-    surfacer: &mut sfs_geometry::surface::fit::Surfacer,
-) -> Products {
-    let t0 = Instant::now();
-    let network = rec.run(&scan.curves, &options.network);
-    let mut out = Products {
-        network_ms: t0.elapsed().as_secs_f64() * 1e3,
-        ..Default::default()
-    };
-    let Some(net) = network else {
-        return out;
-    };
-    out.warnings.extend(net.warnings.iter().cloned());
-    let surfaced = options.surface.as_ref().and_then(|sp| {
-        let t1 = Instant::now();
-        let segs = sfs_geometry::surface::cycles::NetworkSegments::from_positions(&net.positions);
-        let result = surfacer.run(&segs, sp);
-        out.surface_ms = t1.elapsed().as_secs_f64() * 1e3;
-        match result {
-            Ok(s) => {
-                out.warnings
-                    .extend(s.problems.iter().map(|p| format!("surface: {p}")));
-                out.surface = Some(s.report(out.surface_ms));
-                Some(s)
-            }
-            Err(e) => {
-                tracing::warn!("no surface: {e}");
-                out.warnings.push(format!("no surface: {e}"));
-                None
-            }
-        }
-    });
-    match network_glb(&net, surfaced.as_ref()) {
-        Ok(bytes) => out.glb = Some(bytes),
-        Err(e) => {
-            tracing::error!("network.glb not written: {e}");
-            out.warnings.push(format!("network.glb not written: {e}"));
-        }
-    }
-    for (k, p) in &net.positions.nodes {
-        out.nodes.insert(k.to_string(), crate::gltf_out::to_gltf(p));
-    }
-    out.network = Some(net);
-    out
 }
 
 /// How often a running session logs its link statistics (when they changed).
@@ -221,16 +113,12 @@ pub enum SessionError {
         #[source]
         source: std::io::Error,
     },
+    /// The output directory or a file in it cannot be written.
+    #[error(transparent)]
+    Output(#[from] OutputError),
     /// The input (capture file, serial port, stdin) is unavailable.
     #[error(transparent)]
     Source(#[from] SourceError),
-    /// The output directory or a file in it cannot be written.
-    #[error("cannot write {}: {source}", path.display())]
-    Output {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
 }
 
 /// What a finished session reports.
@@ -251,10 +139,7 @@ pub async fn run(
     start: Start,
     shutdown: Shutdown,
 ) -> Result<Outcome, SessionError> {
-    let output_err = |path: &Path| {
-        let path = path.to_owned();
-        move |source| SessionError::Output { path, source }
-    };
+    let output_err = OutputError::at;
     std::fs::create_dir_all(out_dir).map_err(output_err(out_dir))?;
     match crate::atomic::remove_stale(out_dir) {
         Ok(0) => {}
@@ -282,12 +167,7 @@ pub async fn run(
                     out_dir.display()
                 )))
             }
-            Err(source) => {
-                return Err(SessionError::Output {
-                    path: p.clone(),
-                    source,
-                })
-            }
+            Err(source) => return Err(output_err(p)(source).into()),
         },
         (None, Start::Resume) => {
             return Err(SessionError::Resume(
@@ -308,12 +188,8 @@ pub async fn run(
     // Where the session clock starts: a replayed piece of a rotated capture continues the
     // time of the files before it (its sidecar).
     let replay_start = match &spec {
-        SourceSpec::Replay { path, .. } => {
-            crate::capture::read_start(path).map_err(|source| SessionError::Output {
-                path: crate::capture::start_path(path),
-                source,
-            })?
-        }
+        SourceSpec::Replay { path, .. } => crate::capture::read_start(path)
+            .map_err(output_err(&crate::capture::start_path(path)))?,
         _ => Default::default(),
     };
     let description = spec.describe();
@@ -367,7 +243,9 @@ pub async fn run(
         Some(
             crate::live::Live::spawn(crate::live::LiveSettings {
                 out_dir: out_dir.to_owned(),
-                options: options.clone(),
+                network: options.network,
+                surface: options.surface,
+                snapshots: options.snapshots,
                 source: description.clone(),
                 started,
             })
@@ -482,7 +360,7 @@ pub async fn run(
         m.report
     });
     let live = live.map(|l| l.finish());
-    let mut scan = acq.finish();
+    let scan = acq.finish();
     let scan_path = out_dir.join(SCAN_FILE);
     crate::atomic::write_json(&scan_path, &scan, false).map_err(output_err(&scan_path))?;
     let (products, mut live_report) = match live {
@@ -492,76 +370,46 @@ pub async fn run(
             curves,
         }) if curves == scan.curves.len() => (p, Some(report)),
         other => (
-            reconstruct(
-                &scan,
-                options,
-                &mut sfs_geometry::network::Reconstructor::new(),
-                &mut sfs_geometry::surface::fit::Surfacer::new(),
-            ),
+            Pipeline::new().run(&scan.curves, &options.network, options.surface.as_ref()),
             other.map(|o| o.report),
         ),
     };
-    scan.warnings.extend(products.warnings.iter().cloned());
     products.write_glb(out_dir)?;
     if let Some(l) = &mut live_report {
-        crate::live::release_free_memory();
-        (l.rss_mb, l.peak_rss_mb) = crate::live::rss_mb();
+        crate::memory::release_free_memory();
+        (l.rss_mb, l.peak_rss_mb) = crate::memory::rss_mb();
     }
-    let Products {
-        network,
-        surface: surface_report,
-        nodes,
-        ..
-    } = products;
-    let report = Report {
-        sfs_version: env!("CARGO_PKG_VERSION"),
-        source: description,
-        ended: match end {
-            EndReason::EndOfInput => "end_of_input",
-            EndReason::Shutdown => "shutdown",
-            EndReason::CaptureFailed => "capture_failed",
-            EndReason::ReadError => "read_error",
+    let mut report = Report::assemble(
+        Progress {
+            source: &description,
+            ended: end.name(),
+            started,
+            link: &stats,
+            curves: &scan.curves,
+            counts: &scan.counts,
+            warnings: &scan.warnings,
         },
-        wall_time_s: started.elapsed().as_secs_f64(),
-        link: stats,
-        curves: scan.curves.iter().map(CurveSummary::from).collect(),
-        acquisition: scan.counts.clone(),
-        warnings: scan.warnings.clone(),
-        nodes,
-        timings_ms: network.as_ref().map(|n| n.report.timings_ms.clone()),
-        network: network.map(|n| n.report),
-        surface: surface_report,
-        live: live_report,
-        monitor: monitor_report,
-    };
+        &products,
+    );
+    report.live = live_report;
+    report.monitor = monitor_report;
     let report_path = out_dir.join(REPORT_FILE);
     report
         .write(&report_path)
         .map_err(output_err(&report_path))?;
     if end == EndReason::CaptureFailed {
-        return Err(SessionError::Output {
-            path: capture_path.clone().unwrap_or_default(),
-            source: std::io::Error::other("appending to the capture failed"),
-        });
+        return Err(
+            output_err(&capture_path.clone().unwrap_or_default())(std::io::Error::other(
+                "appending to the capture failed",
+            ))
+            .into(),
+        );
     }
     Ok(Outcome {
         report,
         report_path,
         capture_path,
     })
-}
-
-/// The glb of a reconstruction.
-fn network_glb(
-    net: &sfs_geometry::network::Network,
-    surface: Option<&sfs_geometry::surface::fit::Surfaced>,
-) -> Result<Vec<u8>, crate::gltf_out::GltfError> {
-    let mesh = surface.map(|s| s.mesh());
-    crate::gltf_out::network_glb(
-        &crate::gltf_out::network_curves(&net.positions),
-        &net.positions.nodes,
-        mesh.as_ref(),
-    )
 }
 
 /// Hands acquisition's sensor-array epochs to the monitor (if any), and closes the epochs

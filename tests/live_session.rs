@@ -186,7 +186,9 @@ fn curves_that_end_during_a_reconstruction_coalesce() {
     );
     let mut live = sfs::live::Live::spawn(sfs::live::LiveSettings {
         out_dir: dir.clone(),
-        options: sfs::session::Options::default(),
+        network: Default::default(),
+        surface: sfs::session::Options::default().surface,
+        snapshots: false,
         source: "test".into(),
         started: Instant::now(),
     })

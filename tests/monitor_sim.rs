@@ -124,7 +124,7 @@ fn truth_top(truth: &sfs::simulate::structure::StructureTruth, t: f64) -> Vector
 /// alarm on it fires when, and only when, the truth crosses the threshold.
 #[test]
 fn displacement_follows_the_truth_and_the_alarm_fires_when_and_only_when_crossed() {
-    use sfs::monitor::alarm::{Alarm, Transition};
+    use sfs::monitor::alarm::{Alarm, AlarmMetric, Transition};
     use sfs::monitor::metrics::{compare, ReferenceBuilder, Shape};
     let (bytes, truth) = run(StructureKind::Riser, 1, 120.0, 10.0);
     let layout = Layout {
@@ -136,7 +136,7 @@ fn displacement_follows_the_truth_and_the_alarm_fires_when_and_only_when_crossed
     let mut reference = ReferenceBuilder::new();
     let mut t_ref = None;
     let (threshold, hysteresis, tol) = (1.5, 0.2, 0.2);
-    let mut alarm = Alarm::new("max_displacement", threshold, hysteresis);
+    let mut alarm = Alarm::new(AlarmMetric::MaxDisplacement, threshold, hysteresis);
     let (mut raised, mut episodes, mut below) = (0, 0, true);
     let mut worst = 0.0f64;
     for (t, q) in epochs(&scan) {
@@ -374,7 +374,7 @@ fn metrics_are_served_for_a_scraper_while_the_session_runs() {
 fn smoothing_across_epochs_lowers_the_jitter() {
     use sfs::monitor::run::Monitor;
     let (bytes, truth) = run(StructureKind::Riser, 3, 60.0, 10.0);
-    let cfg = |smoothing_s: f64| sfs::config::MonitorConfig {
+    let cfg = |smoothing_s: f64| sfs::monitor::settings::MonitorConfig {
         layout: Layout {
             sensors: truth.sensors.clone(),
             curves: truth.curves.clone(),
@@ -575,7 +575,7 @@ fn monitoring_survives_dropouts_an_unplug_and_a_device_reboot() {
     let epoch_hz = 5.0;
     let mut options = sfs::session::Options::default();
     options.acquisition.array_window = 1.0 / epoch_hz;
-    options.monitor = Some(sfs::config::MonitorConfig {
+    options.monitor = Some(sfs::monitor::settings::MonitorConfig {
         layout: Layout {
             sensors: truth_a.sensors.clone(),
             curves: truth_a.curves.clone(),
@@ -676,7 +676,7 @@ fn layout_config(
     dir: &std::path::Path,
     keys: &str,
     truth: &sfs::simulate::structure::StructureTruth,
-) -> sfs::config::MonitorConfig {
+) -> sfs::monitor::settings::MonitorConfig {
     let text = config_text(&format!("epoch_hz = 5.0\n{keys}\n"), truth);
     let file = dir.join("monitor.toml");
     std::fs::write(&file, &text).unwrap();
@@ -708,7 +708,7 @@ const VERTICAL: &str = r#"{"format": "sfs-monitor-reference", "version": 1, "anc
 
 /// Runs a monitor over `scan` in `dir`; its metrics lines (without the header).
 fn monitor_lines(
-    cfg: sfs::config::MonitorConfig,
+    cfg: sfs::monitor::settings::MonitorConfig,
     dir: &std::path::Path,
     scan: &sfs::scan::Scan,
 ) -> (Vec<String>, sfs::monitor::run::MonitorReport) {

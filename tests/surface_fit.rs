@@ -193,7 +193,7 @@ fn soft_constraints_beat_hard_ones_on_noisy_input() {
     };
     let hard = surface(&net, &p).unwrap();
     let mut line = format!("hard {:.5}", mean_distance(&hard));
-    let sessions = sfs::session::SCAN_SOFTNESS.expect("sessions use soft constraints");
+    let sessions = sfs::pipeline::SCAN_SOFTNESS.expect("sessions use soft constraints");
     let mut at_default = f64::MAX;
     for w in [0.01, 0.1, sessions, 1.0] {
         let soft = surface(&net, &SurfaceParams { soft: Some(w), ..p }).unwrap();

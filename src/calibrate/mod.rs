@@ -41,7 +41,7 @@ pub fn recording(bytes: &[u8], sensor: u16) -> Option<Recording> {
     let mut dec = Decoder::new();
     let mut rec = Recording::default();
     let mut scales: Option<(f64, f64, f64)> = None;
-    let mut clock = crate::acquisition::Clock::default();
+    let mut clock = crate::clock::Clock::default();
     let v = |r: [i16; 3], s: f64| Vector3::new(r[0] as f64, r[1] as f64, r[2] as f64) * s;
     for ev in dec.feed(bytes) {
         match ev {

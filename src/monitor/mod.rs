@@ -2,6 +2,7 @@
 //! (a riser, a sail, a panel) stream continuously; the shape is reconstructed epoch by epoch
 //! with the scanning engine (frames on SO(3), Poisson network).
 //!
+//! - [`settings`]: the resolved `[monitor]` section.
 //! - [`layout`]: where the sensors are (curve, rest arc length) and where the curves cross.
 //! - [`epoch`]: one epoch's orientations → the shape.
 //! - [`metrics`]: displacement and curvature change from a reference shape.
@@ -15,3 +16,4 @@ pub mod http;
 pub mod layout;
 pub mod metrics;
 pub mod run;
+pub mod settings;

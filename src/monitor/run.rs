@@ -18,8 +18,8 @@
 use super::alarm::{Alarm, Transition};
 use super::epoch::{EpochParams, EpochReconstructor};
 use super::metrics::{compare, Metrics, ReferenceBuilder, Shape};
+use super::settings::MonitorConfig;
 use crate::atomic::remove_if_present;
-use crate::config::MonitorConfig;
 use crate::orientation::flags;
 use crate::scan::ArrayEpoch;
 use nalgebra::{Quaternion, UnitQuaternion};
@@ -192,7 +192,7 @@ impl Monitor {
         let alarms = cfg
             .alarms
             .iter()
-            .map(|a| Alarm::new(a.metric.clone(), a.threshold, a.hysteresis))
+            .map(|a| Alarm::new(a.metric, a.threshold, a.hysteresis))
             .collect();
         let reference_epochs = ((cfg.reference_s * cfg.epoch_hz).round() as usize).max(1);
         let mut m = Monitor {
@@ -417,8 +417,8 @@ impl Monitor {
                 "monitor: no epoch: the stream held no sensor-array samples (monitoring needs a device of kind 3, see report.json \"link\" → \"hello\")"
             );
         }
-        crate::live::release_free_memory();
-        self.report.rss_mb = crate::live::rss_mb().0;
+        crate::memory::release_free_memory();
+        self.report.rss_mb = crate::memory::rss_mb().0;
         if let Some(f) = &mut self.csv {
             let _ = f.sync_data();
         }
@@ -617,8 +617,8 @@ impl Monitor {
             }
         }
         if t >= 3600.0 && self.report.rss_mb_after_first_hour.is_none() {
-            crate::live::release_free_memory();
-            self.report.rss_mb_after_first_hour = crate::live::rss_mb().0;
+            crate::memory::release_free_memory();
+            self.report.rss_mb_after_first_hour = crate::memory::rss_mb().0;
         }
         // Saturated and magnetically disturbed sensors are left out like missing ones (their
         // curve is interpolated across them): a disturbed magnetometer turns the heading.
@@ -701,12 +701,7 @@ impl Monitor {
         let mut raised = Vec::new();
         let mut lines = Vec::new();
         for a in &mut self.alarms {
-            let value = match a.metric.as_str() {
-                "max_displacement" => metrics.max_displacement,
-                "mean_displacement" => metrics.mean_displacement,
-                "max_curvature_change" => metrics.max_curvature_change,
-                _ => f64::NAN,
-            };
+            let value = a.metric.of(&metrics);
             let tr = a.update(value);
             if tr == Some(Transition::Raised) {
                 self.report.alarms_raised += 1;
@@ -717,7 +712,7 @@ impl Monitor {
                     Transition::Cleared => "cleared",
                 };
                 tracing::warn!(
-                    metric = a.metric,
+                    metric = a.metric.name(),
                     value,
                     threshold = a.threshold,
                     "monitor: alarm {what} at t = {t:.2} s"
@@ -766,16 +761,14 @@ impl Monitor {
         }
         self.output(METRICS_FILE, written.map_err(|e| e.to_string()));
         if self.report.epochs % self.cfg.latest_every as u64 == 0 {
-            let mesh = self.cfg.surface.as_ref().and_then(|sp| {
-                let t0 = std::time::Instant::now();
-                let segs = sfs_geometry::surface::cycles::NetworkSegments::from_positions(
-                    &shape.positions,
-                );
-                match self.surfacer.run(&segs, sp) {
+            let surface = self.cfg.surface.as_ref().and_then(|sp| {
+                let (result, ms) =
+                    crate::pipeline::surface_of(&shape.positions, sp, &mut self.surfacer);
+                match result {
                     Ok(s) => {
                         self.report.surfaces += 1;
-                        self.report.surface_ms = Some(t0.elapsed().as_secs_f64() * 1e3);
-                        Some(s.mesh())
+                        self.report.surface_ms = Some(ms);
+                        Some(s)
                     }
                     Err(e) => {
                         self.report.surfaces_failed += 1;
@@ -784,11 +777,7 @@ impl Monitor {
                     }
                 }
             });
-            let glb = crate::gltf_out::network_glb(
-                &crate::gltf_out::network_curves(&shape.positions),
-                &shape.positions.nodes,
-                mesh.as_ref(),
-            );
+            let glb = crate::pipeline::glb(&shape.positions, surface.as_ref());
             if let Some(e) = self.surface_error.take() {
                 self.output("the surface", Err(e));
             } else if self.cfg.surface.is_some() {

@@ -112,6 +112,18 @@ pub enum EndReason {
     ReadError,
 }
 
+impl EndReason {
+    /// Its name in `report.json` (`"ended"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            EndReason::EndOfInput => "end_of_input",
+            EndReason::Shutdown => "shutdown",
+            EndReason::CaptureFailed => "capture_failed",
+            EndReason::ReadError => "read_error",
+        }
+    }
+}
+
 /// A source that could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum SourceError {

@@ -1,0 +1,163 @@
+//! The pipeline's products: one place that turns a scan's curves into the network, its
+//! surface, the `network.glb` bytes and the warnings, for the live updates and the session's
+//! final outputs alike; monitoring surfaces and encodes its shapes through the same steps.
+//!
+//! ```text
+//! curves ─▶ Reconstructor (pre-filter, closure test, regression, Poisson) ─▶ positions
+//!        ─▶ surface (segments ─▶ Surfacer) ─▶ glb (curves, nodes, surface) ─▶ Products
+//! ```
+
+use crate::atomic::OutputError;
+use crate::scan::Curve;
+use sfs_geometry::network::poisson::Positions;
+use sfs_geometry::network::{Network, NetworkParams, Reconstructor};
+use sfs_geometry::surface::cycles::NetworkSegments;
+use sfs_geometry::surface::fit::{SurfaceError, SurfaceParams, SurfaceReport, Surfaced, Surfacer};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Instant;
+
+/// Name of the report in a session (or replay output) directory.
+pub const REPORT_FILE: &str = "report.json";
+/// Name of the acquired scan (curves of raw samples and tags).
+pub const SCAN_FILE: &str = "scan.json";
+/// Name of the reconstructed network (glTF binary).
+pub const NETWORK_FILE: &str = "network.glb";
+/// Name of the folder of per-curve snapshots in a session directory.
+pub const SNAPSHOT_DIR: &str = "snapshots";
+
+/// The soft-constraint weight ω of the surface fit for scans (measured data). On a noisy
+/// sphere network (2 cm noise on a unit sphere) it takes the surface's mean distance from
+/// 0.0109 (hard) to about 0.004; on simulated scans, whose curve errors are smooth drifts
+/// rather than noise, it costs little (lilium 0.065 % hard, 0.067 %; weaker weights cost
+/// more there: 0.077 % at 0.01). BENCHMARKS.md, "Soft constraints".
+pub const SCAN_SOFTNESS: Option<f64> = Some(0.3);
+
+/// What one reconstruction of a scan produced (network, surface, the glb bytes), before it is
+/// written: shared by the live updates and the session's final outputs.
+#[derive(Debug, Default)]
+pub struct Products {
+    pub network: Option<Network>,
+    pub surface: Option<SurfaceReport>,
+    /// Node positions in the glb's frame (y up), by node index.
+    pub nodes: BTreeMap<String, [f32; 3]>,
+    /// The reconstruction's and the surfacer's warnings (naming curves and nodes).
+    pub warnings: Vec<String>,
+    /// `network.glb`, when there is a network and it could be encoded.
+    pub glb: Option<Vec<u8>>,
+    pub network_ms: f64,
+    pub surface_ms: f64,
+}
+
+impl Products {
+    /// Replaces `dir/network.glb` atomically (nothing when there is no network).
+    pub fn write_glb(&self, dir: &Path) -> Result<(), OutputError> {
+        match &self.glb {
+            Some(bytes) => {
+                let path = dir.join(NETWORK_FILE);
+                crate::atomic::write_atomic(&path, bytes).map_err(OutputError::at(&path))
+            }
+            None => Ok(()),
+        }
+    }
+
+    /// Writes `dir/snapshots/curve-NNN.glb`.
+    pub fn write_snapshot(&self, dir: &Path, curve: usize) -> Result<(), OutputError> {
+        let Some(bytes) = &self.glb else {
+            return Ok(());
+        };
+        let folder = dir.join(SNAPSHOT_DIR);
+        let path = folder.join(format!("curve-{curve:03}.glb"));
+        std::fs::create_dir_all(&folder)
+            .and_then(|_| crate::atomic::write_atomic(&path, bytes))
+            .map_err(OutputError::at(&path))
+    }
+}
+
+/// The reconstruction caches kept between runs over a growing scan: the pre-filtered curves
+/// and the symbolic factorisations (they change the time a run takes, not its result).
+#[derive(Debug, Default)]
+pub struct Pipeline {
+    reconstructor: Reconstructor,
+    surfacer: Surfacer,
+}
+
+impl Pipeline {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Reconstructs the network of `curves`, and its surface when `surface` is given.
+    pub fn run(
+        &mut self,
+        curves: &[Curve],
+        network: &NetworkParams,
+        surface: Option<&SurfaceParams>,
+    ) -> Products {
+        let t0 = Instant::now();
+        let net = self.reconstructor.run(curves, network);
+        let mut out = Products {
+            network_ms: t0.elapsed().as_secs_f64() * 1e3,
+            ..Default::default()
+        };
+        let Some(net) = net else {
+            return out;
+        };
+        out.warnings.extend(net.warnings.iter().cloned());
+        let surfaced = surface.and_then(|sp| {
+            let (result, ms) = surface_of(&net.positions, sp, &mut self.surfacer);
+            out.surface_ms = ms;
+            match result {
+                Ok(s) => {
+                    out.warnings
+                        .extend(s.problems.iter().map(|p| format!("surface: {p}")));
+                    out.surface = Some(s.report(ms));
+                    Some(s)
+                }
+                Err(e) => {
+                    tracing::warn!("no surface: {e}");
+                    out.warnings.push(format!("no surface: {e}"));
+                    None
+                }
+            }
+        });
+        match glb(&net.positions, surfaced.as_ref()) {
+            Ok(bytes) => out.glb = Some(bytes),
+            Err(e) => {
+                tracing::error!("network.glb not written: {e}");
+                out.warnings.push(format!("network.glb not written: {e}"));
+            }
+        }
+        for (k, p) in &net.positions.nodes {
+            out.nodes.insert(k.to_string(), crate::gltf_out::to_gltf(p));
+        }
+        out.network = Some(net);
+        out
+    }
+}
+
+/// The surface of a reconstructed network (its segments through the surfacer, whose caches
+/// are kept in `surfacer`), and the time it took, ms.
+pub fn surface_of(
+    positions: &Positions,
+    params: &SurfaceParams,
+    surfacer: &mut Surfacer,
+) -> (Result<Surfaced, SurfaceError>, f64) {
+    let t0 = Instant::now();
+    let segments = NetworkSegments::from_positions(positions);
+    let result = surfacer.run(&segments, params);
+    (result, t0.elapsed().as_secs_f64() * 1e3)
+}
+
+/// The glb of a network and its surface.
+pub fn glb(
+    positions: &Positions,
+    surface: Option<&Surfaced>,
+) -> Result<Vec<u8>, crate::gltf_out::GltfError> {
+    let mesh = surface.map(|s| s.mesh());
+    crate::gltf_out::network_glb(
+        &crate::gltf_out::network_curves(positions),
+        &positions.nodes,
+        mesh.as_ref(),
+    )
+}
