@@ -49,6 +49,7 @@ pub mod report;
 pub mod scan;
 pub mod sensor;
 pub mod session;
+pub mod settings;
 pub mod shutdown;
 pub mod simulate;
 pub mod source;

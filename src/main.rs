@@ -6,9 +6,10 @@ use sfs::cli::{
     CalibrateArgs, Cli, Command, ConfigCommand, EvalArgs, LogFormat, ReplayArgs, RunArgs,
     SimulateArgs,
 };
-use sfs::config::{Config, ConfigError};
+use sfs::config::{self, ConfigError};
 use sfs::exit;
 use sfs::session::{self, Outcome, SessionError};
+use sfs::settings::Settings;
 use sfs::shutdown::Shutdown;
 use sfs::source::{SerialSpec, SourceError, SourceSpec};
 use std::path::Path;
@@ -98,41 +99,22 @@ fn replay(a: ReplayArgs) -> i32 {
         path: a.capture,
         pace,
     };
-    let options = match &a.config {
-        Some(f) => match Config::load(f).and_then(|c| options(&c, f)) {
-            Ok(o) => o,
+    let settings = match &a.config {
+        Some(f) => match config::load(f) {
+            Ok(s) => s,
             Err(e) => {
                 complain!("sfs: {e}");
                 return exit::USAGE;
             }
         },
-        None => session::Options::default(),
+        None => Settings::default(),
     };
     // Offline: the outputs once, at the end (no live updates).
-    let options = session::Options {
+    let settings = Settings {
         live: false,
-        ..options
+        ..settings
     };
-    run_session(spec, &a.out, &options, session::Start::New)
-}
-
-/// Session options from a configuration file.
-fn options(cfg: &Config, file: &Path) -> Result<session::Options, ConfigError> {
-    let monitor = cfg.monitor_config(file)?;
-    let mut acquisition = cfg.acquisition_config(file)?;
-    if let Some(m) = &monitor {
-        // One window of the sensors' orientations per epoch.
-        acquisition.array_window = 1.0 / m.epoch_hz;
-    }
-    Ok(session::Options {
-        acquisition,
-        monitor,
-        network: cfg.network_params(file)?,
-        surface: cfg.surface_params(file)?,
-        live: cfg.output.live.unwrap_or(true) && cfg.monitor.is_none(),
-        snapshots: cfg.output.snapshots.unwrap_or(false),
-        capture_rotation: cfg.capture_rotation(file)?,
-    })
+    run_session(spec, &a.out, &settings, session::Start::New)
 }
 
 fn run(a: RunArgs) -> i32 {
@@ -151,7 +133,7 @@ fn run(a: RunArgs) -> i32 {
         (c, _) => c.clone(),
     };
     if let (Some(given), true, Ok(kept)) = (&a.config, resume, std::fs::read_to_string(&saved)) {
-        if std::fs::read_to_string(given).ok().as_deref() != Some(session::kept_origin(&kept).1) {
+        if std::fs::read_to_string(given).ok().as_deref() != Some(config::kept_origin(&kept).1) {
             tracing::warn!(
                 "{} differs from the configuration the session started with ({}): the curves so far are rebuilt with the new one",
                 given.display(),
@@ -159,7 +141,7 @@ fn run(a: RunArgs) -> i32 {
             );
         }
     }
-    let (spec, options) = match resolve_run(&a, config.as_deref()) {
+    let (spec, settings) = match resolve_run(&a, config.as_deref()) {
         Ok(s) => s,
         Err(e) => {
             complain!("sfs: {e}");
@@ -170,44 +152,28 @@ fn run(a: RunArgs) -> i32 {
         session::Start::Resume
     } else {
         match config.as_deref().map(|f| (f, std::fs::read_to_string(f))) {
-            Some((f, Ok(text))) => session::Start::NewWithConfig(session::kept_config(&text, f)),
+            Some((f, Ok(text))) => session::Start::NewWithConfig(config::kept_config(&text, f)),
             _ => session::Start::New,
         }
     };
-    run_session(spec, &dir, &options, start)
+    run_session(spec, &dir, &settings, start)
 }
 
 /// Flags over the configuration file over the defaults.
-fn resolve_run(
-    a: &RunArgs,
-    config: Option<&Path>,
-) -> Result<(SourceSpec, session::Options), ConfigError> {
-    let cli_err = |key: &str, reason: &str| ConfigError {
-        file: "command line".into(),
-        key: key.into(),
-        reason: reason.into(),
-    };
-    let (cfg, file) = match config {
-        Some(f) => {
-            // A kept copy resolves its relative paths where it was copied from.
-            let text = std::fs::read_to_string(f).map_err(|e| ConfigError {
-                file: f.to_owned(),
-                key: "-".into(),
-                reason: format!("cannot read: {e}"),
-            })?;
-            match session::kept_origin(&text) {
-                (Some(origin), body) => (Config::from_text(body, &origin)?, origin),
-                (None, _) => (Config::from_text(&text, f)?, f.to_owned()),
-            }
-        }
-        None => (Config::default(), "command line".into()),
+fn resolve_run(a: &RunArgs, config: Option<&Path>) -> Result<(SourceSpec, Settings), ConfigError> {
+    let cli_err =
+        |key: &str, reason: &str| ConfigError::new(Path::new("command line"), key, reason);
+    let settings = match config {
+        // A kept copy resolves its relative paths where it was copied from.
+        Some(f) => config::load_kept(f)?,
+        None => Settings::default(),
     };
     let mut spec = if a.stdin {
         SourceSpec::Stdin
     } else if let Some(p) = &a.serial {
-        SourceSpec::Serial(SerialSpec::new(p, cfg.source.baud))
-    } else if config.is_some() {
-        cfg.source_spec(&file)?
+        SourceSpec::Serial(SerialSpec::new(p, settings.serial.baud))
+    } else if let Some(s) = &settings.source {
+        s.clone()
     } else {
         return Err(cli_err(
             "--serial",
@@ -222,7 +188,7 @@ fn resolve_run(
             s.baud = b;
         }
         if config.is_some() && a.serial.is_some() {
-            s.watchdog = Duration::from_millis(cfg.source.watchdog_ms);
+            s.watchdog = settings.serial.watchdog;
         }
         if let Some(w) = a.watchdog_ms {
             if w < 100 {
@@ -231,7 +197,7 @@ fn resolve_run(
             s.watchdog = Duration::from_millis(w);
         }
     }
-    Ok((spec, options(&cfg, &file)?))
+    Ok((spec, settings))
 }
 
 fn calibrate(a: CalibrateArgs) -> i32 {
@@ -400,13 +366,12 @@ fn plural(n: usize, word: &str) -> String {
 }
 
 fn config_check(file: &Path) -> i32 {
-    match Config::load(file) {
-        Ok(cfg) => {
+    match config::load(file) {
+        Ok(settings) => {
             say!("{}: ok", file.display());
             // What a monitoring configuration describes, to check it against the structure.
-            if let (Ok(Some(m)), Ok(rotation)) =
-                (cfg.monitor_config(file), cfg.capture_rotation(file))
-            {
+            if let Some(m) = &settings.monitor {
+                let rotation = settings.capture_rotation;
                 let nodes: std::collections::BTreeSet<u32> = m
                     .layout
                     .curves
@@ -446,12 +411,7 @@ fn config_check(file: &Path) -> i32 {
     }
 }
 
-fn run_session(
-    spec: SourceSpec,
-    out: &Path,
-    options: &session::Options,
-    start: session::Start,
-) -> i32 {
+fn run_session(spec: SourceSpec, out: &Path, settings: &Settings, start: session::Start) -> i32 {
     let rt = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -466,7 +426,7 @@ fn run_session(
     rt.block_on(async {
         let shutdown = Shutdown::new();
         tokio::spawn(signals(shutdown.clone()));
-        match session::run(spec, out, options, start, shutdown).await {
+        match session::run(spec, out, settings, start, shutdown).await {
             Ok(o) => {
                 print_summary(&o);
                 exit::OK

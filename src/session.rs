@@ -3,12 +3,13 @@
 //! `bytes → source thread (capture first) → channel → decoder → link statistics → report.json`.
 //! Later stages (acquisition, reconstruction) hang off the decoder's packets here.
 
-use crate::acquisition::{Acquisition, AcquisitionConfig, Update};
+use crate::acquisition::{Acquisition, Update};
 use crate::atomic::OutputError;
 use crate::capture::CaptureWriter;
 use crate::link::LinkStats;
 use crate::pipeline::{Pipeline, REPORT_FILE, SCAN_FILE};
 use crate::report::{Progress, Report};
+use crate::settings::Settings;
 use crate::shutdown::Shutdown;
 use crate::source::{self, EndReason, SourceError, SourceEvent, SourceSpec};
 use device_protocol::Decoder;
@@ -17,41 +18,6 @@ use std::time::{Duration, Instant};
 
 /// Name of the lossless capture in a session directory.
 pub const CAPTURE_FILE: &str = "capture.bin";
-/// What a session does with the packets (everything but the source).
-#[derive(Debug, Clone)]
-pub struct Options {
-    pub acquisition: AcquisitionConfig,
-    pub network: sfs_geometry::network::NetworkParams,
-    /// Surfacing settings; `None` writes the network only.
-    pub surface: Option<sfs_geometry::surface::fit::SurfaceParams>,
-    /// Reconstruct after every finished curve ([`crate::live`]), not only at the end.
-    pub live: bool,
-    /// Keep a copy of `network.glb` per curve (`snapshots/curve-NNN.glb`), live updates only.
-    pub snapshots: bool,
-    /// Monitoring of an instrumented structure ([`crate::monitor::run`]).
-    pub monitor: Option<crate::monitor::settings::MonitorConfig>,
-    /// Rotation of a live session's capture ([`crate::capture::Rotation`]); `None`: one file.
-    pub capture_rotation: Option<crate::capture::Rotation>,
-}
-
-impl Default for Options {
-    /// Documented defaults; the surface is made, with soft constraints ([`SCAN_SOFTNESS`]).
-    fn default() -> Self {
-        Options {
-            acquisition: AcquisitionConfig::default(),
-            network: sfs_geometry::network::NetworkParams::default(),
-            surface: Some(sfs_geometry::surface::fit::SurfaceParams {
-                soft: crate::pipeline::SCAN_SOFTNESS,
-                ..Default::default()
-            }),
-            live: true,
-            snapshots: false,
-            monitor: None,
-            capture_rotation: None,
-        }
-    }
-}
-
 /// How often a running session logs its link statistics (when they changed).
 const STATS_LOG_INTERVAL: Duration = Duration::from_secs(10);
 
@@ -60,28 +26,6 @@ const SHUTDOWN_GRACE: Duration = Duration::from_millis(300);
 
 /// Name of the copy of the configuration a session started with (used by `--resume`).
 pub const CONFIG_COPY: &str = "config.toml";
-
-/// The first line of a kept configuration: where it was copied from. Its relative paths (a
-/// replayed capture, a reference file) are relative to that file's directory, not to the
-/// session's.
-const CONFIG_ORIGIN: &str = "# sfs: copied from ";
-
-/// The text to keep as `config.toml` for the configuration `text` read from `origin`.
-pub fn kept_config(text: &str, origin: &Path) -> String {
-    let origin = std::path::absolute(origin).unwrap_or_else(|_| origin.to_owned());
-    format!("{CONFIG_ORIGIN}{}\n{text}", origin.display())
-}
-
-/// A kept configuration's origin (see [`kept_config`]) and its text as it was.
-pub fn kept_origin(kept: &str) -> (Option<PathBuf>, &str) {
-    match kept
-        .strip_prefix(CONFIG_ORIGIN)
-        .and_then(|r| r.split_once('\n'))
-    {
-        Some((origin, text)) => (Some(PathBuf::from(origin)), text),
-        None => (None, kept),
-    }
-}
 
 /// How a session with a live source starts in its directory.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
@@ -135,7 +79,7 @@ pub struct Outcome {
 pub async fn run(
     spec: SourceSpec,
     out_dir: &Path,
-    options: &Options,
+    options: &Settings,
     start: Start,
     shutdown: Shutdown,
 ) -> Result<Outcome, SessionError> {

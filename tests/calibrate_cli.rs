@@ -125,8 +125,10 @@ fn calibrate_recovers_a_known_distortion() {
     // The snippet is valid configuration.
     let cfg_path = dir.join("calibrated.toml");
     std::fs::write(&cfg_path, format!("[source]\nkind = \"stdin\"\n{snippet}")).unwrap();
-    let cfg = sfs::config::Config::load(&cfg_path).unwrap();
-    let cal = cfg.acquisition_config(&cfg_path).unwrap().calibration;
+    let cal = sfs::config::load(&cfg_path)
+        .unwrap()
+        .acquisition
+        .calibration;
     assert!(
         (cal.mag_hard_iron - truth.hard).norm() < 0.5,
         "hard iron {}",

@@ -187,7 +187,7 @@ fn curves_that_end_during_a_reconstruction_coalesce() {
     let mut live = sfs::live::Live::spawn(sfs::live::LiveSettings {
         out_dir: dir.clone(),
         network: Default::default(),
-        surface: sfs::session::Options::default().surface,
+        surface: sfs::settings::Settings::default().surface,
         snapshots: false,
         source: "test".into(),
         started: Instant::now(),

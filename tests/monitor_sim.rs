@@ -573,27 +573,27 @@ fn monitoring_survives_dropouts_an_unplug_and_a_device_reboot() {
     // starts at 1 s).
     let a = without_sensors(&a, &[10, 11], 11_000_000..21_000_000);
     let epoch_hz = 5.0;
-    let mut options = sfs::session::Options::default();
-    options.acquisition.array_window = 1.0 / epoch_hz;
-    options.monitor = Some(sfs::monitor::settings::MonitorConfig {
-        layout: Layout {
-            sensors: truth_a.sensors.clone(),
-            curves: truth_a.curves.clone(),
-        },
-        epoch_hz,
-        anchor: 0,
-        x_azimuth_deg: 90.0,
-        reference_s: 1.0,
-        reference: None,
-        smoothing_s: 0.0,
-        latest_every: 5,
-        surface: None,
-        regression: None,
-        metrics_max_bytes: u64::MAX,
-        metrics_keep: 1,
-        alarms: Vec::new(),
-        http: None,
-    });
+    // One averaging window per epoch, as a configuration with this [monitor] resolves.
+    let options =
+        sfs::settings::Settings::default().with_monitor(sfs::monitor::settings::MonitorConfig {
+            layout: Layout {
+                sensors: truth_a.sensors.clone(),
+                curves: truth_a.curves.clone(),
+            },
+            epoch_hz,
+            anchor: 0,
+            x_azimuth_deg: 90.0,
+            reference_s: 1.0,
+            reference: None,
+            smoothing_s: 0.0,
+            latest_every: 5,
+            surface: None,
+            regression: None,
+            metrics_max_bytes: u64::MAX,
+            metrics_keep: 1,
+            alarms: Vec::new(),
+            http: None,
+        });
     let shutdown = Shutdown::new();
     let mut dev = plug(&link);
     let session = {
@@ -680,11 +680,7 @@ fn layout_config(
     let text = config_text(&format!("epoch_hz = 5.0\n{keys}\n"), truth);
     let file = dir.join("monitor.toml");
     std::fs::write(&file, &text).unwrap();
-    sfs::config::Config::load(&file)
-        .unwrap()
-        .monitor_config(&file)
-        .unwrap()
-        .unwrap()
+    sfs::config::load(&file).unwrap().monitor.unwrap()
 }
 
 /// `duration` seconds of the simulated structure (10 Hz, seed `seed`) as acquisition gives them

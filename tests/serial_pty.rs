@@ -25,7 +25,7 @@ fn start_session(
             .block_on(session::run(
                 spec,
                 &dir,
-                &session::Options::default(),
+                &sfs::settings::Settings::default(),
                 session::Start::New,
                 shutdown,
             ))

@@ -81,10 +81,9 @@ fn shipped_monitoring_layouts_are_the_simulators() {
     ] {
         let file = std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/config"))
             .join(format!("{name}.toml"));
-        let m = sfs::config::Config::load(&file)
+        let m = sfs::config::load(&file)
             .unwrap()
-            .monitor_config(&file)
-            .unwrap()
+            .monitor
             .expect("a [monitor] section");
         let (_, truth) = run(kind, 1, 0.2, 10.0);
         // `sfs config check` says what the layout is.

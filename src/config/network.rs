@@ -1,0 +1,64 @@
+//! `[network]`: the curve-network reconstruction.
+
+use super::{ConfigError, ConfigFile};
+use serde::Deserialize;
+use std::path::Path;
+
+/// `[network]`, as written (see the module documentation).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NetworkToml {
+    pub h: Option<f64>,
+    pub sigma: Option<f64>,
+    pub alpha: Option<f64>,
+    pub regression: Option<bool>,
+    pub bend_length: Option<f64>,
+    pub bend_fraction: Option<f64>,
+    pub stretch_length: Option<f64>,
+    pub xi: Option<f64>,
+}
+
+impl ConfigFile {
+    /// The reconstruction settings this configuration describes.
+    pub(super) fn network_params(
+        &self,
+        file: &Path,
+    ) -> Result<sfs_geometry::network::NetworkParams, ConfigError> {
+        let n = &self.network;
+        let mut p = sfs_geometry::network::NetworkParams::default();
+        let check =
+            |key: &str, v: Option<f64>, lo: f64, hi: f64| -> Result<Option<f64>, ConfigError> {
+                match v {
+                    Some(x) if !(x.is_finite() && x >= lo && x <= hi) => Err(ConfigError::new(
+                        file,
+                        format!("network.{key}"),
+                        format!("{x} is out of range [{lo}, {hi}]"),
+                    )),
+                    v => Ok(v),
+                }
+            };
+        if let Some(x) = check("h", n.h, 1e-4, 10.0)? {
+            p.prefilter.h = x;
+        }
+        if let Some(x) = check("sigma", n.sigma, 0.01, 5.0)? {
+            p.prefilter.sigma = x;
+        }
+        if let Some(x) = check("alpha", n.alpha, 0.0, 1.0)? {
+            p.prefilter.alpha = x;
+        }
+        p.no_regression = n.regression == Some(false);
+        if let Some(x) = check("bend_length", n.bend_length, 0.0, 100.0)? {
+            p.regression.bend_length = Some(x);
+        }
+        if let Some(x) = check("bend_fraction", n.bend_fraction, 0.0, 100.0)? {
+            p.regression.bend_fraction = x;
+        }
+        if let Some(x) = check("stretch_length", n.stretch_length, 0.0, 100.0)? {
+            p.regression.stretch_length = x;
+        }
+        if let Some(x) = check("xi", n.xi, 0.0, 1e9)? {
+            p.regression.xi = x;
+        }
+        Ok(p)
+    }
+}

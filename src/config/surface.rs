@@ -1,0 +1,72 @@
+//! `[surface]`: surfacing with normal control.
+
+use super::{ConfigError, ConfigFile};
+use serde::Deserialize;
+use std::path::Path;
+
+/// `[surface]`, as written (see the module documentation).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SurfaceToml {
+    pub enabled: Option<bool>,
+    pub edge: Option<f64>,
+    pub max_vertices: Option<usize>,
+    pub reweight: Option<usize>,
+    pub soft: Option<f64>,
+}
+
+impl ConfigFile {
+    /// The surfacing settings this configuration describes (`None`: surfacing disabled).
+    pub(super) fn surface_params(
+        &self,
+        file: &Path,
+    ) -> Result<Option<sfs_geometry::surface::fit::SurfaceParams>, ConfigError> {
+        let s = &self.surface;
+        if s.enabled == Some(false) {
+            return Ok(None);
+        }
+        let mut p = sfs_geometry::surface::fit::SurfaceParams::default();
+        if let Some(e) = s.edge {
+            if !(e.is_finite() && (1e-4..=10.0).contains(&e)) {
+                return Err(ConfigError::new(
+                    file,
+                    "surface.edge",
+                    format!("{e} is out of range [0.0001, 10] m"),
+                ));
+            }
+            p.edge = Some(e);
+        }
+        if let Some(m) = s.max_vertices {
+            if !(100..=10_000_000).contains(&m) {
+                return Err(ConfigError::new(
+                    file,
+                    "surface.max_vertices",
+                    format!("{m} is out of range [100, 10000000]"),
+                ));
+            }
+            p.max_vertices = m;
+        }
+        if let Some(r) = s.reweight {
+            if r > 10 {
+                return Err(ConfigError::new(
+                    file,
+                    "surface.reweight",
+                    format!("{r} passes is more than 10"),
+                ));
+            }
+            p.reweight = r;
+        }
+        p.soft = crate::pipeline::SCAN_SOFTNESS;
+        if let Some(w) = s.soft {
+            if !(w.is_finite() && (0.0..=1e6).contains(&w)) {
+                return Err(ConfigError::new(
+                    file,
+                    "surface.soft",
+                    format!("{w} is out of range [0, 1e6] (0: hard constraints)"),
+                ));
+            }
+            p.soft = (w > 0.0).then_some(w);
+        }
+        Ok(Some(p))
+    }
+}
