@@ -267,12 +267,7 @@ impl Acquisition {
         self.model = Some(SensorModel::new(scales, cal));
         self.kind = Some(h.kind);
         self.scan.device = Some(DeviceInfo {
-            kind: match h.kind {
-                DeviceKind::Morphorider => "morphorider".into(),
-                DeviceKind::Phone => "phone".into(),
-                DeviceKind::SensorArray => "array".into(),
-                DeviceKind::Other(c) => format!("unknown({c})"),
-            },
+            kind: h.kind.to_string(),
             device_id: h.device_id,
             firmware: h.firmware,
             rate_hz: h.rate_hz,

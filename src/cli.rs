@@ -1,8 +1,32 @@
 //! Raw command-line flags (clap). Resolution into a [`crate::source::SourceSpec`] and session
-//! settings happens in `main`, on top of the configuration file.
+//! settings happens in `main`, on top of the configuration file. Every enumerated flag is a
+//! typed value: a bad one is a usage error (exit 2) naming the values allowed.
 
+use crate::simulate::structure::StructureKind;
+use crate::simulate::Profile;
+use crate::source::Pace;
+use clap::builder::PossibleValue;
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use device_protocol::DeviceKind;
 use std::path::PathBuf;
+
+/// A device kind on the command line, by its name ([`DeviceKind::name`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Device(pub DeviceKind);
+
+impl ValueEnum for Device {
+    fn value_variants<'a>() -> &'a [Self] {
+        &[
+            Device(DeviceKind::Morphorider),
+            Device(DeviceKind::Phone),
+            Device(DeviceKind::SensorArray),
+        ]
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        Some(PossibleValue::new(self.0.name()))
+    }
+}
 
 /// Shape from sensors: turns the stream of an inertial scanning device into 3D curve networks.
 #[derive(Debug, Parser)]
@@ -68,14 +92,14 @@ pub struct SimulateArgs {
     pub scene: Option<String>,
     /// A deforming instrumented structure streamed by a sensor array (monitoring mode):
     /// PREFIX.truth.json then holds the layout and the truth at every second.
-    #[arg(long, value_parser = ["riser", "panel"])]
-    pub structure: Option<String>,
+    #[arg(long, value_enum)]
+    pub structure: Option<StructureKind>,
     /// Structures: seconds to simulate.
     #[arg(long, default_value_t = 120.0)]
     pub duration: f64,
     /// The device scanning it.
-    #[arg(long, default_value = "morphorider", value_parser = ["morphorider", "phone", "array"])]
-    pub device: String,
+    #[arg(long, value_enum, default_value = "morphorider")]
+    pub device: Device,
     /// Seed of every random choice: the same seed gives the same bytes.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -83,8 +107,8 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// `default` (documented noise, rare link faults) or `field` (what real sessions bring).
-    #[arg(long, default_value = "default", value_parser = ["default", "field"])]
-    pub profile: String,
+    #[arg(long, value_enum, default_value = "default")]
+    pub profile: Profile,
     /// Directory of the scene files.
     #[arg(long, default_value = "config/scenes")]
     pub scenes: PathBuf,
@@ -108,8 +132,8 @@ pub struct ReplayArgs {
     pub out: PathBuf,
     /// Replay as fast as possible ("fast"), paced by the device timestamps ("realtime"), or
     /// paced N times faster ("x10").
-    #[arg(long, default_value = "fast")]
-    pub pace: String,
+    #[arg(long, default_value = "fast", value_parser = |s: &str| s.parse::<Pace>())]
+    pub pace: Pace,
     /// Configuration file for calibration and processing settings (its `[source]` is ignored).
     #[arg(long, short)]
     pub config: Option<PathBuf>,

@@ -8,7 +8,7 @@
 //!   "connects": 1, "disconnects": 0, "hello": { ... }, "status": { ... } }
 //! ```
 
-use device_protocol::{DeviceKind, Event, Hello, Packet, PacketType, Reject, Status};
+use device_protocol::{Event, Hello, Packet, PacketType, Reject, Status};
 use serde::ser::SerializeMap;
 use serde::{Serialize, Serializer};
 
@@ -115,12 +115,7 @@ impl From<&Hello> for HelloInfo {
     fn from(h: &Hello) -> Self {
         HelloInfo {
             proto: h.proto,
-            kind: match h.kind {
-                DeviceKind::Morphorider => "morphorider",
-                DeviceKind::Phone => "phone",
-                DeviceKind::SensorArray => "array",
-                DeviceKind::Other(_) => "unknown",
-            },
+            kind: h.kind.name(),
             kind_code: h.kind.code(),
             device_id: h.device_id,
             firmware: h.firmware,

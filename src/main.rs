@@ -88,16 +88,9 @@ macro_rules! complain {
 }
 
 fn replay(a: ReplayArgs) -> i32 {
-    let pace = match a.pace.parse() {
-        Ok(p) => p,
-        Err(e) => {
-            complain!("sfs: --pace: {e}");
-            return exit::USAGE;
-        }
-    };
     let spec = SourceSpec::Replay {
         path: a.capture,
-        pace,
+        pace: a.pace,
     };
     let settings = match &a.config {
         Some(f) => match config::load(f) {
@@ -250,10 +243,7 @@ fn write_outputs(files: &[(&Path, &[u8])]) -> Result<(), i32> {
 fn simulate(a: SimulateArgs) -> i32 {
     use sfs::simulate::{self, scene};
     let (bin, truth) = (with_ext(&a.out, ".bin"), with_ext(&a.out, ".truth.json"));
-    if let Some(st) = &a.structure {
-        let kind: simulate::structure::StructureKind = st
-            .parse()
-            .unwrap_or(simulate::structure::StructureKind::Riser);
+    if let Some(kind) = a.structure {
         if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 7.0 * 86_400.0) {
             complain!(
                 "sfs: --duration: {} s is not between 0 and a week",
@@ -267,7 +257,8 @@ fn simulate(a: SimulateArgs) -> i32 {
             return code;
         }
         say!(
-            "{st} (array of {} sensors, seed {}): {} bytes, {:.0} s",
+            "{} (array of {} sensors, seed {}): {} bytes, {:.0} s",
+            kind.name(),
             t.sensors.len(),
             a.seed,
             bytes.len(),
@@ -288,13 +279,7 @@ fn simulate(a: SimulateArgs) -> i32 {
             };
         }
     };
-    let device = match a.device.as_str() {
-        "phone" => device_protocol::DeviceKind::Phone,
-        "array" => device_protocol::DeviceKind::SensorArray,
-        _ => device_protocol::DeviceKind::Morphorider,
-    };
-    let profile = a.profile.parse().unwrap_or(simulate::Profile::Default);
-    let sim = simulate::run(&sc, device, profile, a.seed);
+    let sim = simulate::run(&sc, a.device.0, a.profile, a.seed);
     let json = match serde_json::to_vec(&sim.truth) {
         Ok(j) => j,
         Err(e) => {
@@ -308,8 +293,8 @@ fn simulate(a: SimulateArgs) -> i32 {
     say!(
         "{} ({}, {} profile, seed {}): {} nodes, {} curves, {} bytes, {:.0} s of scanning",
         sc.name,
-        a.device,
-        a.profile,
+        a.device.0.name(),
+        a.profile.name(),
         a.seed,
         sc.nodes.len(),
         sc.curves.len(),

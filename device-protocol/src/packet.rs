@@ -44,6 +44,29 @@ impl DeviceKind {
         }
     }
 
+    /// The kinds this version defines.
+    pub const KNOWN: [DeviceKind; 3] = [
+        DeviceKind::Morphorider,
+        DeviceKind::Phone,
+        DeviceKind::SensorArray,
+    ];
+
+    /// Its name in reports, truth files and on the command line (`"unknown"` for a code this
+    /// version does not define): the one table of the kinds' names.
+    pub fn name(self) -> &'static str {
+        match self {
+            DeviceKind::Morphorider => "morphorider",
+            DeviceKind::Phone => "phone",
+            DeviceKind::SensorArray => "array",
+            DeviceKind::Other(_) => "unknown",
+        }
+    }
+
+    /// The defined kind of that name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::KNOWN.into_iter().find(|k| k.name() == name)
+    }
+
     /// The kind of a wire code.
     pub fn from_code(code: u8) -> Self {
         match code {
@@ -51,6 +74,16 @@ impl DeviceKind {
             2 => DeviceKind::Phone,
             3 => DeviceKind::SensorArray,
             c => DeviceKind::Other(c),
+        }
+    }
+}
+
+/// The name, with the code of a kind this version does not define: `unknown(9)`.
+impl std::fmt::Display for DeviceKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            DeviceKind::Other(c) => write!(f, "unknown({c})"),
+            k => f.write_str(k.name()),
         }
     }
 }

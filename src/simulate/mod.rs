@@ -32,8 +32,8 @@ use rng::Rng;
 use scene::Scene;
 use truth::{um, Truth, TruthCurve, TruthSensor};
 
-/// What `sfs simulate` adds on top of the device's own noise.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// What `sfs simulate` adds on top of the device's own noise (`--profile default|field`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Profile {
     /// Documented default noise, link faults at 0.05 % of packets each (corrupted, lost).
     Default,
@@ -44,13 +44,12 @@ pub enum Profile {
     Field,
 }
 
-impl std::str::FromStr for Profile {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "default" => Ok(Profile::Default),
-            "field" => Ok(Profile::Field),
-            _ => Err(format!("unknown profile {s:?}: default or field")),
+impl Profile {
+    /// Its name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Profile::Default => "default",
+            Profile::Field => "field",
         }
     }
 }
@@ -173,15 +172,6 @@ pub fn run(scene: &Scene, device: DeviceKind, profile: Profile, seed: u64) -> Si
     }
 }
 
-fn device_name(d: DeviceKind) -> &'static str {
-    match d {
-        DeviceKind::Morphorider => "morphorider",
-        DeviceKind::Phone => "phone",
-        DeviceKind::SensorArray => "array",
-        DeviceKind::Other(_) => "unknown",
-    }
-}
-
 fn truth_of(
     scene: &Scene,
     device: DeviceKind,
@@ -194,7 +184,7 @@ fn truth_of(
     Truth {
         scene: scene.name.clone(),
         description: scene.description.clone(),
-        device: device_name(device).into(),
+        device: device.name().into(),
         profile: match profile {
             Profile::Default => "default".into(),
             Profile::Field => "field".into(),

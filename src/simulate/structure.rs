@@ -17,20 +17,19 @@ use device_protocol::{ArraySample, DeviceKind, Hello, Packet, Status};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-/// Which structure.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Which structure (`--structure riser|panel`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum StructureKind {
     Riser,
     Panel,
 }
 
-impl std::str::FromStr for StructureKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "riser" => Ok(StructureKind::Riser),
-            "panel" => Ok(StructureKind::Panel),
-            _ => Err(format!("unknown structure {s:?}: riser or panel")),
+impl StructureKind {
+    /// Its name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            StructureKind::Riser => "riser",
+            StructureKind::Panel => "panel",
         }
     }
 }
