@@ -1,6 +1,8 @@
 //! Sparse symmetric positive-definite solves with faer, split as faer splits them: the
 //! symbolic factorisation of a sparsity pattern is computed once ([`SpdPattern::new`]) and
 //! reused for every numeric factorisation with new values ([`SpdPattern::factor`]).
+//! [`CachedPattern`] keeps the last pattern and its symbolic factorisation across solves
+//! whose pattern does not change (the same network, the same mesh, a new pass of weights).
 //!
 //! ```
 //! use sfs_geometry::sparse_llt::SpdPattern;
@@ -130,6 +132,66 @@ impl SpdPattern {
             chol: self.chol.clone(),
             values: l,
         })
+    }
+}
+
+/// The last sparsity pattern solved and its symbolic factorisation: a new pattern is
+/// factorised symbolically, the same one again is reused (only the numeric factorisation is
+/// redone).
+///
+/// ```
+/// use sfs_geometry::sparse_llt::CachedPattern;
+/// let mut cache = CachedPattern::default();
+/// let entries = vec![(0, 0), (1, 0), (1, 1)];
+/// for scale in [1.0, 2.0] {
+///     let f = cache.factor(2, &entries, &[4.0 * scale, scale, 3.0 * scale]).unwrap();
+///     let mut b = vec![[1.0], [2.0]];
+///     f.solve(&mut b);
+/// }
+/// assert_eq!(cache.symbolic_count(), 1);
+/// ```
+#[derive(Debug, Default)]
+pub struct CachedPattern {
+    cached: Option<SpdPattern>,
+    /// The entries of the cached pattern.
+    entries: Vec<(usize, usize)>,
+    symbolic_count: usize,
+}
+
+impl CachedPattern {
+    /// The pattern of an `n`×`n` matrix's lower-triangle `entries` (see [`SpdPattern::new`]):
+    /// the cached one when `n` and the entries are the same, else a new one, which is kept;
+    /// and whether it is new.
+    pub fn pattern(
+        &mut self,
+        n: usize,
+        entries: &[(usize, usize)],
+    ) -> Result<(&SpdPattern, bool), SolveError> {
+        let same = matches!(&self.cached, Some(p) if p.n == n && self.entries == entries);
+        if !same {
+            self.cached = None;
+            let pattern = SpdPattern::new(n, entries)?;
+            self.symbolic_count += 1;
+            self.entries = entries.to_vec();
+            self.cached = Some(pattern);
+        }
+        Ok((self.cached.as_ref().expect("set above"), !same))
+    }
+
+    /// The numeric factorisation of `values` on the pattern of `entries` (reusing the
+    /// symbolic factorisation when the pattern is the cached one).
+    pub fn factor(
+        &mut self,
+        n: usize,
+        entries: &[(usize, usize)],
+        values: &[f64],
+    ) -> Result<SpdFactor, SolveError> {
+        self.pattern(n, entries)?.0.factor(values)
+    }
+
+    /// Symbolic factorisations computed so far (1 while the pattern never changed).
+    pub fn symbolic_count(&self) -> usize {
+        self.symbolic_count
     }
 }
 

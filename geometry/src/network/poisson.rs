@@ -7,7 +7,7 @@
 //! counts) stays the same.
 
 use super::prefilter::UniformCurve;
-use crate::sparse_llt::{SolveError, SpdPattern};
+use crate::sparse_llt::{CachedPattern, SolveError};
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
 
@@ -35,9 +35,7 @@ pub struct Positions {
 /// Keeps the symbolic factorisation between solves.
 #[derive(Debug, Default)]
 pub struct PoissonSolver {
-    cached: Option<(Vec<(usize, usize)>, SpdPattern)>,
-    /// Symbolic factorisations computed (for tests and benchmarks).
-    pub symbolic_count: usize,
+    pattern: CachedPattern,
 }
 
 struct Edge {
@@ -48,6 +46,11 @@ struct Edge {
 }
 
 impl PoissonSolver {
+    /// Symbolic factorisations computed so far (for tests and benchmarks).
+    pub fn symbolic_count(&self) -> usize {
+        self.pattern.symbolic_count()
+    }
+
     pub fn new() -> Self {
         Self::default()
     }
@@ -128,14 +131,7 @@ impl PoissonSolver {
         for &g in &gauges {
             vals[g] += mean_w.max(1.0);
         }
-        let reuse = matches!(&self.cached, Some((e, _)) if *e == entries);
-        if !reuse {
-            let pat = SpdPattern::new(n, &entries)?;
-            self.symbolic_count += 1;
-            self.cached = Some((entries, pat));
-        }
-        let pat = &self.cached.as_ref().expect("set above").1;
-        let f = pat.factor(&vals)?;
+        let f = self.pattern.factor(n, &entries, &vals)?;
         f.solve(&mut rhs);
         let x: Vec<Vector3<f64>> = rhs.iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
         let out_curves = curves
@@ -210,7 +206,7 @@ mod tests {
         }
         // Same topology again: the symbolic factorisation is reused.
         s.solve(&[c]).unwrap();
-        assert_eq!(s.symbolic_count, 1);
+        assert_eq!(s.symbolic_count(), 1);
     }
 
     #[test]

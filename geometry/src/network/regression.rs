@@ -16,7 +16,7 @@
 //! lengths `ℓ₁`, `ℓ₂` would, whatever the sampling step (see [`RegressionParams`]).
 
 use super::prefilter::UniformCurve;
-use crate::sparse_llt::SpdPattern;
+use crate::sparse_llt::{CachedPattern, SpdPattern};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use std::collections::HashMap;
 
@@ -70,8 +70,7 @@ pub struct RegressionReport {
 /// Keeps the symbolic factorisation of the normal matrix between iterations and runs.
 #[derive(Debug, Default)]
 pub struct RegressionSolver {
-    cached: Option<(Vec<(usize, usize)>, SpdPattern)>,
-    pub symbolic_count: usize,
+    pattern: CachedPattern,
 }
 
 /// The Jacobian of a residual block with respect to one variable: one row of 3 per residual.
@@ -307,6 +306,11 @@ impl RegressionSolver {
     /// `curves[k]`, is where curve `k`'s frames start (e.g. the previous solution, when a new
     /// curve joined the network); the data term still pulls towards `curves[k].q`. The optimum
     /// is the same; fewer iterations reach it.
+    ///
+    /// Precompute, then solve: the normal matrix's block pattern is built once per run
+    /// ([`NormalPattern`]) and factorised symbolically only when it changed since the last
+    /// run; each Levenberg–Marquardt iteration assembles the normal equations
+    /// ([`normal_equations`]) and takes a damped step ([`damped_step`]).
     pub fn run_from(
         &mut self,
         curves: &mut [UniformCurve],
@@ -323,15 +327,109 @@ impl RegressionSolver {
         if n == 0 {
             return RegressionReport::default();
         }
-        let mut x = pb.a.clone();
-        for ((c, vars), start) in curves.iter().zip(&pb.var_of).zip(init) {
-            if let Some(q0) = start.filter(|q0| q0.len() == c.q.len()) {
-                for (q, &v) in q0.iter().zip(vars) {
-                    x[v] = *q.to_rotation_matrix().matrix();
+        let mut x = start(&pb, curves, init);
+        let normal = NormalPattern::of(&pb, p);
+        let symbolic = match self.pattern.pattern(3 * n, &normal.entries) {
+            Ok((s, _)) => s,
+            Err(e) => {
+                tracing::error!("regression: {e}");
+                return RegressionReport::default();
+            }
+        };
+        let mut t = terms(&pb, &x, p);
+        let slots = normal.slots(&t);
+        let e0 = energy(&t);
+        let mut report = RegressionReport {
+            energy_initial: e0,
+            energy_final: e0,
+            ..Default::default()
+        };
+        let mut damping = 1e-6;
+        let mut e = e0;
+        for it in 0..params.max_iterations {
+            report.iterations = it + 1;
+            let (blocks, g) = normal_equations(&pb, &t, &slots, &normal);
+            let gnorm = g.iter().map(|v| v.norm_squared()).sum::<f64>().sqrt();
+            report.gradient_norm = gnorm;
+            if gnorm < params.gradient_tolerance {
+                report.converged = true;
+                break;
+            }
+            let accepted = match damped_step(
+                symbolic,
+                &normal,
+                &blocks,
+                &g,
+                &x,
+                e,
+                &mut damping,
+                |trial| {
+                    let tt = terms(&pb, trial, p);
+                    let et = energy(&tt);
+                    (tt, et)
+                },
+            ) {
+                Some((trial, tt, et)) => {
+                    let rel = (e - et) / e.max(1e-300);
+                    x = trial;
+                    t = tt;
+                    e = et;
+                    damping = (damping / 3.0).max(1e-12);
+                    if rel < params.relative_tolerance {
+                        report.converged = true;
+                    }
+                    true
                 }
+                None => false,
+            };
+            if !accepted || report.converged {
+                report.converged |= !accepted && gnorm < 1e-6;
+                break;
             }
         }
-        // Block pattern (lower triangle of 3×3 blocks) from the residual structure.
+        report.energy_final = e;
+        write_back(curves, &pb, &x);
+        report
+    }
+
+    /// Symbolic factorisations of the normal matrix computed so far.
+    pub fn symbolic_count(&self) -> usize {
+        self.pattern.symbolic_count()
+    }
+}
+
+/// The frames the iterations start from: the data, or `init[k]` where it fits curve `k`.
+fn start(
+    pb: &Problem,
+    curves: &[UniformCurve],
+    init: &[Option<&[UnitQuaternion<f64>]>],
+) -> Vec<Matrix3<f64>> {
+    let mut x = pb.a.clone();
+    for ((c, vars), start) in curves.iter().zip(&pb.var_of).zip(init) {
+        if let Some(q0) = start.filter(|q0| q0.len() == c.q.len()) {
+            for (q, &v) in q0.iter().zip(vars) {
+                x[v] = *q.to_rotation_matrix().matrix();
+            }
+        }
+    }
+    x
+}
+
+/// The normal matrix's pattern: the lower triangle of 3×3 blocks coupling the variables
+/// that share a residual, in a fixed order (`#blocks`, each a `(row, col)` block with
+/// `row ≥ col`), and its scalar entries (`3n` by `3n`, lower triangle).
+struct NormalPattern {
+    block_keys: Vec<(usize, usize)>,
+    block_index: HashMap<(usize, usize), usize>,
+    /// The block of each variable's diagonal.
+    diag_slot: Vec<usize>,
+    entries: Vec<(usize, usize)>,
+}
+
+impl NormalPattern {
+    /// The pattern of problem `pb` under the settings `p` (terms of weight zero add none).
+    fn of(pb: &Problem, p: &Resolved) -> Self {
+        let n = pb.a.len();
         let mut block_keys: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
         let mut add = |a: usize, b: usize| {
             if a != b {
@@ -371,148 +469,145 @@ impl RegressionSolver {
                 }
             }
         }
-        if !matches!(&self.cached, Some((e, _)) if *e == entries) {
-            match SpdPattern::new(3 * n, &entries) {
-                Ok(pat) => {
-                    self.symbolic_count += 1;
-                    self.cached = Some((entries.clone(), pat));
-                }
-                Err(e) => {
-                    tracing::error!("regression: {e}");
-                    return RegressionReport::default();
-                }
-            }
+        NormalPattern {
+            block_keys,
+            block_index,
+            diag_slot,
+            entries,
         }
-        let mut t = terms(&pb, &x, p);
-        // The normal-matrix slot of every (term, variable pair): the terms keep their order
-        // and variables across iterations, so the lookups are done once.
-        let slots: Vec<Vec<usize>> = t
-            .blocks
+    }
+
+    /// The block of every (term, variable pair) of `t`: the terms keep their order and
+    /// variables across iterations, so the lookups are done once.
+    fn slots(&self, t: &Terms) -> Vec<Vec<usize>> {
+        t.blocks
             .iter()
             .map(|(vars, _)| {
                 let mut v = Vec::new();
                 for (vi, _) in vars {
                     for (vj, _) in vars {
                         if vj <= vi {
-                            v.push(block_index[&(*vi, *vj)]);
+                            v.push(self.block_index[&(*vi, *vj)]);
                         }
                     }
                 }
                 v
             })
-            .collect();
-        let e0 = energy(&t);
-        let mut report = RegressionReport {
-            energy_initial: e0,
-            energy_final: e0,
-            ..Default::default()
+            .collect()
+    }
+
+    /// The entries' values of the normal matrix of `blocks` with `damping` added to its
+    /// diagonal (Levenberg–Marquardt: `λ (1 + JᵀJ_ii)`).
+    fn values(&self, blocks: &[Matrix3<f64>], damping: f64) -> Vec<f64> {
+        let mut vals = Vec::with_capacity(self.entries.len());
+        for (k, &(bi, bj)) in self.block_keys.iter().enumerate() {
+            for a in 0..3 {
+                for b in 0..3 {
+                    if bi != bj || a >= b {
+                        let mut v = blocks[k][(a, b)];
+                        if bi == bj && a == b {
+                            v += damping * (1.0 + blocks[k][(a, a)]);
+                        }
+                        vals.push(v);
+                    }
+                }
+            }
+        }
+        vals
+    }
+}
+
+/// The Gauss–Newton normal equations at the terms `t`: `JᵀJ` by blocks of `pattern`
+/// (`#blocks` 3×3 matrices) and the gradient `Jᵀr` (one 3-vector per variable).
+fn normal_equations(
+    pb: &Problem,
+    t: &Terms,
+    slots: &[Vec<usize>],
+    pattern: &NormalPattern,
+) -> (Vec<Matrix3<f64>>, Vec<Vector3<f64>>) {
+    let mut blocks = vec![Matrix3::<f64>::zeros(); pattern.block_keys.len()];
+    let mut g = t.e0_grad.clone();
+    for (i, w) in pb.w.iter().enumerate() {
+        blocks[pattern.diag_slot[i]] += Matrix3::identity() * (2.0 * w);
+    }
+    for ((vars, r), slot) in t.blocks.iter().zip(slots) {
+        let mut next_slot = slot.iter();
+        for (vi, ji) in vars {
+            let mut jtr = Vector3::zeros();
+            for (row, rv) in ji.iter().zip(r) {
+                jtr += Vector3::from(*row) * *rv;
+            }
+            g[*vi] += jtr;
+            for (vj, jj) in vars {
+                if vj > vi {
+                    continue;
+                }
+                let mut blk = Matrix3::zeros();
+                for (ra, rb) in ji.iter().zip(jj) {
+                    blk += Vector3::from(*ra) * Vector3::from(*rb).transpose();
+                }
+                blocks[*next_slot.next().expect("one slot per pair")] += blk;
+            }
+        }
+    }
+    (blocks, g)
+}
+
+/// One Levenberg–Marquardt step from `x` (energy `e`): the damped normal equations solved on
+/// the `symbolic` factorisation, retracted onto SO(3), kept when `evaluate` gives an energy
+/// no higher; otherwise the damping grows and it tries again (10 tries). The accepted frames
+/// with what `evaluate` made of them, or `None`.
+#[allow(clippy::too_many_arguments)]
+fn damped_step<T>(
+    symbolic: &SpdPattern,
+    pattern: &NormalPattern,
+    blocks: &[Matrix3<f64>],
+    g: &[Vector3<f64>],
+    x: &[Matrix3<f64>],
+    e: f64,
+    damping: &mut f64,
+    evaluate: impl Fn(&[Matrix3<f64>]) -> (T, f64),
+) -> Option<(Vec<Matrix3<f64>>, T, f64)> {
+    for _ in 0..10 {
+        let vals = pattern.values(blocks, *damping);
+        let Ok(f) = symbolic.factor(&vals) else {
+            *damping *= 10.0;
+            continue;
         };
-        let mut damping = 1e-6;
-        let mut e = e0;
-        for it in 0..params.max_iterations {
-            report.iterations = it + 1;
-            // Normal equations.
-            let mut blocks = vec![Matrix3::<f64>::zeros(); block_keys.len()];
-            let mut g = t.e0_grad.clone();
-            for (i, w) in pb.w.iter().enumerate() {
-                blocks[diag_slot[i]] += Matrix3::identity() * (2.0 * w);
-            }
-            for ((vars, r), slot) in t.blocks.iter().zip(&slots) {
-                let mut next_slot = slot.iter();
-                for (vi, ji) in vars {
-                    let mut jtr = Vector3::zeros();
-                    for (row, rv) in ji.iter().zip(r) {
-                        jtr += Vector3::from(*row) * *rv;
-                    }
-                    g[*vi] += jtr;
-                    for (vj, jj) in vars {
-                        if vj > vi {
-                            continue;
-                        }
-                        let mut blk = Matrix3::zeros();
-                        for (ra, rb) in ji.iter().zip(jj) {
-                            blk += Vector3::from(*ra) * Vector3::from(*rb).transpose();
-                        }
-                        blocks[*next_slot.next().expect("one slot per pair")] += blk;
-                    }
-                }
-            }
-            let gnorm = g.iter().map(|v| v.norm_squared()).sum::<f64>().sqrt();
-            report.gradient_norm = gnorm;
-            if gnorm < params.gradient_tolerance {
-                report.converged = true;
-                break;
-            }
-            let pat = &self.cached.as_ref().expect("set above").1;
-            let mut accepted = false;
-            for _ in 0..10 {
-                let mut vals = Vec::with_capacity(entries.len());
-                for (k, &(bi, bj)) in block_keys.iter().enumerate() {
-                    for a in 0..3 {
-                        for b in 0..3 {
-                            if bi != bj || a >= b {
-                                let mut v = blocks[k][(a, b)];
-                                if bi == bj && a == b {
-                                    v += damping * (1.0 + blocks[k][(a, a)]);
-                                }
-                                vals.push(v);
-                            }
-                        }
-                    }
-                }
-                let Ok(f) = pat.factor(&vals) else {
-                    damping *= 10.0;
-                    continue;
-                };
-                let mut rhs: Vec<[f64; 1]> =
-                    g.iter().flat_map(|v| [[-v.x], [-v.y], [-v.z]]).collect();
-                f.solve(&mut rhs);
-                let trial: Vec<Matrix3<f64>> = x
-                    .iter()
-                    .enumerate()
-                    .map(|(i, xi)| {
-                        retract(
-                            xi,
-                            &Vector3::new(rhs[3 * i][0], rhs[3 * i + 1][0], rhs[3 * i + 2][0]),
-                        )
-                    })
-                    .collect();
-                if trial.iter().any(|m| m.iter().any(|v| !v.is_finite())) {
-                    damping *= 10.0;
-                    continue;
-                }
-                let tt = terms(&pb, &trial, p);
-                let et = energy(&tt);
-                if et <= e {
-                    let rel = (e - et) / e.max(1e-300);
-                    x = trial;
-                    t = tt;
-                    e = et;
-                    damping = (damping / 3.0).max(1e-12);
-                    accepted = true;
-                    if rel < params.relative_tolerance {
-                        report.converged = true;
-                    }
-                    break;
-                }
-                damping *= 4.0;
-            }
-            if !accepted || report.converged {
-                report.converged |= !accepted && gnorm < 1e-6;
-                break;
-            }
+        let mut rhs: Vec<[f64; 1]> = g.iter().flat_map(|v| [[-v.x], [-v.y], [-v.z]]).collect();
+        f.solve(&mut rhs);
+        let trial: Vec<Matrix3<f64>> = x
+            .iter()
+            .enumerate()
+            .map(|(i, xi)| {
+                retract(
+                    xi,
+                    &Vector3::new(rhs[3 * i][0], rhs[3 * i + 1][0], rhs[3 * i + 2][0]),
+                )
+            })
+            .collect();
+        if trial.iter().any(|m| m.iter().any(|v| !v.is_finite())) {
+            *damping *= 10.0;
+            continue;
         }
-        report.energy_final = e;
-        // Write back, re-orthonormalised.
-        for (c, vars) in curves.iter_mut().zip(&pb.var_of) {
-            for (q, &v) in c.q.iter_mut().zip(vars) {
-                // x is a product of exact rotations: convert directly (Shepperd), not by the
-                // iterative projection, which can settle on a wrong rotation far from its guess.
-                *q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(x[v]));
-                q.renormalize();
-            }
+        let (tt, et) = evaluate(&trial);
+        if et <= e {
+            return Some((trial, tt, et));
         }
-        report
+        *damping *= 4.0;
+    }
+    None
+}
+
+/// The regressed frames back into the curves, re-orthonormalised.
+fn write_back(curves: &mut [UniformCurve], pb: &Problem, x: &[Matrix3<f64>]) {
+    for (c, vars) in curves.iter_mut().zip(&pb.var_of) {
+        for (q, &v) in c.q.iter_mut().zip(vars) {
+            // x is a product of exact rotations: convert directly (Shepperd), not by the
+            // iterative projection, which can settle on a wrong rotation far from its guess.
+            *q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(x[v]));
+            q.renormalize();
+        }
     }
 }
 

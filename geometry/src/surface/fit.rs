@@ -26,7 +26,7 @@
 use super::cotmatrix::{cotmatrix, voronoi_areas, SparseRows};
 use super::cycles::{cycles, Cycles, NetworkSegments};
 use super::tessellate::{tessellate, Embedding};
-use crate::sparse_llt::{SolveError, SpdPattern};
+use crate::sparse_llt::{CachedPattern, SolveError};
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
 
@@ -402,7 +402,7 @@ impl SoftSolver {
         q: &SparseRows,
         c: usize,
         omega: f64,
-        cache: &mut Option<(Vec<(usize, usize)>, SpdPattern)>,
+        cache: &mut CachedPattern,
     ) -> Result<Self, SolveError> {
         let n = q.n();
         let diag_mean = (0..c).map(|i| q.get(i, i)).sum::<f64>() / c.max(1) as f64;
@@ -423,11 +423,7 @@ impl SoftSolver {
                 vals.push(if i < c { w } else { 0.0 });
             }
         }
-        if !matches!(cache, Some((e, _)) if *e == entries) {
-            let pat = SpdPattern::new(n, &entries)?;
-            *cache = Some((entries, pat));
-        }
-        let factor = cache.as_ref().expect("set above").1.factor(&vals)?;
+        let factor = cache.factor(n, &entries, &vals)?;
         Ok(SoftSolver { c, w, factor })
     }
 
@@ -481,7 +477,7 @@ impl FreeSolver {
     fn with_pattern(
         q: &SparseRows,
         c: usize,
-        cache: &mut Option<(Vec<(usize, usize)>, SpdPattern)>,
+        cache: &mut CachedPattern,
     ) -> Result<Self, SolveError> {
         let nf = q.n() - c;
         let mut entries = Vec::new();
@@ -494,16 +490,14 @@ impl FreeSolver {
                 }
             }
         }
-        if !matches!(cache, Some((e, _)) if *e == entries) {
-            let pat = SpdPattern::new(nf, &entries)?;
+        let (pat, fresh) = cache.pattern(nf, &entries)?;
+        if fresh {
             tracing::debug!(
                 "surface: symbolic factorisation of {nf} free unknowns, {} entries, fill {}",
                 entries.len(),
                 pat.fill()
             );
-            *cache = Some((entries, pat));
         }
-        let pat = &cache.as_ref().expect("set above").1;
         Ok(FreeSolver {
             c,
             factor: pat.factor(&vals)?,
@@ -656,14 +650,12 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
     Surfacer::new().run(net, p)
 }
 
-type PatternCache = Option<(Vec<(usize, usize)>, SpdPattern)>;
-
 /// Keeps the symbolic factorisations between surfaces (as the daemon runs it after every
 /// curve): when the mesh's pattern is unchanged only the numeric factorisations are redone.
 #[derive(Debug, Default)]
 pub struct Surfacer {
-    pattern: PatternCache,
-    soft_pattern: PatternCache,
+    pattern: CachedPattern,
+    soft_pattern: CachedPattern,
 }
 
 impl Surfacer {
@@ -684,8 +676,8 @@ impl Surfacer {
 fn surface_with(
     net: &NetworkSegments,
     p: &SurfaceParams,
-    pattern: &mut PatternCache,
-    soft_pattern: &mut PatternCache,
+    pattern: &mut CachedPattern,
+    soft_pattern: &mut CachedPattern,
 ) -> Result<Surfaced, SurfaceError> {
     let net = &net.cleaned();
     let cyc = cycles(net);
@@ -827,7 +819,7 @@ fn surface_with(
                     }
                 }
                 let q3 = SparseRows::from_triplets(nv, t);
-                let mut own = None;
+                let mut own = CachedPattern::default();
                 FreeSolver::with_pattern(&q3, c, &mut own)?.solve(&q3, &zero, &mut asm.positions);
             }
             Method::NormalControl => {
