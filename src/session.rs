@@ -7,6 +7,7 @@ use crate::acquisition::{Acquisition, Update};
 use crate::atomic::OutputError;
 use crate::capture::CaptureWriter;
 use crate::link::LinkStats;
+use crate::monitor::run::{Begin, Monitor};
 use crate::pipeline::{Pipeline, REPORT_FILE, SCAN_FILE};
 use crate::report::{Progress, Report};
 use crate::settings::Settings;
@@ -76,13 +77,117 @@ pub struct Outcome {
 /// Runs a session from `spec` until its source ends or `shutdown` is triggered, then writes
 /// `out_dir/report.json`. A live source is captured to `out_dir/capture.bin` (appended to, so a
 /// resumed session continues it).
+///
+/// Its stages: the directory is prepared ([`prepare`]), the source started, the flow of
+/// packets set up ([`Flow::start`]) and, on resume, fed the capture so far
+/// ([`Flow::resume`]); then the source is streamed until it ends ([`Flow::stream`]) and the
+/// outputs are written ([`Flow::finish`]).
 pub async fn run(
     spec: SourceSpec,
     out_dir: &Path,
-    options: &Settings,
+    settings: &Settings,
     start: Start,
     shutdown: Shutdown,
 ) -> Result<Outcome, SessionError> {
+    let prepared = prepare(&spec, out_dir, settings, &start)?;
+    let description = spec.describe();
+    let progress = replay_progress(&spec);
+    tracing::info!(source = %description, out = %out_dir.display(), "session started");
+    let started = Instant::now();
+    let mut src = source::spawn(spec, prepared.capture, shutdown.clone())?;
+    let begin = match start {
+        Start::Resume => Begin::Resume,
+        Start::New | Start::NewWithConfig(_) => Begin::Fresh,
+    };
+    let monitor = match &settings.monitor {
+        Some(m) => Some(Monitor::new(m.clone(), out_dir, begin).map_err(OutputError::at(out_dir))?),
+        None => None,
+    };
+    let _http = match (&monitor, settings.monitor.as_ref().and_then(|m| m.http)) {
+        (Some(m), Some(addr)) => Some(
+            crate::monitor::http::serve(addr, m.exposition.clone(), shutdown.clone())
+                .await
+                .map_err(|source| SessionError::Metrics { addr, source })?,
+        ),
+        _ => None,
+    };
+    // Resume: the capture files to decode again, from the newest that starts before what a
+    // monitor needs (all of them otherwise).
+    let prior = prepared.prior.map(|mut files| {
+        let from = monitor.as_ref().and_then(|m| m.replay_from());
+        let k = from.map_or(0, |t| {
+            files
+                .iter()
+                .rposition(|f| f.start.elapsed_us as f64 * 1e-6 <= t)
+                .unwrap_or(0)
+        });
+        files.split_off(k)
+    });
+    let clock_start = match &prior {
+        Some(files) => files[0].start.clone(),
+        None => prepared.replay_start,
+    };
+    let mut flow = Flow::start(
+        settings,
+        out_dir,
+        &clock_start,
+        monitor,
+        &description,
+        started,
+    )?;
+    if let Some(files) = prior {
+        flow.resume(files)?;
+    }
+    let end = flow.stream(&mut src, &shutdown, progress.as_ref()).await;
+    stop_source(src).await;
+    if flow.decoder.buffered() > 0 {
+        tracing::debug!(
+            bytes = flow.decoder.buffered(),
+            "stream ended inside a frame"
+        );
+    }
+    if let Some(p) = progress {
+        p.finish_and_clear();
+    }
+    log_stats("session ended", &flow.stats);
+    let (report, report_path) = flow.finish(settings, out_dir, end, &description, started)?;
+    if end == EndReason::CaptureFailed {
+        return Err(
+            OutputError::at(&prepared.capture_path.clone().unwrap_or_default())(
+                std::io::Error::other("appending to the capture failed"),
+            )
+            .into(),
+        );
+    }
+    Ok(Outcome {
+        report,
+        report_path,
+        capture_path: prepared.capture_path,
+    })
+}
+
+/// A session directory made ready before the source starts.
+struct Prepared {
+    /// Where a live source's bytes are captured (`None`: a replayed file).
+    capture_path: Option<PathBuf>,
+    /// A resumed session's capture files, opened before the source appends to them.
+    prior: Option<Vec<PriorFile>>,
+    capture: Option<CaptureWriter>,
+    /// Where the session clock starts for a replayed file (a piece of a rotated capture
+    /// continues the time of the files before it: its sidecar).
+    replay_start: crate::capture::CaptureStart,
+}
+
+/// Prepares `out_dir`: created, the temporary files of a killed session removed, a new
+/// session refused where a capture exists, the capture files of a resumed one opened, the
+/// configuration kept (`config.toml`) and the capture opened for appending (rotated if
+/// configured).
+fn prepare(
+    spec: &SourceSpec,
+    out_dir: &Path,
+    settings: &Settings,
+    start: &Start,
+) -> Result<Prepared, SessionError> {
     let output_err = OutputError::at;
     std::fs::create_dir_all(out_dir).map_err(output_err(out_dir))?;
     match crate::atomic::remove_stale(out_dir) {
@@ -91,9 +196,7 @@ pub async fn run(
         Err(e) => tracing::warn!("cannot clean {}: {e}", out_dir.display()),
     }
     let capture_path = spec.is_live().then(|| out_dir.join(CAPTURE_FILE));
-    // Raw bytes of the session so far (resume): its capture files, opened before the source
-    // appends anything (or rotates them).
-    let prior = match (&capture_path, &start) {
+    let prior = match (&capture_path, start) {
         (Some(p), Start::New | Start::NewWithConfig(_)) => match std::fs::metadata(p) {
             Ok(m) if m.len() > 0 => {
                 return Err(SessionError::CaptureExists {
@@ -120,245 +223,243 @@ pub async fn run(
         }
         (None, _) => None,
     };
-    if let (Some(_), Start::NewWithConfig(text)) = (&capture_path, &start) {
+    if let (Some(_), Start::NewWithConfig(text)) = (&capture_path, start) {
         let p = out_dir.join(CONFIG_COPY);
         crate::atomic::write_atomic(&p, text.as_bytes()).map_err(output_err(&p))?;
     }
-    let capture = match (&capture_path, options.capture_rotation) {
+    let capture = match (&capture_path, settings.capture_rotation) {
         (Some(p), None) => Some(CaptureWriter::open_append(p).map_err(output_err(p))?),
         (Some(p), Some(r)) => Some(CaptureWriter::open_rotating(p, r).map_err(output_err(p))?),
         (None, _) => None,
     };
-    // Where the session clock starts: a replayed piece of a rotated capture continues the
-    // time of the files before it (its sidecar).
-    let replay_start = match &spec {
+    let replay_start = match spec {
         SourceSpec::Replay { path, .. } => crate::capture::read_start(path)
             .map_err(output_err(&crate::capture::start_path(path)))?,
         _ => Default::default(),
     };
-    let description = spec.describe();
-    let progress = replay_progress(&spec);
-    tracing::info!(source = %description, out = %out_dir.display(), "session started");
-    let started = Instant::now();
-    let mut src = source::spawn(spec, capture, shutdown.clone())?;
+    Ok(Prepared {
+        capture_path,
+        prior,
+        capture,
+        replay_start,
+    })
+}
 
-    let mut monitor = match &options.monitor {
-        Some(m) => Some(
-            crate::monitor::run::Monitor::new(
-                m.clone(),
-                out_dir,
-                match start {
-                    Start::Resume => crate::monitor::run::Begin::Resume,
-                    Start::New | Start::NewWithConfig(_) => crate::monitor::run::Begin::Fresh,
-                },
+/// What a session holds while it streams: the decoder and its statistics, acquisition, and
+/// the monitor and live worker it feeds.
+struct Flow {
+    decoder: Decoder,
+    stats: LinkStats,
+    acq: Acquisition,
+    monitor: Option<Monitor>,
+    live: Option<crate::live::Live>,
+}
+
+impl Flow {
+    /// The flow of a session whose clock starts at `clock_start`, with its live worker when
+    /// the settings ask for live updates.
+    fn start(
+        settings: &Settings,
+        out_dir: &Path,
+        clock_start: &crate::capture::CaptureStart,
+        monitor: Option<Monitor>,
+        description: &str,
+        started: Instant,
+    ) -> Result<Flow, SessionError> {
+        let live = if settings.live {
+            Some(
+                crate::live::Live::spawn(crate::live::LiveSettings {
+                    out_dir: out_dir.to_owned(),
+                    network: settings.network,
+                    surface: settings.surface,
+                    snapshots: settings.snapshots,
+                    source: description.to_owned(),
+                    started,
+                })
+                .map_err(|e| SessionError::Source(SourceError::Thread(e)))?,
             )
-            .map_err(output_err(out_dir))?,
-        ),
-        None => None,
-    };
-    let _http = match (&monitor, options.monitor.as_ref().and_then(|m| m.http)) {
-        (Some(m), Some(addr)) => Some(
-            crate::monitor::http::serve(addr, m.exposition.clone(), shutdown.clone())
-                .await
-                .map_err(|source| SessionError::Metrics { addr, source })?,
-        ),
-        _ => None,
-    };
-    let mut decoder = Decoder::new();
-    let mut stats = LinkStats::default();
-    // Resume: the capture files to decode again, from the newest that starts before what a
-    // monitor needs (all of them otherwise).
-    let prior = prior.map(|mut files| {
-        let from = monitor.as_ref().and_then(|m| m.replay_from());
-        let k = from.map_or(0, |t| {
-            files
-                .iter()
-                .rposition(|f| f.start.elapsed_us as f64 * 1e-6 <= t)
-                .unwrap_or(0)
-        });
-        files.split_off(k)
-    });
-    let clock_start = match &prior {
-        Some(files) => files[0].start.clone(),
-        None => replay_start,
-    };
-    let mut acq = Acquisition::starting_at(options.acquisition.clone(), &clock_start);
-    let mut live = if options.live {
-        Some(
-            crate::live::Live::spawn(crate::live::LiveSettings {
-                out_dir: out_dir.to_owned(),
-                network: options.network,
-                surface: options.surface,
-                snapshots: options.snapshots,
-                source: description.clone(),
-                started,
-            })
-            .map_err(|e| SessionError::Source(SourceError::Thread(e)))?,
-        )
-    } else {
-        None
-    };
-    if let Some(files) = prior {
-        // Resume: the same decoder and acquisition state as if the session had not stopped.
-        // Read in pieces, up to the length each file had before the source appended to it,
-        // so that a monitor takes the epochs as they come.
+        } else {
+            None
+        };
+        Ok(Flow {
+            decoder: Decoder::new(),
+            stats: LinkStats::default(),
+            acq: Acquisition::starting_at(settings.acquisition.clone(), clock_start),
+            monitor,
+            live,
+        })
+    }
+
+    /// Decodes `bytes`; with `post`, hands every curve that ends (or changes) to the live
+    /// worker as it happens.
+    fn feed(&mut self, bytes: &[u8], post: bool) {
+        for e in self.decoder.feed(bytes) {
+            self.stats.observe(&e);
+            let update = self.acq.event(&e);
+            if let (true, Some(Update::CurveEnded(i) | Update::CurveUpdated(i))) = (post, update) {
+                post_curve(&mut self.live, &self.acq, i, &self.stats);
+            }
+        }
+        feed_monitor(&mut self.monitor, &mut self.acq);
+    }
+
+    /// Resume: the same decoder and acquisition state as if the session had not stopped.
+    /// Read in pieces, up to the length each file had before the source appended to it, so
+    /// that a monitor takes the epochs as they come; then every curve goes to the live worker.
+    fn resume(&mut self, files: Vec<PriorFile>) -> Result<(), SessionError> {
         let mut chunk = vec![0u8; 1 << 16];
         let mut total = 0;
         for f in files {
-            stats.bytes += f.len;
+            self.stats.bytes += f.len;
             total += f.len;
             let mut file = std::io::Read::take(f.file, f.len);
             loop {
-                let n = std::io::Read::read(&mut file, &mut chunk).map_err(output_err(&f.path))?;
+                let n =
+                    std::io::Read::read(&mut file, &mut chunk).map_err(OutputError::at(&f.path))?;
                 if n == 0 {
                     break;
                 }
-                for e in decoder.feed(&chunk[..n]) {
-                    stats.observe(&e);
-                    acq.event(&e);
-                }
-                feed_monitor(&mut monitor, &mut acq);
+                self.feed(&chunk[..n], false);
             }
         }
         tracing::info!(
             bytes = total,
-            curves = acq.scan().curves.len(),
+            curves = self.acq.scan().curves.len(),
             "resumed: the capture so far is decoded"
         );
-        if let Some(l) = &mut live {
-            for c in &acq.scan().curves {
-                l.post(c, None, snapshot(&acq, &stats));
+        if let Some(l) = &mut self.live {
+            for c in &self.acq.scan().curves {
+                l.post(c, None, snapshot(&self.acq, &self.stats));
             }
         }
+        Ok(())
     }
-    let mut end = EndReason::Shutdown;
-    let mut deadline: Option<tokio::time::Instant> = None;
-    let mut tick = tokio::time::interval_at(
-        tokio::time::Instant::now() + STATS_LOG_INTERVAL,
-        STATS_LOG_INTERVAL,
-    );
-    let mut logged = LinkStats::default();
-    loop {
-        let ev = tokio::select! {
-            ev = src.events.recv() => ev,
-            _ = tick.tick() => {
-                if stats != logged {
-                    log_stats("link", &stats);
-                    logged = stats.clone();
-                }
-                continue;
-            }
-            _ = shutdown.triggered(), if deadline.is_none() => {
-                tracing::info!("shutdown requested: draining the source");
-                deadline = Some(tokio::time::Instant::now() + SHUTDOWN_GRACE);
-                continue;
-            }
-            _ = sleep_until(deadline), if deadline.is_some() => {
-                tracing::warn!("source did not stop in time; finishing without it");
-                break;
-            }
-        };
-        match ev {
-            Some(SourceEvent::Bytes(bytes)) => {
-                stats.bytes += bytes.len() as u64;
-                if let Some(p) = &progress {
-                    p.inc(bytes.len() as u64);
-                }
-                for e in decoder.feed(&bytes) {
-                    stats.observe(&e);
-                    if let Some(Update::CurveEnded(i) | Update::CurveUpdated(i)) = acq.event(&e) {
-                        post(&mut live, &acq, i, &stats);
+
+    /// Streams the source's events until it ends, the channel closes, or a shutdown's grace
+    /// period runs out; logs the link statistics every [`STATS_LOG_INTERVAL`] they changed.
+    async fn stream(
+        &mut self,
+        src: &mut source::SourceHandle,
+        shutdown: &Shutdown,
+        progress: Option<&indicatif::ProgressBar>,
+    ) -> EndReason {
+        let mut deadline: Option<tokio::time::Instant> = None;
+        let mut tick = tokio::time::interval_at(
+            tokio::time::Instant::now() + STATS_LOG_INTERVAL,
+            STATS_LOG_INTERVAL,
+        );
+        let mut logged = LinkStats::default();
+        loop {
+            let ev = tokio::select! {
+                ev = src.events.recv() => ev,
+                _ = tick.tick() => {
+                    if self.stats != logged {
+                        log_stats("link", &self.stats);
+                        logged = self.stats.clone();
                     }
+                    continue;
                 }
-                feed_monitor(&mut monitor, &mut acq);
+                _ = shutdown.triggered(), if deadline.is_none() => {
+                    tracing::info!("shutdown requested: draining the source");
+                    deadline = Some(tokio::time::Instant::now() + SHUTDOWN_GRACE);
+                    continue;
+                }
+                _ = sleep_until(deadline), if deadline.is_some() => {
+                    tracing::warn!("source did not stop in time; finishing without it");
+                    return EndReason::Shutdown;
+                }
+            };
+            match ev {
+                Some(SourceEvent::Bytes(bytes)) => {
+                    self.stats.bytes += bytes.len() as u64;
+                    if let Some(p) = progress {
+                        p.inc(bytes.len() as u64);
+                    }
+                    self.feed(&bytes, true);
+                }
+                Some(SourceEvent::Connected { .. }) => self.stats.connects += 1,
+                Some(SourceEvent::Disconnected { .. }) => self.stats.disconnects += 1,
+                Some(SourceEvent::End { reason }) => return reason,
+                None => return EndReason::Shutdown,
             }
-            Some(SourceEvent::Connected { .. }) => stats.connects += 1,
-            Some(SourceEvent::Disconnected { .. }) => stats.disconnects += 1,
-            Some(SourceEvent::End { reason }) => {
-                end = reason;
-                break;
-            }
-            None => break,
         }
     }
-    drop(src.events); // a source still blocked on send sees the channel closed and stops
-                      // Let the source thread finish its final fsync; a thread blocked reading stdin is left.
+
+    /// The final outputs: the monitor and the live worker finish (its last reconstruction is
+    /// the final one, the same bits a fresh one would give, when it saw every curve),
+    /// `scan.json`, `network.glb` and `report.json` are written.
+    fn finish(
+        self,
+        settings: &Settings,
+        out_dir: &Path,
+        end: EndReason,
+        description: &str,
+        started: Instant,
+    ) -> Result<(Report, PathBuf), SessionError> {
+        let monitor_report = self.monitor.map(|mut m| {
+            m.finish();
+            m.report
+        });
+        let live = self.live.map(|l| l.finish());
+        let scan = self.acq.finish();
+        let scan_path = out_dir.join(SCAN_FILE);
+        crate::atomic::write_json(&scan_path, &scan, false).map_err(OutputError::at(&scan_path))?;
+        let (products, mut live_report) = match live {
+            Some(crate::live::LiveOutcome {
+                report,
+                products: Some(p),
+                curves,
+            }) if curves == scan.curves.len() => (p, Some(report)),
+            other => (
+                Pipeline::new().run(&scan.curves, &settings.network, settings.surface.as_ref()),
+                other.map(|o| o.report),
+            ),
+        };
+        products.write_glb(out_dir)?;
+        if let Some(l) = &mut live_report {
+            crate::memory::release_free_memory();
+            (l.rss_mb, l.peak_rss_mb) = crate::memory::rss_mb();
+        }
+        let mut report = Report::assemble(
+            Progress {
+                source: description,
+                ended: end.name(),
+                started,
+                link: &self.stats,
+                curves: &scan.curves,
+                counts: &scan.counts,
+                warnings: &scan.warnings,
+            },
+            &products,
+        );
+        report.live = live_report;
+        report.monitor = monitor_report;
+        let report_path = out_dir.join(REPORT_FILE);
+        report
+            .write(&report_path)
+            .map_err(OutputError::at(&report_path))?;
+        Ok((report, report_path))
+    }
+}
+
+/// Stops the source: the channel is closed (a source still blocked on send sees it and
+/// stops) and its thread is given a second to finish its final fsync; a thread blocked
+/// reading stdin is left.
+async fn stop_source(src: source::SourceHandle) {
+    let source::SourceHandle { events, thread } = src;
+    drop(events);
     let join_deadline = Instant::now() + Duration::from_secs(1);
-    while !src.thread.is_finished() && Instant::now() < join_deadline {
+    while !thread.is_finished() && Instant::now() < join_deadline {
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
-    if src.thread.is_finished() {
-        let _ = src.thread.join();
+    if thread.is_finished() {
+        let _ = thread.join();
     }
-    if decoder.buffered() > 0 {
-        tracing::debug!(bytes = decoder.buffered(), "stream ended inside a frame");
-    }
-    if let Some(p) = progress {
-        p.finish_and_clear();
-    }
-    log_stats("session ended", &stats);
-    // The live worker brings in what is pending and stops; its last reconstruction is the
-    // final one (the same bits a fresh one would give) when it saw every curve.
-    let monitor_report = monitor.map(|mut m| {
-        m.finish();
-        m.report
-    });
-    let live = live.map(|l| l.finish());
-    let scan = acq.finish();
-    let scan_path = out_dir.join(SCAN_FILE);
-    crate::atomic::write_json(&scan_path, &scan, false).map_err(output_err(&scan_path))?;
-    let (products, mut live_report) = match live {
-        Some(crate::live::LiveOutcome {
-            report,
-            products: Some(p),
-            curves,
-        }) if curves == scan.curves.len() => (p, Some(report)),
-        other => (
-            Pipeline::new().run(&scan.curves, &options.network, options.surface.as_ref()),
-            other.map(|o| o.report),
-        ),
-    };
-    products.write_glb(out_dir)?;
-    if let Some(l) = &mut live_report {
-        crate::memory::release_free_memory();
-        (l.rss_mb, l.peak_rss_mb) = crate::memory::rss_mb();
-    }
-    let mut report = Report::assemble(
-        Progress {
-            source: &description,
-            ended: end.name(),
-            started,
-            link: &stats,
-            curves: &scan.curves,
-            counts: &scan.counts,
-            warnings: &scan.warnings,
-        },
-        &products,
-    );
-    report.live = live_report;
-    report.monitor = monitor_report;
-    let report_path = out_dir.join(REPORT_FILE);
-    report
-        .write(&report_path)
-        .map_err(output_err(&report_path))?;
-    if end == EndReason::CaptureFailed {
-        return Err(
-            output_err(&capture_path.clone().unwrap_or_default())(std::io::Error::other(
-                "appending to the capture failed",
-            ))
-            .into(),
-        );
-    }
-    Ok(Outcome {
-        report,
-        report_path,
-        capture_path,
-    })
 }
 
 /// Hands acquisition's sensor-array epochs to the monitor (if any), and closes the epochs
 /// acquisition has completed.
-fn feed_monitor(monitor: &mut Option<crate::monitor::run::Monitor>, acq: &mut Acquisition) {
+fn feed_monitor(monitor: &mut Option<Monitor>, acq: &mut Acquisition) {
     if let Some(m) = monitor {
         for e in acq.take_array() {
             m.feed(&e);
@@ -430,7 +531,12 @@ fn replay_progress(spec: &SourceSpec) -> Option<indicatif::ProgressBar> {
 }
 
 /// Sends curve `index` (just ended or changed) to the live worker.
-fn post(live: &mut Option<crate::live::Live>, acq: &Acquisition, index: usize, stats: &LinkStats) {
+fn post_curve(
+    live: &mut Option<crate::live::Live>,
+    acq: &Acquisition,
+    index: usize,
+    stats: &LinkStats,
+) {
     let Some(live) = live else { return };
     if let Some(c) = acq.scan().curves.iter().find(|c| c.index == index) {
         live.post(c, Some(Instant::now()), snapshot(acq, stats));
