@@ -605,7 +605,62 @@ impl Monitor {
         self.reference = ReferenceBuilder::new();
     }
 
+    /// Closes the epoch ending at `t` with the sensors' orientations of its `window`: the
+    /// shape is reconstructed, measured against the reference, the alarms updated, and the
+    /// outputs written (a metrics line, every `latest_every` epochs `latest.glb`).
     fn close(&mut self, t: f64, window: BTreeMap<u16, (UnitQuaternion<f64>, u8)>) {
+        let quiet = self.begin_epoch(t);
+        let usable = self.usable_orientations(&window);
+        let shape = match self.rec.run(
+            &self.cfg.layout,
+            &usable,
+            &EpochParams {
+                regression: self.cfg.regression,
+                ..Default::default()
+            },
+        ) {
+            Ok(s) => s,
+            Err(e) => return self.failed(t, e.to_string()),
+        };
+        let (missing, saturated, disturbed) = self.health(t, &shape.missing, &window, quiet);
+        for w in &shape.left_out {
+            tracing::debug!("monitor: t = {t:.2} s: {w}");
+        }
+        let Some(now) = Shape::anchored(&shape.positions, self.cfg.anchor) else {
+            let why = format!(
+                "the anchor node {} is on no curve with a sensor",
+                self.cfg.anchor
+            );
+            return self.failed(t, why);
+        };
+        if let Some((since, _)) = self.failing.take() {
+            tracing::info!("monitor: epochs reconstructed again from t = {t:.2} s (failing since {since:.2} s)");
+        }
+        let metrics = self.measure(&now);
+        let raised = self.update_alarms(t, &metrics, quiet);
+        let line = format!(
+            "{t:.3},{:.6},{:.6},{:.6},{},{saturated},{disturbed},{}\n",
+            metrics.max_displacement,
+            metrics.mean_displacement,
+            metrics.max_curvature_change,
+            missing,
+            raised.join(";")
+        );
+        self.report.last = Some(metrics);
+        self.expose(t, &metrics, missing, saturated, disturbed);
+        if quiet {
+            return;
+        }
+        self.write_metrics_line(&line);
+        if self.report.epochs % self.cfg.latest_every as u64 == 0 {
+            self.write_latest(t, &shape.positions);
+        }
+    }
+
+    /// Counts the epoch; whether it is a quiet one (a resumed session feeding again what its
+    /// files already hold); restores the alarms of a resumed session at its first new epoch;
+    /// notes the memory after the first hour.
+    fn begin_epoch(&mut self, t: f64) -> bool {
         self.report.epochs += 1;
         // Written as `{t:.3}` by the session before.
         let quiet = self.quiet_until.is_some_and(|q| t <= q + 5e-4);
@@ -620,8 +675,17 @@ impl Monitor {
             crate::memory::release_free_memory();
             self.report.rss_mb_after_first_hour = crate::memory::rss_mb().0;
         }
-        // Saturated and magnetically disturbed sensors are left out like missing ones (their
-        // curve is interpolated across them): a disturbed magnetometer turns the heading.
+        quiet
+    }
+
+    /// The orientations of the sensors whose window is usable, in the structure's frame,
+    /// smoothed across epochs when configured. Saturated and magnetically disturbed sensors
+    /// are left out like missing ones (their curve is interpolated across them): a disturbed
+    /// magnetometer turns the heading.
+    fn usable_orientations(
+        &mut self,
+        window: &BTreeMap<u16, (UnitQuaternion<f64>, u8)>,
+    ) -> BTreeMap<u16, UnitQuaternion<f64>> {
         let unusable = flags::INVALID | flags::SATURATED | flags::MAG_DISTURBED;
         let mut usable: BTreeMap<u16, UnitQuaternion<f64>> = window
             .iter()
@@ -638,22 +702,21 @@ impl Monitor {
                 self.smoothed.insert(*s, *q);
             }
         }
-        let shape = match self.rec.run(
-            &self.cfg.layout,
-            &usable,
-            &EpochParams {
-                regression: self.cfg.regression,
-                ..Default::default()
-            },
-        ) {
-            Ok(s) => s,
-            Err(e) => return self.failed(t, e.to_string()),
-        };
-        // Each sensor of the layout left out is counted once: saturated, else disturbed, else
-        // missing (no samples, or no orientation from them).
+        usable
+    }
+
+    /// Each sensor of the layout left out, counted once: saturated, else disturbed, else
+    /// missing (no samples, or no orientation from them); the changes are reported.
+    fn health(
+        &mut self,
+        t: f64,
+        left_out: &[u16],
+        window: &BTreeMap<u16, (UnitQuaternion<f64>, u8)>,
+        quiet: bool,
+    ) -> (usize, usize, usize) {
         let (mut missing, mut saturated, mut disturbed) = (0, 0, 0);
         let mut health = BTreeMap::new();
-        for s in &shape.missing {
+        for s in left_out {
             let state = match window.get(s).map(|(_, f)| *f) {
                 Some(f) if f & flags::SATURATED != 0 => {
                     saturated += 1;
@@ -671,37 +734,35 @@ impl Monitor {
             health.insert(*s, state);
         }
         self.health_changes(t, health, quiet);
-        for w in &shape.left_out {
-            tracing::debug!("monitor: t = {t:.2} s: {w}");
-        }
-        let Some(now) = Shape::anchored(&shape.positions, self.cfg.anchor) else {
-            let why = format!(
-                "the anchor node {} is on no curve with a sensor",
-                self.cfg.anchor
-            );
-            return self.failed(t, why);
-        };
-        if let Some((since, _)) = self.failing.take() {
-            tracing::info!("monitor: epochs reconstructed again from t = {t:.2} s (failing since {since:.2} s)");
-        }
-        let metrics = match &self.fixed {
-            Some(r) => compare(r, &now),
+        (missing, saturated, disturbed)
+    }
+
+    /// The metrics of shape `now` against the reference (the fixed one, or the mean of the
+    /// first epochs, which `now` joins while it is being built).
+    fn measure(&mut self, now: &Shape) -> Metrics {
+        match &self.fixed {
+            Some(r) => compare(r, now),
             None => {
-                if self.reference.add(&now) {
+                if self.reference.add(now) {
                     self.report.reference_epochs = self.reference.count();
                 }
                 let r = self.reference.reference().expect("an epoch was added");
-                let m = compare(&r, &now);
+                let m = compare(&r, now);
                 if self.reference.count() >= self.reference_epochs {
                     self.keep_reference(r);
                 }
                 m
             }
-        };
+        }
+    }
+
+    /// Feeds the epoch's metrics to the alarms: transitions are logged and written to
+    /// `events.log` (not in a quiet epoch); the labels of the alarms raised.
+    fn update_alarms(&mut self, t: f64, metrics: &Metrics, quiet: bool) -> Vec<String> {
         let mut raised = Vec::new();
         let mut lines = Vec::new();
         for a in &mut self.alarms {
-            let value = a.metric.of(&metrics);
+            let value = a.metric.of(metrics);
             let tr = a.update(value);
             if tr == Some(Transition::Raised) {
                 self.report.alarms_raised += 1;
@@ -730,19 +791,12 @@ impl Monitor {
         for l in lines {
             self.event(&l);
         }
-        let line = format!(
-            "{t:.3},{:.6},{:.6},{:.6},{},{saturated},{disturbed},{}\n",
-            metrics.max_displacement,
-            metrics.mean_displacement,
-            metrics.max_curvature_change,
-            missing,
-            raised.join(";")
-        );
-        self.report.last = Some(metrics);
-        self.expose(t, &metrics, missing, saturated, disturbed);
-        if quiet {
-            return;
-        }
+        raised
+    }
+
+    /// Appends `line` to `metrics.csv`, rotated past its size (opened again after a failed
+    /// rotation or write).
+    fn write_metrics_line(&mut self, line: &str) {
         let written = if self.csv_bytes + line.len() as u64 > self.cfg.metrics_max_bytes {
             self.rotate()
         } else if self.csv.is_none() {
@@ -760,34 +814,35 @@ impl Monitor {
             Err(_) => self.csv = None,
         }
         self.output(METRICS_FILE, written.map_err(|e| e.to_string()));
-        if self.report.epochs % self.cfg.latest_every as u64 == 0 {
-            let surface = self.cfg.surface.as_ref().and_then(|sp| {
-                let (result, ms) =
-                    crate::pipeline::surface_of(&shape.positions, sp, &mut self.surfacer);
-                match result {
-                    Ok(s) => {
-                        self.report.surfaces += 1;
-                        self.report.surface_ms = Some(ms);
-                        Some(s)
-                    }
-                    Err(e) => {
-                        self.report.surfaces_failed += 1;
-                        self.surface_error = Some(format!("t = {t:.2} s: {e}"));
-                        None
-                    }
+    }
+
+    /// Replaces `latest.glb` with the shape (and its surface when configured).
+    fn write_latest(&mut self, t: f64, positions: &sfs_geometry::network::poisson::Positions) {
+        let surface = self.cfg.surface.as_ref().and_then(|sp| {
+            let (result, ms) = crate::pipeline::surface_of(positions, sp, &mut self.surfacer);
+            match result {
+                Ok(s) => {
+                    self.report.surfaces += 1;
+                    self.report.surface_ms = Some(ms);
+                    Some(s)
                 }
-            });
-            let glb = crate::pipeline::glb(&shape.positions, surface.as_ref());
-            if let Some(e) = self.surface_error.take() {
-                self.output("the surface", Err(e));
-            } else if self.cfg.surface.is_some() {
-                self.output("the surface", Ok(()));
+                Err(e) => {
+                    self.report.surfaces_failed += 1;
+                    self.surface_error = Some(format!("t = {t:.2} s: {e}"));
+                    None
+                }
             }
-            let path = self.dir.join(LATEST_FILE);
-            let written = glb
-                .map_err(|e| e.to_string())
-                .and_then(|b| crate::atomic::write_atomic(&path, &b).map_err(|e| e.to_string()));
-            self.output(LATEST_FILE, written);
+        });
+        let glb = crate::pipeline::glb(positions, surface.as_ref());
+        if let Some(e) = self.surface_error.take() {
+            self.output("the surface", Err(e));
+        } else if self.cfg.surface.is_some() {
+            self.output("the surface", Ok(()));
         }
+        let path = self.dir.join(LATEST_FILE);
+        let written = glb
+            .map_err(|e| e.to_string())
+            .and_then(|b| crate::atomic::write_atomic(&path, &b).map_err(|e| e.to_string()));
+        self.output(LATEST_FILE, written);
     }
 }
