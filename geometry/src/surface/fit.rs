@@ -673,78 +673,36 @@ impl Surfacer {
     }
 }
 
+/// The surface in three stages, precompute then solve (as libigl's
+/// `min_quad_with_fixed_precompute` / `_solve`): the tessellation of every cycle
+/// ([`tessellation`]); per pass, the weights, the normal matrix and its factorisation
+/// ([`System::precompute`], symbolic factorisations reused from the caches), then the
+/// propagation of positions and normals ([`System::propagate`]) and the fit for the method;
+/// last the output mesh ([`output`]).
 fn surface_with(
     net: &NetworkSegments,
     p: &SurfaceParams,
     pattern: &mut CachedPattern,
     soft_pattern: &mut CachedPattern,
 ) -> Result<Surfaced, SurfaceError> {
-    let net = &net.cleaned();
-    let cyc = cycles(net);
-    let mut problems = cyc.problems.clone();
-    let edge = p
-        .edge
-        .unwrap_or_else(|| default_edge(net).max(budget_edge(net, &cyc, p.max_vertices)));
-    // Boundary vertices about half an edge apart at least: a network sampled far more finely
-    // than the surface would otherwise fill each patch's rim with a band of graded triangles.
-    let decimated = net.decimated(BOUNDARY_STEP * edge);
-    let net = &decimated;
-    let t0 = std::time::Instant::now();
-    let (mut asm, mut skipped) = assemble(net, &cyc, edge, &mut problems);
-    // The budget's area is an estimate (a developed patch can take more room in the plane
-    // than on the surface): over it by a quarter, tessellate once more at the edge the count
-    // asks for.
-    let nv = asm.positions.len() as f64;
-    if p.edge.is_none() && nv > 1.25 * p.max_vertices as f64 {
-        let edge = edge * (nv / p.max_vertices as f64).sqrt();
-        tracing::debug!("surface: {nv} vertices over the budget; edge {edge:.4}");
-        problems = cyc.problems.clone();
-        (asm, skipped) = assemble(net, &cyc, edge, &mut problems);
-    }
+    let Tessellation {
+        mut asm,
+        skipped,
+        cycles: cyc,
+        mut problems,
+        edge,
+    } = tessellation(net, p);
     let lap = |what: &str, t: &mut std::time::Instant| {
         tracing::debug!("surface: {what} {:.1} ms", t.elapsed().as_secs_f64() * 1e3);
         *t = std::time::Instant::now();
     };
-    let mut tt = t0;
-    lap("cycles + tessellation + planar weights", &mut tt);
+    let mut tt = std::time::Instant::now();
     if asm.triangles.is_empty() {
         return Err(SurfaceError::NoPatch(problems));
     }
     let nv = asm.positions.len();
     let c = asm.constrained;
-    // Rows in the energy: vertices whose ring is closed (every edge in two triangles).
-    let mut edges: Vec<(usize, usize)> = Vec::with_capacity(3 * asm.triangles.len());
-    for t in &asm.triangles {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            edges.push((a.min(b), a.max(b)));
-        }
-    }
-    edges.sort_unstable();
-    let mut rows = vec![true; nv];
-    let mut used = vec![false; nv];
-    for t in &asm.triangles {
-        for &i in t {
-            used[i] = true;
-        }
-    }
-    let mut k = 0;
-    while k < edges.len() {
-        let mut m = k + 1;
-        while m < edges.len() && edges[m] == edges[k] {
-            m += 1;
-        }
-        if m - k != 2 {
-            rows[edges[k].0] = false;
-            rows[edges[k].1] = false;
-        }
-        k = m;
-    }
-    for i in 0..nv {
-        if !used[i] {
-            rows[i] = false;
-        }
-    }
+    let rows = energy_rows(&asm);
     let zero = vec![Vector3::zeros(); nv];
     let mut nstar = asm.normals.clone();
     let data: Vec<Vector3<f64>> = asm.positions[..c].to_vec();
@@ -757,50 +715,11 @@ fn surface_with(
         lap("weights", &mut tt);
         let q = normal_matrix(&asm.lc, &asm.mass, &rows);
         lap("normal matrix", &mut tt);
-        // Soft constraints (normal control only): one factorisation of the whole system serves
-        // the propagations and the fit, the normals constrained as softly as the positions.
-        let soft = match (p.soft, p.method) {
-            (Some(omega), Method::NormalControl) => {
-                Some(SoftSolver::with_pattern(&q, c, omega, soft_pattern)?)
-            }
-            _ => None,
-        };
-        let solver = match soft {
-            Some(_) => None,
-            None => Some(FreeSolver::with_pattern(&q, c, pattern)?),
-        };
+        let system = System::precompute(&q, c, p, pattern, soft_pattern)?;
         lap("factorisation", &mut tt);
         // 1. Biharmonic positions (the first pass, and the comparison methods) and normals.
-        nstar.clone_from(&asm.normals);
-        match (&solver, &soft) {
-            (Some(solver), _) => {
-                if pass == 0 || p.method != Method::NormalControl {
-                    solver.solve_pair(&q, &mut asm.positions, &mut nstar);
-                } else {
-                    solver.solve(&q, &zero, &mut nstar);
-                }
-            }
-            (None, Some(soft)) => {
-                if pass == 0 {
-                    asm.positions[..c].copy_from_slice(&data);
-                    soft.solve_pair(&mut asm.positions, &mut nstar);
-                } else {
-                    soft.solve(None, &mut nstar);
-                }
-                // The curves keep their measured normals (the free ones are propagated).
-                nstar[..c].copy_from_slice(&asm.normals[..c]);
-            }
-            (None, None) => unreachable!("one of the two solvers is made"),
-        }
-        for (i, n) in nstar.iter_mut().enumerate() {
-            *n = n.try_normalize(1e-12).unwrap_or_else(|| {
-                if i < c {
-                    asm.normals[i]
-                } else {
-                    Vector3::z()
-                }
-            });
-        }
+        system.propagate(&q, pass, p.method, &mut asm, &mut nstar, &data, &zero);
+        // 2. The fit.
         match p.method {
             Method::Biharmonic => {}
             Method::Triharmonic => {
@@ -835,22 +754,217 @@ fn surface_with(
                         b[i] += tk * w;
                     }
                 }
-                match (&solver, &soft) {
-                    (_, Some(soft)) => {
-                        asm.positions[..c].copy_from_slice(&data);
-                        soft.solve(Some(&b), &mut asm.positions);
-                    }
-                    (Some(solver), None) => solver.solve(&q, &b, &mut asm.positions),
-                    (None, None) => unreachable!("one of the two solvers is made"),
-                }
+                system.fit(&q, &b, &mut asm.positions, &data);
             }
         }
     }
     lap("solves", &mut tt);
-    // Output: drop triangles that came out degenerate in 3D (reported; the threshold, a
-    // millionth of a target triangle, keeps them non-degenerate once written in f32), and
-    // vertex normals.
+    let (triangles, normals) = output(&asm, &nstar, edge, &mut problems)?;
+    Ok(Surfaced {
+        positions: asm.positions,
+        normals,
+        propagated: nstar,
+        triangles,
+        constrained: asm.constrained,
+        cycles: cyc,
+        skipped,
+        problems,
+    })
+}
+
+/// The tessellated cycles of a network, before any solve.
+struct Tessellation {
+    asm: Assembly,
+    skipped: usize,
+    cycles: Cycles,
+    problems: Vec<String>,
+    /// The target edge, m.
+    edge: f64,
+}
+
+/// The cycles of the cleaned network tessellated at the target edge (the configured one, or
+/// the default within the vertex budget), their rims decimated to half an edge.
+fn tessellation(net: &NetworkSegments, p: &SurfaceParams) -> Tessellation {
+    let net = &net.cleaned();
+    let cyc = cycles(net);
+    let mut problems = cyc.problems.clone();
+    let edge = p
+        .edge
+        .unwrap_or_else(|| default_edge(net).max(budget_edge(net, &cyc, p.max_vertices)));
+    // Boundary vertices about half an edge apart at least: a network sampled far more finely
+    // than the surface would otherwise fill each patch's rim with a band of graded triangles.
+    let decimated = net.decimated(BOUNDARY_STEP * edge);
+    let net = &decimated;
+    let t0 = std::time::Instant::now();
+    let (mut asm, mut skipped) = assemble(net, &cyc, edge, &mut problems);
+    // The budget's area is an estimate (a developed patch can take more room in the plane
+    // than on the surface): over it by a quarter, tessellate once more at the edge the count
+    // asks for.
+    let nv = asm.positions.len() as f64;
+    if p.edge.is_none() && nv > 1.25 * p.max_vertices as f64 {
+        let edge = edge * (nv / p.max_vertices as f64).sqrt();
+        tracing::debug!("surface: {nv} vertices over the budget; edge {edge:.4}");
+        problems = cyc.problems.clone();
+        (asm, skipped) = assemble(net, &cyc, edge, &mut problems);
+    }
+    tracing::debug!(
+        "surface: cycles + tessellation + planar weights {:.1} ms",
+        t0.elapsed().as_secs_f64() * 1e3
+    );
+    Tessellation {
+        asm,
+        skipped,
+        cycles: cyc,
+        problems,
+        edge,
+    }
+}
+
+/// The vertices that are rows of the energy: those whose ring is closed (every edge around
+/// them in two triangles). `#V` flags.
+fn energy_rows(asm: &Assembly) -> Vec<bool> {
+    let nv = asm.positions.len();
+    let mut edges: Vec<(usize, usize)> = Vec::with_capacity(3 * asm.triangles.len());
+    for t in &asm.triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            edges.push((a.min(b), a.max(b)));
+        }
+    }
+    edges.sort_unstable();
+    let mut rows = vec![true; nv];
+    let mut used = vec![false; nv];
+    for t in &asm.triangles {
+        for &i in t {
+            used[i] = true;
+        }
+    }
+    let mut k = 0;
+    while k < edges.len() {
+        let mut m = k + 1;
+        while m < edges.len() && edges[m] == edges[k] {
+            m += 1;
+        }
+        if m - k != 2 {
+            rows[edges[k].0] = false;
+            rows[edges[k].1] = false;
+        }
+        k = m;
+    }
+    for i in 0..nv {
+        if !used[i] {
+            rows[i] = false;
+        }
+    }
+    rows
+}
+
+/// One pass's factorised system: the free block of the normal matrix (hard constraints), or
+/// with soft constraints the whole system, whose one factorisation serves the propagations
+/// and the fit (normal control only).
+enum System {
+    Free(FreeSolver),
+    Soft(SoftSolver),
+}
+
+impl System {
+    /// Factorises the normal matrix `q` (`#V` by `#V`, the first `c` vertices constrained),
+    /// reusing the symbolic factorisations in the caches.
+    fn precompute(
+        q: &SparseRows,
+        c: usize,
+        p: &SurfaceParams,
+        pattern: &mut CachedPattern,
+        soft_pattern: &mut CachedPattern,
+    ) -> Result<System, SolveError> {
+        Ok(match (p.soft, p.method) {
+            (Some(omega), Method::NormalControl) => {
+                System::Soft(SoftSolver::with_pattern(q, c, omega, soft_pattern)?)
+            }
+            _ => System::Free(FreeSolver::with_pattern(q, c, pattern)?),
+        })
+    }
+
+    /// The biharmonic propagation of the normals from the curves (`nstar`, `#V` unit
+    /// normals on return), and of the positions in the first pass (every pass for the
+    /// comparison methods).
+    #[allow(clippy::too_many_arguments)]
+    fn propagate(
+        &self,
+        q: &SparseRows,
+        pass: usize,
+        method: Method,
+        asm: &mut Assembly,
+        nstar: &mut [Vector3<f64>],
+        data: &[Vector3<f64>],
+        zero: &[Vector3<f64>],
+    ) {
+        let c = asm.constrained;
+        nstar.clone_from_slice(&asm.normals);
+        match self {
+            System::Free(solver) => {
+                if pass == 0 || method != Method::NormalControl {
+                    solver.solve_pair(q, &mut asm.positions, nstar);
+                } else {
+                    solver.solve(q, zero, nstar);
+                }
+            }
+            System::Soft(soft) => {
+                if pass == 0 {
+                    asm.positions[..c].copy_from_slice(data);
+                    soft.solve_pair(&mut asm.positions, nstar);
+                } else {
+                    soft.solve(None, nstar);
+                }
+                // The curves keep their measured normals (the free ones are propagated).
+                nstar[..c].copy_from_slice(&asm.normals[..c]);
+            }
+        }
+        for (i, n) in nstar.iter_mut().enumerate() {
+            *n = n.try_normalize(1e-12).unwrap_or_else(|| {
+                if i < c {
+                    asm.normals[i]
+                } else {
+                    Vector3::z()
+                }
+            });
+        }
+    }
+
+    /// The positions that fit the target `b` (`#V` right-hand sides), the curves' positions
+    /// `data` held (hard) or pulled at (soft).
+    fn fit(
+        &self,
+        q: &SparseRows,
+        b: &[Vector3<f64>],
+        positions: &mut [Vector3<f64>],
+        data: &[Vector3<f64>],
+    ) {
+        match self {
+            System::Soft(soft) => {
+                positions[..data.len()].copy_from_slice(data);
+                soft.solve(Some(b), positions);
+            }
+            System::Free(solver) => solver.solve(q, b, positions),
+        }
+    }
+}
+
+/// `#F` triangles and `#V` unit vertex normals.
+type TrianglesAndNormals = (Vec<[u32; 3]>, Vec<Vector3<f64>>);
+
+/// The output mesh: triangles that came out degenerate in 3D are dropped (reported; the
+/// threshold, a millionth of a target triangle, keeps them non-degenerate once written in
+/// f32), vertex normals from the faces (the propagated normal where they cancel). An error
+/// when a vertex is not finite.
+fn output(
+    asm: &Assembly,
+    nstar: &[Vector3<f64>],
+    edge: f64,
+    problems: &mut Vec<String>,
+) -> Result<TrianglesAndNormals, SurfaceError> {
     let scale = edge * edge;
+    let nv = asm.positions.len();
     let mut triangles = Vec::with_capacity(asm.triangles.len());
     let mut vn = vec![Vector3::zeros(); nv];
     let mut degenerate = 0;
@@ -876,7 +990,7 @@ fn surface_with(
     }
     let normals: Vec<Vector3<f64>> = vn
         .iter()
-        .zip(&nstar)
+        .zip(nstar)
         .map(|(v, s)| v.try_normalize(1e-300).unwrap_or(*s))
         .collect();
     if let Some(i) = asm
@@ -888,16 +1002,7 @@ fn surface_with(
             "vertex {i} is not finite"
         ))));
     }
-    Ok(Surfaced {
-        positions: asm.positions,
-        normals,
-        propagated: nstar,
-        triangles,
-        constrained: c,
-        cycles: cyc,
-        skipped,
-        problems,
-    })
+    Ok((triangles, normals))
 }
 
 #[cfg(test)]
