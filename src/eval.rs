@@ -172,14 +172,14 @@ fn distances(d: &[f64], diag: f64) -> Distances {
 }
 
 /// Why an evaluation is impossible.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum EvalError {
     #[error("the glb holds no curve point")]
     NoPoints,
     #[error("the truth holds no curve")]
     NoTruth,
     #[error("the truth surface cannot be rebuilt: {0}")]
-    Surface(String),
+    Surface(#[from] crate::simulate::mesh::MeshError),
 }
 
 /// Evaluates a reconstruction against the truth.

@@ -393,24 +393,31 @@ pub struct ReadNetwork {
     pub surface: Option<SurfaceMesh>,
 }
 
+/// Why a glb cannot be read back.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    #[error("not a valid glb: {0}")]
+    Glb(#[from] gltf::Error),
+    #[error("{0}")]
+    Extras(#[from] serde_json::Error),
+    #[error("node key {0:?} is not an index")]
+    NodeKey(String),
+}
+
 /// Reads what [`network_glb`] writes (nodes named `network` and `surface`).
-pub fn read_glb(bytes: &[u8]) -> Result<ReadNetwork, String> {
-    let g = gltf::Gltf::from_slice(bytes).map_err(|e| format!("not a valid glb: {e}"))?;
+pub fn read_glb(bytes: &[u8]) -> Result<ReadNetwork, ReadError> {
+    let g = gltf::Gltf::from_slice(bytes)?;
     let blob = g.blob.as_deref();
     let mut out = ReadNetwork::default();
     for node in g.nodes() {
         let name = node.name().unwrap_or("");
         if name == "network" {
             if let Some(x) = node.extras() {
-                let v: serde_json::Value =
-                    serde_json::from_str(x.get()).map_err(|e| e.to_string())?;
+                let v: serde_json::Value = serde_json::from_str(x.get())?;
                 if let Some(m) = v.get("nodes").and_then(|n| n.as_object()) {
                     for (k, p) in m {
-                        let a: Vec<f32> =
-                            serde_json::from_value(p.clone()).map_err(|e| e.to_string())?;
-                        let idx: u32 = k
-                            .parse()
-                            .map_err(|_| format!("node key {k:?} is not an index"))?;
+                        let a: Vec<f32> = serde_json::from_value(p.clone())?;
+                        let idx: u32 = k.parse().map_err(|_| ReadError::NodeKey(k.clone()))?;
                         if a.len() == 3 {
                             out.nodes.insert(idx, from_gltf([a[0], a[1], a[2]]));
                         }

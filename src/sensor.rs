@@ -34,6 +34,19 @@ pub struct AxisMap {
     pub m: Matrix3<f64>,
 }
 
+/// Why axis names do not make a mapping.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum AxisError {
+    #[error("expected 3 axis names for T, B, N, got {got}")]
+    Count { got: usize },
+    #[error("{name:?} is not one of x, y, z, -x, -y, -z")]
+    Unknown { name: String },
+    #[error("an axis is used twice")]
+    Repeated,
+    #[error("the mapping is a reflection (left-handed); flip the sign of one axis")]
+    Reflection,
+}
+
 impl AxisMap {
     pub fn identity() -> Self {
         AxisMap {
@@ -42,12 +55,9 @@ impl AxisMap {
     }
 
     /// Parses three signed axis names (`"x"`, `"-y"`, …) for T, B, N. Errors say why.
-    pub fn parse<S: AsRef<str>>(names: &[S]) -> Result<Self, String> {
+    pub fn parse<S: AsRef<str>>(names: &[S]) -> Result<Self, AxisError> {
         if names.len() != 3 {
-            return Err(format!(
-                "expected 3 axis names for T, B, N, got {}",
-                names.len()
-            ));
+            return Err(AxisError::Count { got: names.len() });
         }
         let mut m = Matrix3::<f64>::zeros();
         for (row, name) in names.iter().enumerate() {
@@ -60,16 +70,16 @@ impl AxisMap {
                 "x" => 0,
                 "y" => 1,
                 "z" => 2,
-                _ => return Err(format!("{n:?} is not one of x, y, z, -x, -y, -z")),
+                _ => return Err(AxisError::Unknown { name: n.to_owned() }),
             };
             m[(row, col)] = sign;
         }
         let det = m.determinant();
         if (det - 1.0).abs() > 1e-9 {
             return Err(if det.abs() < 0.5 {
-                "an axis is used twice".into()
+                AxisError::Repeated
             } else {
-                "the mapping is a reflection (left-handed); flip the sign of one axis".into()
+                AxisError::Reflection
             });
         }
         Ok(AxisMap { m })
@@ -178,6 +188,17 @@ pub struct Scales {
     pub wheel_m_per_tick: Option<f64>,
 }
 
+/// Why a HELLO's scales cannot be used: the sensor, the scale and its unit per count.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ScaleError {
+    #[error("{0} scale {1} is not positive")]
+    NotPositive(&'static str, f64),
+    #[error("{0} scale {1} {2} per count is implausible")]
+    Implausible(&'static str, f64, &'static str),
+    #[error("wheel advance {0} m per tick is implausible")]
+    Wheel(f64),
+}
+
 impl Scales {
     pub fn from_hello(h: &device_protocol::Hello) -> Self {
         let wheel = (h.ticks_per_rev > 0 && h.wheel_circumference_um > 0)
@@ -191,41 +212,33 @@ impl Scales {
     }
 
     /// Whether every scale is finite and positive where the device has the sensor.
-    pub fn validate(&self, has_gyro: bool) -> Result<(), String> {
+    pub fn validate(&self, has_gyro: bool) -> Result<(), ScaleError> {
+        use ScaleError::*;
         let ok = |x: f64| x.is_finite() && x > 0.0;
         if !ok(self.acc) {
-            return Err(format!("accelerometer scale {} is not positive", self.acc));
+            return Err(NotPositive("accelerometer", self.acc));
         }
         if !ok(self.mag) {
-            return Err(format!("magnetometer scale {} is not positive", self.mag));
+            return Err(NotPositive("magnetometer", self.mag));
         }
         if has_gyro && !ok(self.gyro) {
-            return Err(format!("gyroscope scale {} is not positive", self.gyro));
+            return Err(NotPositive("gyroscope", self.gyro));
         }
         // A plausible sensor: full scale (32767 counts) between 1/100 and 1000 units of g,
         // µT and rad/s; a wheel advancing at most 10 cm per tick.
         let full = |x: f64| x * 32767.0;
         if !(0.098..=98_000.0).contains(&full(self.acc)) {
-            return Err(format!(
-                "accelerometer scale {} m/s² per count is implausible",
-                self.acc
-            ));
+            return Err(Implausible("accelerometer", self.acc, "m/s²"));
         }
         if !(1.0..=1e6).contains(&full(self.mag)) {
-            return Err(format!(
-                "magnetometer scale {} µT per count is implausible",
-                self.mag
-            ));
+            return Err(Implausible("magnetometer", self.mag, "µT"));
         }
         if has_gyro && !(0.01..=1e4).contains(&full(self.gyro)) {
-            return Err(format!(
-                "gyroscope scale {} rad/s per count is implausible",
-                self.gyro
-            ));
+            return Err(Implausible("gyroscope", self.gyro, "rad/s"));
         }
         if let Some(w) = self.wheel_m_per_tick {
             if !(w.is_finite() && w > 0.0 && w <= 0.1) {
-                return Err(format!("wheel advance {w} m per tick is implausible"));
+                return Err(Wheel(w));
             }
         }
         Ok(())
@@ -301,12 +314,14 @@ mod tests {
     fn axis_maps_are_proper_rotations() {
         assert!(AxisMap::parse(&["x", "y", "z"]).is_ok());
         assert!(AxisMap::parse(&["y", "-x", "z"]).is_ok());
-        assert!(AxisMap::parse(&["y", "x", "z"])
-            .unwrap_err()
-            .contains("reflection"));
-        assert!(AxisMap::parse(&["x", "x", "z"])
-            .unwrap_err()
-            .contains("twice"));
+        assert_eq!(
+            AxisMap::parse(&["y", "x", "z"]).unwrap_err(),
+            AxisError::Reflection
+        );
+        assert_eq!(
+            AxisMap::parse(&["x", "x", "z"]).unwrap_err(),
+            AxisError::Repeated
+        );
         assert!(AxisMap::parse(&["x", "w", "z"]).is_err());
         let m = AxisMap::parse(&["-z", "y", "x"]).unwrap();
         assert_eq!(AxisMap::parse(&m.names()).unwrap(), m);

@@ -109,7 +109,9 @@ impl ConfigFile {
             ));
         }
         let axes = match &c.axes {
-            Some(names) => Some(AxisMap::parse(names).map_err(|e| err("calibration.axes", e))?),
+            Some(names) => {
+                Some(AxisMap::parse(names).map_err(|e| err("calibration.axes", e.to_string()))?)
+            }
             None => None,
         };
         let [r, p, y] = c.mounting_deg.map(f64::to_radians);

@@ -60,7 +60,10 @@ impl ConfigFile {
                 .filter(|p| !p.as_os_str().is_empty())
                 .ok_or_else(|| err("path", format!("required when source.kind = {:?}", s.kind)))
         };
-        let pace: Pace = s.pace.parse().map_err(|e| err("pace", e))?;
+        let pace = s
+            .pace
+            .parse::<Pace>()
+            .map_err(|e| err("pace", e.to_string()))?;
         if s.baud == 0 {
             return Err(err(
                 "baud",

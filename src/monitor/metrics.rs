@@ -147,6 +147,32 @@ impl ReferenceBuilder {
 /// The `format` of a reference file.
 pub const REFERENCE_FORMAT: &str = "sfs-monitor-reference";
 
+/// Why a reference file cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ReferenceError {
+    #[error("{0}")]
+    Json(#[from] serde_json::Error),
+    #[error("format {0:?} is not {REFERENCE_FORMAT:?}")]
+    Format(String),
+    #[error("version {0} is not supported (1)")]
+    Version(u32),
+    #[error("curve {curve}: fewer than two points")]
+    TooFewPoints { curve: usize },
+    #[error("curve {curve}: point {point} is not finite")]
+    NotFinite { curve: usize, point: usize },
+    #[error("curve {curve} is given twice")]
+    Twice { curve: usize },
+    #[error("curve {curve} is not in the layout")]
+    NotInLayout { curve: usize },
+    #[error("curve {curve} of the layout is not in the file")]
+    NotInFile { curve: usize },
+    #[error("curve {curve}: the polyline has no length")]
+    NoLength { curve: usize },
+    /// Anchored at another node than the layout's.
+    #[error("anchored at node {anchor}")]
+    Anchored { anchor: u32 },
+}
+
 /// A reference shape on disk (JSON): per curve of the layout, a polyline from its first node
 /// to its last, in metres, with the anchor node at the origin. A monitoring session writes
 /// the reference it built as `reference.json` in this format; `[monitor] reference_file`
@@ -207,27 +233,31 @@ impl ReferenceFile {
 
     /// Parses and checks a reference file (format, version, finite points, at least two per
     /// curve, each curve once).
-    pub fn parse(text: &str) -> Result<ReferenceFile, String> {
-        let r: ReferenceFile = serde_json::from_str(text).map_err(|e| e.to_string())?;
+    pub fn parse(text: &str) -> Result<ReferenceFile, ReferenceError> {
+        use ReferenceError::*;
+        let r: ReferenceFile = serde_json::from_str(text)?;
         if r.format != REFERENCE_FORMAT {
-            return Err(format!("format {:?} is not {REFERENCE_FORMAT:?}", r.format));
+            return Err(Format(r.format));
         }
         if r.version != 1 {
-            return Err(format!("version {} is not supported (1)", r.version));
+            return Err(Version(r.version));
         }
         for (k, c) in r.curves.iter().enumerate() {
             if c.points.len() < 2 {
-                return Err(format!("curve {}: fewer than two points", c.curve));
+                return Err(TooFewPoints { curve: c.curve });
             }
-            if let Some(j) = c
+            if let Some(point) = c
                 .points
                 .iter()
                 .position(|p| p.iter().any(|x| !x.is_finite()))
             {
-                return Err(format!("curve {}: point {j} is not finite", c.curve));
+                return Err(NotFinite {
+                    curve: c.curve,
+                    point,
+                });
             }
             if r.curves[..k].iter().any(|o| o.curve == c.curve) {
-                return Err(format!("curve {} is given twice", c.curve));
+                return Err(Twice { curve: c.curve });
             }
         }
         Ok(r)
@@ -237,21 +267,22 @@ impl ReferenceFile {
     /// ([`super::epoch::samples`]): a polyline with exactly as many points is taken as it
     /// is; any other is resampled at the same fractions of its arc length as the samples
     /// are of the curve's rest length. Every curve of the layout must be in the file.
-    pub fn shape(&self, layout: &[super::layout::LayoutCurve], step: f64) -> Result<Shape, String> {
+    pub fn shape(
+        &self,
+        layout: &[super::layout::LayoutCurve],
+        step: f64,
+    ) -> Result<Shape, ReferenceError> {
         if let Some(c) = self
             .curves
             .iter()
             .find(|c| !layout.iter().any(|l| l.index == c.curve))
         {
-            return Err(format!("curve {} is not in the layout", c.curve));
+            return Err(ReferenceError::NotInLayout { curve: c.curve });
         }
         let mut curves = Vec::with_capacity(layout.len());
         for l in layout {
             let Some(c) = self.curves.iter().find(|c| c.curve == l.index) else {
-                return Err(format!(
-                    "curve {} of the layout is not in the file",
-                    l.index
-                ));
+                return Err(ReferenceError::NotInFile { curve: l.index });
             };
             let pts: Vec<Vector3<f64>> = c.points.iter().map(|p| Vector3::from(*p)).collect();
             let (x, _, _) = super::epoch::samples(l, step);
@@ -266,7 +297,7 @@ impl ReferenceFile {
             }
             let (total, s0, rest) = (*acc.last().unwrap(), x[0], x.last().unwrap() - x[0]);
             if total <= 0.0 {
-                return Err(format!("curve {}: the polyline has no length", l.index));
+                return Err(ReferenceError::NoLength { curve: l.index });
             }
             let at = |u: f64| {
                 let a = u * total;

@@ -277,7 +277,7 @@ impl Monitor {
                         r.epochs.unwrap_or(0),
                     ))
                 } else {
-                    Err(format!("anchored at node {}", r.anchor))
+                    Err(super::metrics::ReferenceError::Anchored { anchor: r.anchor })
                 }
             })
             .map_err(|e| {
@@ -316,7 +316,7 @@ impl Monitor {
     /// The outcome of writing output `what`: an error is logged when that output starts
     /// failing (not at every epoch: a full disk must not also flood the log), and its
     /// recovery.
-    fn output(&mut self, what: &'static str, r: Result<(), String>) {
+    fn output(&mut self, what: &'static str, r: Result<(), impl std::fmt::Display>) {
         match r {
             Ok(()) => {
                 if self.output_failing.remove(what) {
@@ -349,7 +349,7 @@ impl Monitor {
                     .open(&path)
             })
             .and_then(|mut f| f.write_all(line.as_bytes()).and_then(|_| f.sync_data()));
-        self.output(EVENTS_FILE, written.map_err(|e| e.to_string()));
+        self.output(EVENTS_FILE, written);
     }
 
     /// Feeds one sensor's epoch; windows older than the newest one seen are closed. An epoch
@@ -813,7 +813,7 @@ impl Monitor {
             Ok(()) => self.csv_bytes += line.len() as u64,
             Err(_) => self.csv = None,
         }
-        self.output(METRICS_FILE, written.map_err(|e| e.to_string()));
+        self.output(METRICS_FILE, written);
     }
 
     /// Replaces `latest.glb` with the shape (and its surface when configured).
@@ -837,7 +837,7 @@ impl Monitor {
         if let Some(e) = self.surface_error.take() {
             self.output("the surface", Err(e));
         } else if self.cfg.surface.is_some() {
-            self.output("the surface", Ok(()));
+            self.output("the surface", Ok::<(), String>(()));
         }
         let path = self.dir.join(LATEST_FILE);
         let written = glb

@@ -134,7 +134,7 @@ pub enum SurfaceRef {
 
 impl SurfaceRef {
     /// Rebuilds the surface.
-    pub fn build(&self) -> Result<Surface, String> {
+    pub fn build(&self) -> Result<Surface, super::mesh::MeshError> {
         Ok(match self {
             SurfaceRef::Sphere { center, radius } => Surface::Sphere {
                 center: Vector3::from(*center),
@@ -162,7 +162,7 @@ impl SurfaceRef {
                 translate,
                 flip_normals,
             } => {
-                let mut m = TriMesh::load_obj(path).map_err(|e| e.to_string())?;
+                let mut m = TriMesh::load_obj(path)?;
                 m.transform(*scale, Vector3::from(*translate));
                 if *flip_normals {
                     m.flip();
@@ -387,7 +387,10 @@ fn build_surface(s: &SurfaceToml, base: &Path) -> Result<(Surface, SurfaceRef), 
             ))
         }
     };
-    Ok((r.build().map_err(|e| ("path".to_string(), e))?, r))
+    Ok((
+        r.build().map_err(|e| ("path".to_string(), e.to_string()))?,
+        r,
+    ))
 }
 
 /// A polyline with normals (and the plane it lies in, for exact snapping).

@@ -52,12 +52,34 @@ pub struct Truth {
     pub events: Vec<String>,
 }
 
+/// Why a truth file cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum TruthError {
+    #[error("cannot read {}: {source}", path.display())]
+    Read {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}: {source}", path.display())]
+    Format {
+        path: std::path::PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+}
+
 impl Truth {
     /// Reads a truth file.
-    pub fn load(path: &std::path::Path) -> Result<Truth, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+    pub fn load(path: &std::path::Path) -> Result<Truth, TruthError> {
+        let text = std::fs::read_to_string(path).map_err(|source| TruthError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        serde_json::from_str(&text).map_err(|source| TruthError::Format {
+            path: path.to_owned(),
+            source,
+        })
     }
 }
 

@@ -42,17 +42,22 @@ impl std::fmt::Display for Pace {
     }
 }
 
+/// A pace that is not `fast`, `realtime` or `xN` (N from 1 to 1000).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "unknown pace {0:?}: expected \"fast\", \"realtime\" or \"xN\" (N times real time, 1 to 1000)"
+)]
+pub struct PaceError(pub String);
+
 impl std::str::FromStr for Pace {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = PaceError;
+    fn from_str(s: &str) -> Result<Self, PaceError> {
         match s {
             "fast" => Ok(Pace::Fast),
             "realtime" => Ok(Pace::Realtime),
             _ => match s.strip_prefix('x').map(str::parse::<u16>) {
                 Some(Ok(n)) if (1..=1000).contains(&n) => Ok(Pace::Times(n)),
-                _ => Err(format!(
-                    "unknown pace {s:?}: expected \"fast\", \"realtime\" or \"xN\" (N times real time, 1 to 1000)"
-                )),
+                _ => Err(PaceError(s.to_owned())),
             },
         }
     }
