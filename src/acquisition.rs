@@ -70,6 +70,151 @@ impl Default for AcquisitionConfig {
     }
 }
 
+/// Something acquisition had to bridge, ignore or leave out, with the curve and time where
+/// it has them; its text is its `Display`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum AcquisitionWarning {
+    /// The device rebooted while a curve was open: distance and time are bridged.
+    RebootInCurve { curve: usize, t: f64 },
+    /// A HELLO whose scales cannot be used: samples are ignored until a valid one.
+    UnusableHello {
+        device_id: u32,
+        error: crate::sensor::ScaleError,
+    },
+    /// The device kind changed mid-session.
+    KindChanged { kind: DeviceKind },
+    /// The wheel counter jumped (said once per session; such jumps are ignored).
+    WheelJump { t: f64, step_m: f64 },
+    /// A SEGMENT_LENGTH that is not a positive length.
+    BadSegmentLength { t: f64, segment: u16, length_m: f64 },
+    /// A SEGMENT_LENGTH before any curve.
+    SegmentLengthWithoutCurve { t: f64, segment: u16 },
+    /// A SEGMENT_LENGTH for a segment the last curve does not have.
+    NoSuchSegment {
+        curve: usize,
+        t: f64,
+        segment: u16,
+        segments: usize,
+    },
+    /// A curve with no samples between its start and end.
+    NoSamples { curve: usize, nodes: Vec<u32> },
+    /// The wheel went back over a segment.
+    WheelBack {
+        curve: usize,
+        node: u32,
+        t: f64,
+        back_m: f64,
+        segment: usize,
+        from: u32,
+    },
+    /// The session ended with a curve open.
+    NeverEnded {
+        curve: usize,
+        nodes: Vec<u32>,
+        samples: usize,
+    },
+}
+
+impl AcquisitionWarning {
+    /// A stable name of the kind of problem.
+    pub fn code(&self) -> &'static str {
+        use AcquisitionWarning::*;
+        match self {
+            RebootInCurve { .. } => "reboot_in_curve",
+            UnusableHello { .. } => "unusable_hello",
+            KindChanged { .. } => "device_kind_changed",
+            WheelJump { .. } => "wheel_jump",
+            BadSegmentLength { .. } => "bad_segment_length",
+            SegmentLengthWithoutCurve { .. } => "segment_length_without_curve",
+            NoSuchSegment { .. } => "no_such_segment",
+            NoSamples { .. } => "curve_without_samples",
+            WheelBack { .. } => "wheel_back",
+            NeverEnded { .. } => "curve_never_ended",
+        }
+    }
+
+    /// The curve it names.
+    pub fn curve(&self) -> Option<usize> {
+        use AcquisitionWarning::*;
+        match self {
+            RebootInCurve { curve, .. }
+            | NoSuchSegment { curve, .. }
+            | NoSamples { curve, .. }
+            | WheelBack { curve, .. }
+            | NeverEnded { curve, .. } => Some(*curve),
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for AcquisitionWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use AcquisitionWarning::*;
+        match self {
+            RebootInCurve { curve, t } => write!(
+                f,
+                "curve {curve}, t = {t:.3} s: the device rebooted during the curve; its distance and time are bridged"
+            ),
+            UnusableHello { device_id, error } => write!(
+                f,
+                "HELLO of device {device_id} is unusable: {error}; its samples are ignored until a valid HELLO"
+            ),
+            KindChanged { kind } => write!(
+                f,
+                "the device kind changed mid-session (now {kind:?}); later samples use it"
+            ),
+            WheelJump { t, step_m } => write!(
+                f,
+                "t = {t:.3} s: the wheel counter jumped {step_m:.3} m between two samples; such jumps are ignored"
+            ),
+            BadSegmentLength {
+                t,
+                segment,
+                length_m,
+            } => write!(
+                f,
+                "t = {t:.3} s: SEGMENT_LENGTH of segment {segment} is {length_m} m; ignored"
+            ),
+            SegmentLengthWithoutCurve { t, segment } => write!(
+                f,
+                "t = {t:.3} s: SEGMENT_LENGTH {segment} with no curve scanned yet; ignored"
+            ),
+            NoSuchSegment {
+                curve,
+                t,
+                segment,
+                segments,
+            } => write!(
+                f,
+                "curve {curve}, t = {t:.3} s: SEGMENT_LENGTH for segment {segment}, but the curve has {segments} segment(s); ignored"
+            ),
+            NoSamples { curve, nodes } => write!(
+                f,
+                "curve {curve}: no samples between its B/I and E (nodes {nodes:?}); it carries no shape"
+            ),
+            WheelBack {
+                curve,
+                node,
+                t,
+                back_m,
+                segment,
+                from,
+            } => write!(
+                f,
+                "curve {curve}, node {node}, t = {t:.3} s: the wheel went back {back_m:.3} m over segment {segment} (from node {from}); backwards scanning?"
+            ),
+            NeverEnded {
+                curve,
+                nodes,
+                samples,
+            } => write!(
+                f,
+                "curve {curve}: the session ended before its E (nodes {nodes:?}, {samples} samples); not used"
+            ),
+        }
+    }
+}
+
 /// Largest wheel advance between consecutive samples taken as real motion, m.
 pub const MAX_WHEEL_STEP: f64 = 0.5;
 
@@ -210,9 +355,9 @@ impl Acquisition {
         std::mem::take(&mut self.scan.array)
     }
 
-    fn warn(&mut self, msg: String) {
-        tracing::warn!("{msg}");
-        self.scan.warnings.push(msg);
+    fn warn(&mut self, w: AcquisitionWarning) {
+        tracing::warn!("{w}");
+        self.scan.warnings.push(w.into());
     }
 
     /// Processes one decoder event.
@@ -224,11 +369,8 @@ impl Acquisition {
                 self.wheel_reset = true;
                 let t = self.clock.now();
                 if let Some(o) = &self.open {
-                    let msg = format!(
-                        "curve {}, t = {t:.3} s: the device rebooted during the curve; its distance and time are bridged",
-                        o.index
-                    );
-                    self.warn(msg);
+                    let w = AcquisitionWarning::RebootInCurve { curve: o.index, t };
+                    self.warn(w);
                 }
                 None
             }
@@ -245,10 +387,10 @@ impl Acquisition {
         let scales = Scales::from_hello(h);
         let has_gyro = h.kind == DeviceKind::Phone;
         if let Err(e) = scales.validate(has_gyro) {
-            self.warn(format!(
-                "HELLO of device {} is unusable: {e}; its samples are ignored until a valid HELLO",
-                h.device_id
-            ));
+            self.warn(AcquisitionWarning::UnusableHello {
+                device_id: h.device_id,
+                error: e,
+            });
             self.model = None;
             return;
         }
@@ -258,10 +400,7 @@ impl Acquisition {
             return;
         }
         if self.kind.is_some() && self.kind != Some(h.kind) {
-            self.warn(format!(
-                "the device kind changed mid-session (now {:?}); later samples use it",
-                h.kind
-            ));
+            self.warn(AcquisitionWarning::KindChanged { kind: h.kind });
         }
         let cal = self.cfg.calibration.resolve(h.kind);
         self.model = Some(SensorModel::new(scales, cal));
@@ -295,9 +434,7 @@ impl Acquisition {
                     } else {
                         self.scan.counts.wheel_glitches += 1;
                         if self.scan.counts.wheel_glitches == 1 {
-                            self.warn(format!(
-                                "t = {t:.3} s: the wheel counter jumped {step:.3} m between two samples; such jumps are ignored"
-                            ));
+                            self.warn(AcquisitionWarning::WheelJump { t, step_m: step });
                         }
                     }
                 }
@@ -450,7 +587,7 @@ impl Acquisition {
                         update = Some(Update::CurveEnded(curve));
                     }
                 }
-                KeyEvent::Warning(w) => self.scan.warnings.push(w.to_string()),
+                KeyEvent::Warning(w) => self.scan.warnings.push(w.into()),
             }
         }
         self.key_events = events;
@@ -459,9 +596,11 @@ impl Acquisition {
 
     fn segment_length(&mut self, t: f64, segment: u16, len: f64) -> Option<Update> {
         if !(len.is_finite() && len > 0.0) {
-            self.warn(format!(
-                "t = {t:.3} s: SEGMENT_LENGTH of segment {segment} is {len} m; ignored"
-            ));
+            self.warn(AcquisitionWarning::BadSegmentLength {
+                t,
+                segment,
+                length_m: len,
+            });
             return None;
         }
         if let Some(o) = &mut self.open {
@@ -469,17 +608,18 @@ impl Acquisition {
             return None;
         }
         let Some(last) = self.scan.curves.last() else {
-            self.warn(format!(
-                "t = {t:.3} s: SEGMENT_LENGTH {segment} with no curve scanned yet; ignored"
-            ));
+            self.warn(AcquisitionWarning::SegmentLengthWithoutCurve { t, segment });
             return None;
         };
         let index = last.index;
         let nseg = last.tags.len().saturating_sub(1);
         if segment as usize >= nseg {
-            self.warn(format!(
-                "curve {index}, t = {t:.3} s: SEGMENT_LENGTH for segment {segment}, but the curve has {nseg} segment(s); ignored"
-            ));
+            self.warn(AcquisitionWarning::NoSuchSegment {
+                curve: index,
+                t,
+                segment,
+                segments: nseg,
+            });
             return None;
         }
         self.late_lengths
@@ -605,11 +745,10 @@ impl Acquisition {
             samples: s,
         };
         if n == 0 {
-            self.warn(format!(
-                "curve {}: no samples between its B/I and E (nodes {:?}); it carries no shape",
-                o.index,
-                curve.nodes()
-            ));
+            self.warn(AcquisitionWarning::NoSamples {
+                curve: o.index,
+                nodes: curve.nodes(),
+            });
         }
         if phone {
             let from_cfg = self.cfg.segment_lengths.get(&o.index);
@@ -632,11 +771,15 @@ impl Acquisition {
             }
             for (k, pair) in curve.tags.windows(2).enumerate() {
                 if pair[1].d < pair[0].d {
-                    let msg = format!(
-                        "curve {}, node {}, t = {:.3} s: the wheel went back {:.3} m over segment {k} (from node {}); backwards scanning?",
-                        o.index, pair[1].node, pair[1].t, pair[0].d - pair[1].d, pair[0].node
-                    );
-                    self.warn(msg);
+                    let w = AcquisitionWarning::WheelBack {
+                        curve: o.index,
+                        node: pair[1].node,
+                        t: pair[1].t,
+                        back_m: pair[0].d - pair[1].d,
+                        segment: k,
+                        from: pair[0].node,
+                    };
+                    self.warn(w);
                 }
             }
         }
@@ -769,11 +912,11 @@ impl Acquisition {
     pub fn finish(mut self) -> Scan {
         if let Some(o) = self.open.take() {
             let nodes: Vec<u32> = o.tags.iter().map(|t| t.0).collect();
-            self.warn(format!(
-                "curve {}: the session ended before its E (nodes {nodes:?}, {} samples); not used",
-                o.index,
-                o.raw.len()
-            ));
+            self.warn(AcquisitionWarning::NeverEnded {
+                curve: o.index,
+                nodes,
+                samples: o.raw.len(),
+            });
             self.scan.counts.curves_discarded += 1;
         }
         self.scan.field_reference = self.field.reference().map(|(n, d)| [n, d]);

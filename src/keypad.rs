@@ -37,14 +37,15 @@
 /// reused by the next one).
 pub type CurveIndex = usize;
 
-/// A grammar violation.
+/// A grammar violation: the curve open, the node concerned, the time of the key, and what
+/// was wrong.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Warning {
     pub curve: Option<CurveIndex>,
     pub node: Option<u32>,
     /// Session time of the key, seconds.
     pub t: f64,
-    pub message: String,
+    pub issue: Issue,
 }
 
 impl std::fmt::Display for Warning {
@@ -56,7 +57,107 @@ impl std::fmt::Display for Warning {
         if let Some(n) = self.node {
             write!(f, ", node {n}")?;
         }
-        write!(f, ", t = {:.3} s: {}", self.t, self.message)
+        write!(f, ", t = {:.3} s: {}", self.t, self.issue)
+    }
+}
+
+/// What a key sequence did wrong.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Issue {
+    /// Digits typed, then another key than Enter.
+    Unconfirmed { digits: String, key: char },
+    /// A curve ended (or was ended) with fewer than two node tags.
+    TooFewTags { why: &'static str, tags: usize },
+    /// Packets were lost after digits and no Enter came: the node is tagged at its last digit.
+    EnterPresumedLost,
+    /// Digits not confirmed within [`DIGIT_TIMEOUT`].
+    TimedOut { digits: String },
+    /// A digit with no curve open.
+    DigitWithoutCurve,
+    /// A seventh digit.
+    IndexTooLong { digits: String },
+    /// Enter with no curve open.
+    EnterWithoutCurve,
+    /// Enter with no digits after packets were lost: tagged as an anonymous node.
+    IndexLost,
+    /// Enter with no digits.
+    EnterWithoutIndex,
+    /// The node just tagged, tagged again.
+    Repeat,
+    /// B or I while a curve is open: the open one is ended.
+    NeverEnded { key: char },
+    /// U with nothing to undo.
+    UndoNothing,
+    /// U with no curve open.
+    UndoWithoutCurve,
+    /// C with no curve open.
+    CancelWithoutCurve,
+    /// E with no curve open.
+    EndWithoutCurve,
+    /// A key the grammar does not know.
+    UnknownKey { key: u8 },
+}
+
+impl Issue {
+    /// A stable name of the kind of violation (for machines reading `report.json`).
+    pub fn code(&self) -> &'static str {
+        match self {
+            Issue::Unconfirmed { .. } => "keypad_digits_unconfirmed",
+            Issue::TooFewTags { .. } => "keypad_too_few_tags",
+            Issue::EnterPresumedLost => "keypad_enter_presumed_lost",
+            Issue::TimedOut { .. } => "keypad_digits_timed_out",
+            Issue::DigitWithoutCurve => "keypad_digit_without_curve",
+            Issue::IndexTooLong { .. } => "keypad_index_too_long",
+            Issue::EnterWithoutCurve => "keypad_enter_without_curve",
+            Issue::IndexLost => "keypad_index_lost",
+            Issue::EnterWithoutIndex => "keypad_enter_without_index",
+            Issue::Repeat => "keypad_repeat",
+            Issue::NeverEnded { .. } => "keypad_curve_never_ended",
+            Issue::UndoNothing => "keypad_undo_nothing",
+            Issue::UndoWithoutCurve => "keypad_undo_without_curve",
+            Issue::CancelWithoutCurve => "keypad_cancel_without_curve",
+            Issue::EndWithoutCurve => "keypad_end_without_curve",
+            Issue::UnknownKey { .. } => "keypad_unknown_key",
+        }
+    }
+}
+
+impl std::fmt::Display for Issue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Issue::Unconfirmed { digits, key } => write!(
+                f,
+                "digits {digits:?} were not confirmed with Enter before {key:?}; ignored"
+            ),
+            Issue::TooFewTags { why, tags } => write!(
+                f,
+                "{why} with {tags} node tag(s); a curve needs a start and an end node: discarded"
+            ),
+            Issue::EnterPresumedLost => f.write_str("packets were lost after these digits and no Enter came: Enter presumed lost, node tagged at its last digit"),
+            Issue::TimedOut { digits } => write!(
+                f,
+                "digits {digits:?} not confirmed with Enter within {DIGIT_TIMEOUT} s; ignored"
+            ),
+            Issue::DigitWithoutCurve => f.write_str("digit with no curve open; ignored"),
+            Issue::IndexTooLong { digits } => {
+                write!(f, "node index longer than 6 digits ({digits}…); ignored")
+            }
+            Issue::EnterWithoutCurve => f.write_str("Enter with no curve open; ignored"),
+            Issue::IndexLost => f.write_str("Enter after packets were lost and with no digits: the node index was lost; tagged as an anonymous node that joins no other curve"),
+            Issue::EnterWithoutIndex => f.write_str("Enter with no node index typed; ignored"),
+            Issue::Repeat => f.write_str("node tagged twice in a row; the repeat is ignored"),
+            Issue::NeverEnded { key } => write!(
+                f,
+                "curve never ended (no E) before {key:?} started the next one; ending it here"
+            ),
+            Issue::UndoNothing => f.write_str("U (undo) with no node tag to undo; ignored"),
+            Issue::UndoWithoutCurve => f.write_str("U (undo) with no curve open; ignored"),
+            Issue::CancelWithoutCurve => f.write_str("C (cancel) with no curve open; ignored"),
+            Issue::EndWithoutCurve => f.write_str("E (end) with no curve open; ignored"),
+            Issue::UnknownKey { key } => {
+                write!(f, "unknown key 0x{key:02X} ({:?}); ignored", *key as char)
+            }
+        }
     }
 }
 
@@ -146,12 +247,12 @@ impl Keypad {
         self.open.as_ref().map_or(&[], |o| &o.tags)
     }
 
-    fn warn(&self, out: &mut Vec<KeyEvent>, t: f64, node: Option<u32>, message: String) {
+    fn warn(&self, out: &mut Vec<KeyEvent>, t: f64, node: Option<u32>, issue: Issue) {
         let w = Warning {
             curve: self.open_curve(),
             node,
             t,
-            message,
+            issue,
         };
         tracing::warn!("keypad: {w}");
         out.push(KeyEvent::Warning(w));
@@ -164,16 +265,16 @@ impl Keypad {
                 out,
                 t,
                 d.parse().ok(),
-                format!(
-                    "digits {d:?} were not confirmed with Enter before {:?}; ignored",
-                    key as char
-                ),
+                Issue::Unconfirmed {
+                    digits: d,
+                    key: key as char,
+                },
             );
         }
     }
 
     /// Ends the open curve: kept with two tags or more, else discarded.
-    fn finish(&mut self, t: f64, why: &str, out: &mut Vec<KeyEvent>) {
+    fn finish(&mut self, t: f64, why: &'static str, out: &mut Vec<KeyEvent>) {
         let Some(open) = &self.open else { return };
         let curve = open.curve;
         if open.tags.len() >= 2 {
@@ -183,14 +284,7 @@ impl Keypad {
         } else {
             let n = open.tags.len();
             let node = open.tags.first().copied();
-            self.warn(
-                out,
-                t,
-                node,
-                format!(
-                    "{why} with {n} node tag(s); a curve needs a start and an end node: discarded"
-                ),
-            );
+            self.warn(out, t, node, Issue::TooFewTags { why, tags: n });
             self.open = None;
             out.push(KeyEvent::Discarded { curve });
         }
@@ -229,7 +323,7 @@ impl Keypad {
             if open.tags.last() != Some(&node) {
                 open.tags.push(node);
                 let curve = open.curve;
-                self.warn(out, t_tag, Some(node), "packets were lost after these digits and no Enter came: Enter presumed lost, node tagged at its last digit".into());
+                self.warn(out, t_tag, Some(node), Issue::EnterPresumedLost);
                 out.push(KeyEvent::Tagged {
                     curve,
                     node,
@@ -242,9 +336,9 @@ impl Keypad {
                 out,
                 t_tag,
                 Some(node),
-                format!(
-                    "digits {digits:?} not confirmed with Enter within {DIGIT_TIMEOUT} s; ignored"
-                ),
+                Issue::TimedOut {
+                    digits: digits.clone(),
+                },
             );
         }
     }
@@ -266,21 +360,15 @@ impl Keypad {
         match key {
             b'0'..=b'9' => {
                 if self.open.is_none() {
-                    self.warn(
-                        out,
-                        t,
-                        Some((key - b'0') as u32),
-                        "digit with no curve open; ignored".into(),
-                    );
+                    self.warn(out, t, Some((key - b'0') as u32), Issue::DigitWithoutCurve);
                 } else if self.digits.len() >= 6 {
                     self.warn(
                         out,
                         t,
                         None,
-                        format!(
-                            "node index longer than 6 digits ({}…); ignored",
-                            self.digits
-                        ),
+                        Issue::IndexTooLong {
+                            digits: self.digits.clone(),
+                        },
                     );
                 } else {
                     self.digits.push(key as char);
@@ -290,24 +378,14 @@ impl Keypad {
                 self.gap_since_digit = false;
                 let digits = std::mem::take(&mut self.digits);
                 if self.open.is_none() {
-                    self.warn(
-                        out,
-                        t,
-                        digits.parse().ok(),
-                        "Enter with no curve open; ignored".into(),
-                    );
+                    self.warn(out, t, digits.parse().ok(), Issue::EnterWithoutCurve);
                     return;
                 }
                 if digits.is_empty() {
                     if gap_before {
                         let node = ANONYMOUS_NODE_BASE + self.anonymous;
                         self.anonymous += 1;
-                        self.warn(
-                            out,
-                            t,
-                            Some(node),
-                            "Enter after packets were lost and with no digits: the node index was lost; tagged as an anonymous node that joins no other curve".into(),
-                        );
+                        self.warn(out, t, Some(node), Issue::IndexLost);
                         let open = self.open.as_mut().expect("checked");
                         open.tags.push(node);
                         out.push(KeyEvent::Tagged {
@@ -318,12 +396,7 @@ impl Keypad {
                         });
                         return;
                     }
-                    self.warn(
-                        out,
-                        t,
-                        None,
-                        "Enter with no node index typed; ignored".into(),
-                    );
+                    self.warn(out, t, None, Issue::EnterWithoutIndex);
                     return;
                 }
                 let node: u32 = digits.parse().expect("only digits, at most 6");
@@ -331,12 +404,7 @@ impl Keypad {
                 let uncertain = std::mem::take(&mut self.digits_uncertain) || gap_before;
                 let open = self.open.as_mut().expect("checked");
                 if open.tags.last() == Some(&node) {
-                    self.warn(
-                        out,
-                        t,
-                        Some(node),
-                        "node tagged twice in a row; the repeat is ignored".into(),
-                    );
+                    self.warn(out, t, Some(node), Issue::Repeat);
                     return;
                 }
                 open.tags.push(node);
@@ -354,10 +422,7 @@ impl Keypad {
                         out,
                         t,
                         self.open_tags().last().copied(),
-                        format!(
-                        "curve never ended (no E) before {:?} started the next one; ending it here",
-                        key as char
-                    ),
+                        Issue::NeverEnded { key: key as char },
                     );
                     self.finish(t, "ended implicitly", out);
                 }
@@ -375,42 +440,27 @@ impl Keypad {
                 self.drop_digits(t, key, out);
                 match self.open.as_mut().map(|o| (o.curve, o.tags.pop())) {
                     Some((curve, Some(node))) => out.push(KeyEvent::Untagged { curve, node }),
-                    Some((_, None)) => self.warn(
-                        out,
-                        t,
-                        None,
-                        "U (undo) with no node tag to undo; ignored".into(),
-                    ),
-                    None => self.warn(out, t, None, "U (undo) with no curve open; ignored".into()),
+                    Some((_, None)) => self.warn(out, t, None, Issue::UndoNothing),
+                    None => self.warn(out, t, None, Issue::UndoWithoutCurve),
                 }
             }
             b'C' => {
                 self.drop_digits(t, key, out);
                 match self.open.take() {
                     Some(o) => out.push(KeyEvent::Discarded { curve: o.curve }),
-                    None => self.warn(
-                        out,
-                        t,
-                        None,
-                        "C (cancel) with no curve open; ignored".into(),
-                    ),
+                    None => self.warn(out, t, None, Issue::CancelWithoutCurve),
                 }
             }
             b'E' => {
                 self.drop_digits(t, key, out);
                 if self.open.is_none() {
-                    self.warn(out, t, None, "E (end) with no curve open; ignored".into());
+                    self.warn(out, t, None, Issue::EndWithoutCurve);
                 } else {
                     self.finish(t, "E pressed", out);
                 }
             }
             other => {
-                self.warn(
-                    out,
-                    t,
-                    None,
-                    format!("unknown key 0x{other:02X} ({:?}); ignored", other as char),
-                );
+                self.warn(out, t, None, Issue::UnknownKey { key: other });
             }
         }
     }
@@ -500,7 +550,7 @@ mod tests {
             let w = warnings(&ev);
             assert_eq!(w.len(), 1, "{keys:?}: {ev:?}");
             assert_eq!(w[0].curve, *curve, "{keys:?}");
-            assert!(w[0].message.contains(needle), "{keys:?}: {}", w[0]);
+            assert!(w[0].to_string().contains(needle), "{keys:?}: {}", w[0]);
             assert_eq!(
                 w[0].t,
                 (keys.len() - 1) as f64,
@@ -534,7 +584,7 @@ mod tests {
             })
             .collect();
         assert_eq!(tags, [(1, 1.2), (16, 5.2), (8, 9.2)]);
-        assert!(warnings(&out)[0].message.contains("Enter presumed lost"));
+        assert_eq!(warnings(&out)[0].issue, Issue::EnterPresumedLost);
         // Without a gap, digits left for more than the timeout are dropped with a warning.
         let mut k = Keypad::new();
         let mut out = Vec::new();
@@ -551,7 +601,7 @@ mod tests {
         }
         let w = warnings(&out);
         assert_eq!(w.len(), 1, "{out:?}");
-        assert!(w[0].message.contains("not confirmed") && w[0].node == Some(7));
+        assert!(matches!(w[0].issue, Issue::TimedOut { .. }) && w[0].node == Some(7));
         assert!(out.contains(&KeyEvent::Tagged {
             curve: 0,
             node: 2,
@@ -610,7 +660,7 @@ mod tests {
         assert!(tags.iter().filter(|&&n| is_anonymous(n)).count() == 2);
         let w = warnings(&out);
         assert_eq!(w.len(), 2, "{out:?}");
-        assert!(w[0].message.contains("index was lost") && w[0].curve == Some(0));
+        assert!(w[0].issue == Issue::IndexLost && w[0].curve == Some(0));
         assert_eq!(ended(&out), [0]);
         // Without a loss, an Enter with no digits is still ignored.
         let ev = run("I1\n\n2\nE");

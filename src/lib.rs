@@ -53,6 +53,7 @@ pub mod settings;
 pub mod shutdown;
 pub mod simulate;
 pub mod source;
+pub mod warning;
 
 /// Exit codes of the `sfs` binary (a stated policy, also in the README).
 pub mod exit {

@@ -33,7 +33,7 @@ pub struct Snapshot {
     pub link: LinkStats,
     pub counts: Counts,
     /// Acquisition warnings so far.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<crate::warning::Warning>,
 }
 
 /// What the worker leaves when it is closed.

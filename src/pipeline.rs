@@ -9,6 +9,7 @@
 
 use crate::atomic::OutputError;
 use crate::scan::Curve;
+use crate::warning::Warning;
 use sfs_geometry::network::poisson::Positions;
 use sfs_geometry::network::{Network, NetworkParams, Reconstructor};
 use sfs_geometry::surface::cycles::NetworkSegments;
@@ -42,7 +43,7 @@ pub struct Products {
     /// Node positions in the glb's frame (y up), by node index.
     pub nodes: BTreeMap<String, [f32; 3]>,
     /// The reconstruction's and the surfacer's warnings (naming curves and nodes).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
     /// `network.glb`, when there is a network and it could be encoded.
     pub glb: Option<Vec<u8>>,
     pub network_ms: f64,
@@ -103,20 +104,21 @@ impl Pipeline {
         let Some(net) = net else {
             return out;
         };
-        out.warnings.extend(net.warnings.iter().cloned());
+        out.warnings
+            .extend(net.warnings.iter().cloned().map(Warning::Network));
         let surfaced = surface.and_then(|sp| {
             let (result, ms) = surface_of(&net.positions, sp, &mut self.surfacer);
             out.surface_ms = ms;
             match result {
                 Ok(s) => {
                     out.warnings
-                        .extend(s.problems.iter().map(|p| format!("surface: {p}")));
+                        .extend(s.problems.iter().cloned().map(Warning::Surface));
                     out.surface = Some(s.report(ms));
                     Some(s)
                 }
                 Err(e) => {
                     tracing::warn!("no surface: {e}");
-                    out.warnings.push(format!("no surface: {e}"));
+                    out.warnings.push(Warning::NoSurface(e));
                     None
                 }
             }
@@ -125,7 +127,7 @@ impl Pipeline {
             Ok(bytes) => out.glb = Some(bytes),
             Err(e) => {
                 tracing::error!("network.glb not written: {e}");
-                out.warnings.push(format!("network.glb not written: {e}"));
+                out.warnings.push(Warning::GlbNotWritten(e));
             }
         }
         for (k, p) in &net.positions.nodes {

@@ -3,6 +3,7 @@
 
 use crate::link::LinkStats;
 use crate::scan::{Counts, Curve};
+use crate::warning::Warning;
 use serde::Serialize;
 use std::path::Path;
 
@@ -22,8 +23,11 @@ pub struct Report {
     pub curves: Vec<CurveSummary>,
     /// What acquisition counted (samples, flags, discarded curves).
     pub acquisition: Counts,
-    /// Problems in words naming curve, node and time.
-    pub warnings: Vec<String>,
+    /// Problems naming curve, node and time, as their texts.
+    pub warnings: Vec<Warning>,
+    /// The stable code of each of `warnings`, in the same order (`keypad_repeat`,
+    /// `tag_detached`, `face_clockwise`, …).
+    pub warning_codes: Vec<&'static str>,
     /// Reconstructed node positions in the glb's frame (y up), by node index.
     pub nodes: std::collections::BTreeMap<String, [f32; 3]>,
     /// Wall time per reconstruction stage, ms.
@@ -124,7 +128,7 @@ pub struct Progress<'a> {
     pub curves: &'a [Curve],
     pub counts: &'a Counts,
     /// Acquisition's warnings so far (the products' follow them).
-    pub warnings: &'a [String],
+    pub warnings: &'a [Warning],
 }
 
 impl Report {
@@ -132,6 +136,12 @@ impl Report {
     /// the live and monitoring sections, which their owners add).
     pub fn assemble(p: Progress<'_>, products: &crate::pipeline::Products) -> Report {
         let network = products.network.as_ref().map(|n| &n.report);
+        let warnings: Vec<Warning> = p
+            .warnings
+            .iter()
+            .chain(&products.warnings)
+            .cloned()
+            .collect();
         Report {
             sfs_version: env!("CARGO_PKG_VERSION"),
             source: p.source.to_owned(),
@@ -140,12 +150,8 @@ impl Report {
             link: p.link.clone(),
             curves: p.curves.iter().map(CurveSummary::from).collect(),
             acquisition: p.counts.clone(),
-            warnings: p
-                .warnings
-                .iter()
-                .chain(&products.warnings)
-                .cloned()
-                .collect(),
+            warning_codes: warnings.iter().map(Warning::code).collect(),
+            warnings,
             nodes: products.nodes.clone(),
             timings_ms: network.map(|n| n.timings_ms.clone()),
             network: network.cloned(),

@@ -56,12 +56,13 @@ pub struct ArrayEpoch {
 }
 
 /// Everything acquisition produced.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Scan {
     pub device: Option<DeviceInfo>,
     pub curves: Vec<Curve>,
-    /// Grammar violations and acquisition problems, in words naming curve, node and time.
-    pub warnings: Vec<String>,
+    /// Grammar violations and acquisition problems, naming curve, node and time (written as
+    /// their texts).
+    pub warnings: Vec<crate::warning::Warning>,
     pub counts: Counts,
     /// Median magnetic field norm (µT) and dip (°) of the session, when measured.
     pub field_reference: Option<[f64; 2]>,

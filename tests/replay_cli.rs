@@ -155,3 +155,60 @@ fn closed_output_pipes_neither_panic_nor_lose_the_report() {
     assert_eq!(status.code(), Some(0));
     assert!(dir.join("out/report.json").exists());
 }
+
+/// Issue 14: every warning of `report.json` keeps its text and carries a stable code, in the
+/// same order: a repeated node tag, an unknown key and a curve never ended give theirs.
+#[test]
+fn issue_14_warnings_carry_stable_codes() {
+    let dir = tmpdir("replay-codes");
+    let mut b = Builder::new();
+    b.packet(hello());
+    for k in *b"B1\n" {
+        b.key(k);
+    }
+    for i in 0..50 {
+        b.sample(i);
+    }
+    for k in *b"1\nX" {
+        b.key(k);
+    }
+    for i in 50..100 {
+        b.sample(i);
+    }
+    for k in *b"2\n" {
+        b.key(k);
+    }
+    let cap = dir.join("keys.bin");
+    std::fs::write(&cap, &b.bytes).unwrap();
+    let out = sfs()
+        .args(["--log", "off", "replay", cap.to_str().unwrap(), "--out"])
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let report = read_report(&dir.join("out"));
+    let texts: Vec<&str> = report["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap())
+        .collect();
+    let codes: Vec<&str> = report["warning_codes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.as_str().unwrap())
+        .collect();
+    assert_eq!(
+        codes,
+        ["keypad_repeat", "keypad_unknown_key", "curve_never_ended"],
+        "{texts:?}"
+    );
+    assert!(texts[0].starts_with("curve 0, node 1, t = "), "{texts:?}");
+    assert!(texts[0].ends_with("node tagged twice in a row; the repeat is ignored"));
+    assert!(texts[1].contains("unknown key 0x58 ('X')"), "{texts:?}");
+    assert!(
+        texts[2].starts_with("curve 0: the session ended before its E (nodes [1, 2]"),
+        "{texts:?}"
+    );
+}

@@ -141,9 +141,10 @@ fn an_open_network_and_a_dangling_curve_surface_what_they_can() {
     // The open side merges into one face that runs along the dangling top edge both ways:
     // rejected with the curve named; the bottom and the side under the kept edge surface.
     assert!(
-        out.problems
-            .iter()
-            .any(|p| p.contains("both directions") && p.contains("curve")),
+        out.problems.iter().any(|p| matches!(
+            p,
+            sfs_geometry::surface::SurfaceProblem::BothDirections { .. }
+        )),
         "{:?}",
         out.problems
     );

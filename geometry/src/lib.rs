@@ -25,3 +25,14 @@ pub mod rng;
 pub mod sparse_llt;
 pub mod surface;
 pub mod union_find;
+
+/// Serialises a list as the texts (`Display`) of its items: warnings and problems keep their
+/// words in the application's JSON.
+#[cfg(feature = "serde")]
+pub fn serialize_texts<S, T>(items: &[T], s: S) -> Result<S::Ok, S::Error>
+where
+    S: serde::Serializer,
+    T: std::fmt::Display,
+{
+    s.collect_seq(items.iter().map(|x| x.to_string()))
+}

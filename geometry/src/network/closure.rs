@@ -242,9 +242,38 @@ fn repeats_in_curve(c: &UniformCurve, tag: usize) -> bool {
 pub struct ClosureReport {
     /// Tags detached, in order.
     pub detached: Vec<Detached>,
-    /// Warnings about tags the loops refuse but with no other sign of a wrong index (kept:
-    /// the misfit may be the data's, e.g. a heading disturbed along the whole curve).
-    pub warnings: Vec<String>,
+    /// Tags the loops refuse but with no other sign of a wrong index (kept: the misfit may
+    /// be the data's, e.g. a heading disturbed along the whole curve).
+    pub refused: Vec<Refused>,
+}
+
+/// A tag the network's loops refuse, kept on its node: nothing else suggests a wrong index.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Refused {
+    /// Scan index of the curve.
+    pub curve: usize,
+    /// The node it tags.
+    pub node: u32,
+    /// Position of the tag in the curve's tag list (0 = first).
+    pub tag: usize,
+    /// Share of the network's misfit energy it explains, %.
+    pub misfit_pct: f64,
+    /// How far the curve would have to be pulled to meet the node, m.
+    pub offset_m: f64,
+}
+
+impl std::fmt::Display for Refused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "curve {}, node {} (tag {} of the curve): the network's loops do not close through this tag ({:.0} % of the network's misfit; the curve would have to be pulled {:.0} mm to meet the node); nothing else suggests a wrong index, so it is kept: check the index, or the data of this curve",
+            self.curve,
+            self.node,
+            self.tag + 1,
+            self.misfit_pct,
+            self.offset_m * 1e3
+        )
+    }
 }
 
 /// Detaches the tags the network's loops refuse (see the module docs) when there is a second
@@ -293,14 +322,13 @@ pub fn detach_outlier_tags(
         let Some(c) = evidenced.copied() else {
             if let Some(w) = worst {
                 let cu = &curves[w.curve];
-                out.warnings.push(format!(
-                    "curve {}, node {} (tag {} of the curve): the network's loops do not close through this tag ({:.0} % of the network's misfit; the curve would have to be pulled {:.0} mm to meet the node); nothing else suggests a wrong index, so it is kept: check the index, or the data of this curve",
-                    cu.index,
-                    cu.nodes[w.tag].1,
-                    w.tag + 1,
-                    100.0 * w.drop / d.energy,
-                    w.offset * 1e3
-                ));
+                out.refused.push(Refused {
+                    curve: cu.index,
+                    node: cu.nodes[w.tag].1,
+                    tag: w.tag,
+                    misfit_pct: 100.0 * w.drop / d.energy,
+                    offset_m: w.offset,
+                });
             }
             break;
         };
@@ -435,8 +463,15 @@ mod tests {
             // With no second sign of a wrong index the tag is kept, with a warning.
             let kept = detach_outlier_tags(&mut g.clone(), |_, _| false);
             assert!(kept.detached.is_empty());
-            assert_eq!(kept.warnings.len(), 1, "{kept:?}");
-            assert!(kept.warnings[0].contains("curve 2, node 5 (tag 3"));
+            assert_eq!(kept.refused.len(), 1, "{kept:?}");
+            assert_eq!(
+                (
+                    kept.refused[0].curve,
+                    kept.refused[0].node,
+                    kept.refused[0].tag
+                ),
+                (2, 5, 2)
+            );
             // Packets lost while it was typed: detached.
             let d = detach_outlier_tags(&mut g, |c, k| (c, k) == (2, 2)).detached;
             assert_eq!(d.len(), 1, "seed {seed}: {d:?}");
@@ -458,7 +493,7 @@ mod tests {
         let r = detach_outlier_tags(&mut g, |_, _| false);
         assert_eq!(r.detached.len(), 1, "{r:?}");
         assert_eq!((r.detached[0].curve, r.detached[0].tag), (1, 2));
-        assert!(r.warnings.is_empty());
+        assert!(r.refused.is_empty());
     }
 
     #[test]

@@ -60,12 +60,81 @@ pub struct Timings {
     pub poisson: f64,
 }
 
+/// A problem the reconstruction met, naming the curve and node where it has them; its text
+/// is its `Display`, its kind a stable [`code`](NetworkWarning::code).
+#[derive(Debug, Clone, PartialEq)]
+pub enum NetworkWarning {
+    /// A curve that cannot be resampled is left out of the network.
+    LeftOut(prefilter::PrefilterError),
+    /// No curve could be used: nothing is reconstructed.
+    NothingUsable,
+    /// A tag the network's loops refuse, detached from its node (a mistyped index).
+    TagDetached(closure::Detached),
+    /// A tag the network's loops refuse with nothing else suggesting a wrong index: kept.
+    TagRefused(closure::Refused),
+    /// The Poisson system could not be solved.
+    PoissonFailed(crate::sparse_llt::SolveError),
+    /// The network falls apart into parts with no node in common.
+    InParts { components: usize },
+}
+
+impl NetworkWarning {
+    /// A stable name of the kind of problem (for machines reading `report.json`).
+    pub fn code(&self) -> &'static str {
+        match self {
+            NetworkWarning::LeftOut(_) => "curve_left_out",
+            NetworkWarning::NothingUsable => "nothing_reconstructed",
+            NetworkWarning::TagDetached(_) => "tag_detached",
+            NetworkWarning::TagRefused(_) => "tag_refused",
+            NetworkWarning::PoissonFailed(_) => "poisson_failed",
+            NetworkWarning::InParts { .. } => "network_in_parts",
+        }
+    }
+
+    /// The curve it names.
+    pub fn curve(&self) -> Option<usize> {
+        match self {
+            NetworkWarning::LeftOut(e) => Some(e.curve()),
+            NetworkWarning::TagDetached(d) => Some(d.curve),
+            NetworkWarning::TagRefused(r) => Some(r.curve),
+            _ => None,
+        }
+    }
+
+    /// The node it names.
+    pub fn node(&self) -> Option<u32> {
+        match self {
+            NetworkWarning::TagDetached(d) => Some(d.node),
+            NetworkWarning::TagRefused(r) => Some(r.node),
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for NetworkWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NetworkWarning::LeftOut(e) => write!(f, "{e}; left out of the network"),
+            NetworkWarning::NothingUsable => {
+                f.write_str("no curve could be used: nothing reconstructed")
+            }
+            NetworkWarning::TagDetached(d) => d.fmt(f),
+            NetworkWarning::TagRefused(r) => r.fmt(f),
+            NetworkWarning::PoissonFailed(e) => write!(f, "Poisson reconstruction failed: {e}"),
+            NetworkWarning::InParts { components } => write!(
+                f,
+                "the network falls apart into {components} parts with no node in common: each is reconstructed on its own, their relative placement is arbitrary"
+            ),
+        }
+    }
+}
+
 /// The reconstruction of a scan.
 #[derive(Debug, Clone)]
 pub struct Network {
     pub positions: Positions,
     pub report: NetworkReport,
-    pub warnings: Vec<String>,
+    pub warnings: Vec<NetworkWarning>,
 }
 
 /// Holds what is reused between reconstructions of a growing scan: the pre-filtered curves
@@ -157,13 +226,13 @@ impl Reconstructor {
             }
             match &self.prefiltered[&c.index].1 {
                 Ok(u) => uniform.push(u.clone()),
-                Err(e) => warnings.push(format!("{e}; left out of the network")),
+                Err(e) => warnings.push(NetworkWarning::LeftOut(e.clone())),
             }
         }
         let t1 = Instant::now();
         if uniform.is_empty() {
             if !curves.is_empty() {
-                warnings.push("no curve could be used: nothing reconstructed".into());
+                warnings.push(NetworkWarning::NothingUsable);
             }
             for w in &warnings {
                 tracing::warn!("{w}");
@@ -185,8 +254,20 @@ impl Reconstructor {
                 .collect();
             closure::detach_outlier_tags(&mut uniform, |c, k| uncertain.contains(&(c, k)))
         };
-        warnings.extend(closure.detached.iter().map(|d| d.to_string()));
-        warnings.extend(closure.warnings.iter().cloned());
+        warnings.extend(
+            closure
+                .detached
+                .iter()
+                .cloned()
+                .map(NetworkWarning::TagDetached),
+        );
+        warnings.extend(
+            closure
+                .refused
+                .iter()
+                .cloned()
+                .map(NetworkWarning::TagRefused),
+        );
         let regression = if p.no_regression {
             RegressionReport::default()
         } else if warm {
@@ -210,16 +291,15 @@ impl Reconstructor {
             Ok(p) => p,
             Err(e) => {
                 tracing::error!("Poisson reconstruction failed: {e}");
-                warnings.push(format!("Poisson reconstruction failed: {e}"));
+                warnings.push(NetworkWarning::PoissonFailed(e));
                 return None;
             }
         };
         let t3 = Instant::now();
         if positions.components > 1 {
-            warnings.push(format!(
-                "the network falls apart into {} parts with no node in common: each is reconstructed on its own, their relative placement is arbitrary",
-                positions.components
-            ));
+            warnings.push(NetworkWarning::InParts {
+                components: positions.components,
+            });
         }
         let report = NetworkReport {
             curves_used: uniform.len(),

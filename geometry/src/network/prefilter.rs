@@ -101,6 +101,20 @@ pub enum PrefilterError {
     },
 }
 
+impl PrefilterError {
+    /// The curve it is about.
+    pub fn curve(&self) -> usize {
+        match *self {
+            PrefilterError::TooFewNodes { curve, .. }
+            | PrefilterError::TooShort { curve, .. }
+            | PrefilterError::NoSamples { curve }
+            | PrefilterError::Backwards { curve, .. }
+            | PrefilterError::EmptySegment { curve, .. }
+            | PrefilterError::TooLong { curve, .. } => curve,
+        }
+    }
+}
+
 /// Shortest segment between two consecutive node tags, m.
 pub const MIN_SEGMENT: f64 = 0.001;
 

@@ -33,6 +33,7 @@
 //! assert!(c.problems.is_empty());
 //! ```
 
+use super::{Span, SurfaceProblem};
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
 
@@ -289,12 +290,16 @@ pub struct Cycles {
     /// Connected parts of the network.
     pub components: usize,
     /// Each failure in words, naming nodes and curves.
-    pub problems: Vec<String>,
+    pub problems: Vec<SurfaceProblem>,
 }
 
-fn describe(net: &NetworkSegments, h: HalfEdge) -> String {
+fn describe(net: &NetworkSegments, h: HalfEdge) -> Span {
     let s = &net.segments[h.segment];
-    format!("curve {} between nodes {} and {}", s.curve, s.a, s.b)
+    Span {
+        curve: s.curve,
+        a: s.a,
+        b: s.b,
+    }
 }
 
 /// Traces the faces of `net` (see the module docs).
@@ -319,10 +324,10 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
     for (si, s) in net.segments.iter().enumerate() {
         for (forward, node) in [(true, s.a), (false, s.b)] {
             let Some(n) = net.normals.get(&node).or_else(|| fallback.get(&node)) else {
-                out.problems.push(format!(
-                    "node {node} (curve {}) has no normal, nor have its curves there: its segments are left out",
-                    s.curve
-                ));
+                out.problems.push(SurfaceProblem::NoNormal {
+                    node,
+                    curve: s.curve,
+                });
                 continue;
             };
             let d = s.leaving(!forward);
@@ -336,16 +341,16 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
             let e2 = n.cross(&e1);
             let dp = d - n * n.dot(&d);
             if dp.norm() < 1e-12 * d.norm().max(1e-300) || !dp.iter().all(|x| x.is_finite()) {
-                out.problems.push(format!(
-                    "{} leaves node {node} along its normal: it cannot be ordered around the node",
-                    describe(
+                out.problems.push(SurfaceProblem::AlongNormal {
+                    span: describe(
                         net,
                         HalfEdge {
                             segment: si,
-                            forward
-                        }
-                    )
-                ));
+                            forward,
+                        },
+                    ),
+                    node,
+                });
             }
             let angle = dp.dot(&e2).atan2(dp.dot(&e1));
             at.entry(node).or_default().push((
@@ -406,10 +411,9 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
             }
         }
         if !ok {
-            out.problems.push(format!(
-                "the face starting along {} does not close",
-                describe(net, h0)
-            ));
+            out.problems.push(SurfaceProblem::FaceOpen {
+                along: describe(net, h0),
+            });
             out.rejected.push(Cycle { edges });
             continue;
         }
@@ -429,15 +433,13 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
     out.components = sets.roots().count();
     out.euler = nodes.len() as i64 - edges_used + (faces.len() + out.rejected.len()) as i64;
     if out.euler > 2 * out.components as i64 || out.euler % 2 != 0 {
-        out.problems.push(format!(
-            "the faces traced from the normals do not form a closed surface: V − E + F = {} − {} + {} = {} over {} part(s) (expected even and at most {}); normals that disagree across a node or curves that cross without a node can cause this",
-            nodes.len(),
-            edges_used,
-            faces.len() + out.rejected.len(),
-            out.euler,
-            out.components,
-            2 * out.components
-        ));
+        out.problems.push(SurfaceProblem::NotClosed {
+            vertices: nodes.len(),
+            edges: edges_used,
+            faces: faces.len() + out.rejected.len(),
+            euler: out.euler,
+            components: out.components,
+        });
     }
     // Node normals against their neighbours' (a flipped normal reverses a node's rotation).
     let mut neighbours: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
@@ -459,9 +461,10 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
             .map(|m| nn.dot(m))
             .fold(f64::MIN, f64::max);
         if list.len() >= 2 && closest < -0.1 {
-            out.problems.push(format!(
-                "the normal at node {n} points against those of its neighbours (nodes {list:?}): flipped?"
-            ));
+            out.problems.push(SurfaceProblem::NormalFlipped {
+                node: *n,
+                neighbours: list.clone(),
+            });
         }
     }
     // Classify: rejected if a segment appears in both directions; outer if all boundary and
@@ -478,10 +481,10 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
             .copied();
         if let Some(h) = twice {
             let nodes = f.nodes(net);
-            out.problems.push(format!(
-                "the face through nodes {nodes:?} runs along {} in both directions: the curve ends without closing a cycle (a dangling curve), is the only link between two parts, or a node normal disagrees with the curves; it is not surfaced",
-                describe(net, h)
-            ));
+            out.problems.push(SurfaceProblem::BothDirections {
+                nodes,
+                along: describe(net, h),
+            });
             out.rejected.push(f);
             continue;
         }
@@ -503,9 +506,7 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
         }
         let nodes = f.nodes(net);
         if vector_area(&f.polyline(net)).dot(&boundary_normal(net, &f)) <= 0.0 {
-            out.problems.push(format!(
-                "the face through nodes {nodes:?} turns clockwise around their normals (a node normal is flipped, or curves cross without a node); it is not surfaced"
-            ));
+            out.problems.push(SurfaceProblem::Clockwise { nodes });
             out.rejected.push(f);
             continue;
         }
@@ -605,9 +606,11 @@ mod tests {
         assert_eq!(c.patches.len(), 5, "{:?}", c.problems);
         assert_eq!(c.rejected.len(), 1);
         assert!(
-            c.problems
-                .iter()
-                .any(|p| p.contains("curve 99 between nodes 0 and 8") && p.contains("dangling")),
+            c.problems.iter().any(|p| matches!(
+                p,
+                SurfaceProblem::BothDirections { along, .. }
+                    if *along == Span { curve: 99, a: 0, b: 8 }
+            )),
             "{:?}",
             c.problems
         );
@@ -623,7 +626,7 @@ mod tests {
         assert!(
             c.problems
                 .iter()
-                .any(|p| p.contains("normal at node 3 points against")),
+                .any(|p| matches!(p, SurfaceProblem::NormalFlipped { node: 3, .. })),
             "{:?}",
             c.problems
         );

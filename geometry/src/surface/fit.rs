@@ -26,6 +26,7 @@
 use super::cotmatrix::{cotmatrix, voronoi_areas, SparseRows};
 use super::cycles::{cycles, Cycles, NetworkSegments};
 use super::tessellate::{tessellate, Embedding};
+use super::SurfaceProblem;
 use crate::sparse_llt::{CachedPattern, SolveError};
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
@@ -96,7 +97,7 @@ pub struct Surfaced {
     /// Patches that could not be tessellated (with the reason, naming the nodes), and any
     /// other problem: each also in `problems`.
     pub skipped: usize,
-    pub problems: Vec<String>,
+    pub problems: Vec<SurfaceProblem>,
 }
 
 /// What the surfacer did, for `report.json`.
@@ -114,7 +115,9 @@ pub struct SurfaceReport {
     pub vertices: usize,
     pub constrained: usize,
     pub triangles: usize,
-    pub problems: Vec<String>,
+    /// Serialised as their texts.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "crate::serialize_texts"))]
+    pub problems: Vec<SurfaceProblem>,
     pub time_ms: f64,
 }
 
@@ -148,8 +151,8 @@ impl Surfaced {
 /// Why there is no surface at all.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SurfaceError {
-    #[error("no cycle of the network could be surfaced{}", if .0.is_empty() { String::new() } else { format!(": {}", .0.join("; ")) })]
-    NoPatch(Vec<String>),
+    #[error("no cycle of the network could be surfaced{}", if .0.is_empty() { String::new() } else { format!(": {}", .0.iter().map(|p| p.to_string()).collect::<Vec<_>>().join("; ")) })]
+    NoPatch(Vec<SurfaceProblem>),
     #[error("the surface system cannot be solved: {0}")]
     Solve(#[from] SolveError),
 }
@@ -169,7 +172,7 @@ fn assemble(
     net: &NetworkSegments,
     cyc: &Cycles,
     edge: f64,
-    problems: &mut Vec<String>,
+    problems: &mut Vec<SurfaceProblem>,
 ) -> (Assembly, usize) {
     let mut positions = Vec::new();
     let mut normals = Vec::new();
@@ -260,10 +263,10 @@ fn assemble(
         let (mesh, l, areas) = match result {
             Ok(m) => m,
             Err(e) => {
-                problems.push(format!(
-                    "the patch through nodes {:?} cannot be tessellated: {e}; it is left open",
-                    cyc.nodes(net)
-                ));
+                problems.push(SurfaceProblem::NotTessellated {
+                    nodes: cyc.nodes(net),
+                    reason: e,
+                });
                 skipped += 1;
                 continue;
             }
@@ -277,10 +280,9 @@ fn assemble(
             mesh.embedding
         );
         if mesh.embedding == Embedding::Circle {
-            problems.push(format!(
-                "the patch through nodes {:?} overlaps itself seen along its average normal and developed; it was tessellated on a disk",
-                cyc.nodes(net)
-            ));
+            problems.push(SurfaceProblem::OnDisk {
+                nodes: cyc.nodes(net),
+            });
         }
         // Local → global ids: the boundary first, then new free vertices.
         let mut g: Vec<usize> = ids.clone();
@@ -777,7 +779,7 @@ struct Tessellation {
     asm: Assembly,
     skipped: usize,
     cycles: Cycles,
-    problems: Vec<String>,
+    problems: Vec<SurfaceProblem>,
     /// The target edge, m.
     edge: f64,
 }
@@ -961,7 +963,7 @@ fn output(
     asm: &Assembly,
     nstar: &[Vector3<f64>],
     edge: f64,
-    problems: &mut Vec<String>,
+    problems: &mut Vec<SurfaceProblem>,
 ) -> Result<TrianglesAndNormals, SurfaceError> {
     let scale = edge * edge;
     let nv = asm.positions.len();
@@ -984,9 +986,9 @@ fn output(
         triangles.push(t.map(|i| i as u32));
     }
     if degenerate > 0 {
-        problems.push(format!(
-            "{degenerate} triangle(s) came out with zero area and were left out"
-        ));
+        problems.push(SurfaceProblem::ZeroArea {
+            triangles: degenerate,
+        });
     }
     let normals: Vec<Vector3<f64>> = vn
         .iter()
