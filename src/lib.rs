@@ -7,7 +7,8 @@
 //! - [`source`]: where bytes come from (serial port, capture file, stdin), each on its own
 //!   thread behind one channel of [`source::SourceEvent`]s.
 //! - [`capture`]: lossless capture of live bytes, written before anything decodes them
-//!   (rotated with retention for unattended runs, each piece keeping the session's time).
+//!   (rotated with retention for unattended runs, each piece keeping the session's time);
+//!   [`clock`]: the session time from the device's stamps (wraps and reboots bridged).
 //! - [`link`]: statistics of the decoded link (packets, rejects, gaps, reboots, STATUS).
 //! - [`sensor`]: packets → calibrated samples (HELLO scales, calibration, axis mapping).
 //! - [`orientation`]: samples → orientations of the frame [T B N] (TRIAD, the phone's
@@ -17,17 +18,27 @@
 //!   (pre-filter, loop-closure test of the tags, regression on SO(3)) → positions of the
 //!   network (Poisson) → surface (cycles, tessellation, cotangent Laplacian, biharmonic
 //!   propagation, the mean-curvature-guided fit), with the sparse Cholesky they share.
-//! - [`gltf_out`]: network (and surface) → `network.glb`; [`eval`]: scoring against a truth.
-//! - [`session`]: one run of the pipeline, source → decoder → acquisition → outputs;
-//!   [`live`]: the worker that rebuilds the outputs after every curve (coalescing).
-//! - [`report`]: `report.json`; [`atomic`]: atomic replacement of output files.
+//! - [`pipeline`]: the one place that turns a scan's curves into products (network, surface,
+//!   `network.glb` bytes, warnings), with the caches kept between runs.
+//! - [`gltf_out`]: all glTF writing and reading (the output contract).
+//! - [`live`]: the worker that rebuilds the outputs after every curve (coalescing).
+//! - [`report`]: `report.json`, assembled in one place; [`warning`]: the typed warnings
+//!   it lists; [`memory`]: resident size; [`atomic`]: atomic replacement of output files.
+//! - [`session`]: one session, prepared, streamed (source → decoder → acquisition → live
+//!   worker and monitor) and finished (scan.json, network.glb, report.json).
 //! - [`monitor`]: instrumented structures (sensor arrays): layout → shape per epoch →
 //!   metrics against a reference → alarms → rolling outputs (metrics.csv, events.log,
 //!   latest.glb, a Prometheus endpoint).
-//! - [`calibrate`]: `sfs calibrate` (ellipsoid and static-pose fits).
-//! - [`simulate`]: captures of known shapes (operator timeline, device models).
-//! - [`config`]: the resolved configuration (`config/*.toml`); [`cli`]: raw flags.
+//! - [`settings`]: everything a session runs with, resolved once; [`config`]: the
+//!   configuration file (`config/*.toml`), one module per section, resolved into settings;
+//!   [`cli`]: the raw flags; `main.rs` the thin binary over them.
 //! - [`shutdown`]: the stop signal passed into every long-running part.
+//! - Tools beside the daemon: [`calibrate`] (`sfs calibrate`: ellipsoid and static-pose
+//!   fits), [`simulate`] (captures of known shapes: operator timeline, device models),
+//!   [`eval`] (`sfs eval`: scoring against a truth).
+//!
+//! The modules import one another without cycles (checked with
+//! `../shared/tools/rust_imports.py`).
 
 pub mod acquisition;
 pub mod atomic;

@@ -4,8 +4,8 @@
 //! they have them. Their text (`Display`) is what the log, `scan.json` and `report.json` say;
 //! their [`code`](Warning::code) is a stable name of the kind, for machines.
 
-use crate::acquisition::AcquisitionWarning;
 use crate::keypad;
+use device_protocol::DeviceKind;
 use sfs_geometry::network::NetworkWarning;
 use sfs_geometry::surface::fit::SurfaceError;
 use sfs_geometry::surface::SurfaceProblem;
@@ -77,6 +77,151 @@ impl std::fmt::Display for Warning {
 impl serde::Serialize for Warning {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         s.collect_str(self)
+    }
+}
+
+/// Something acquisition had to bridge, ignore or leave out, with the curve and time where
+/// it has them; its text is its `Display`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum AcquisitionWarning {
+    /// The device rebooted while a curve was open: distance and time are bridged.
+    RebootInCurve { curve: usize, t: f64 },
+    /// A HELLO whose scales cannot be used: samples are ignored until a valid one.
+    UnusableHello {
+        device_id: u32,
+        error: crate::sensor::ScaleError,
+    },
+    /// The device kind changed mid-session.
+    KindChanged { kind: DeviceKind },
+    /// The wheel counter jumped (said once per session; such jumps are ignored).
+    WheelJump { t: f64, step_m: f64 },
+    /// A SEGMENT_LENGTH that is not a positive length.
+    BadSegmentLength { t: f64, segment: u16, length_m: f64 },
+    /// A SEGMENT_LENGTH before any curve.
+    SegmentLengthWithoutCurve { t: f64, segment: u16 },
+    /// A SEGMENT_LENGTH for a segment the last curve does not have.
+    NoSuchSegment {
+        curve: usize,
+        t: f64,
+        segment: u16,
+        segments: usize,
+    },
+    /// A curve with no samples between its start and end.
+    NoSamples { curve: usize, nodes: Vec<u32> },
+    /// The wheel went back over a segment.
+    WheelBack {
+        curve: usize,
+        node: u32,
+        t: f64,
+        back_m: f64,
+        segment: usize,
+        from: u32,
+    },
+    /// The session ended with a curve open.
+    NeverEnded {
+        curve: usize,
+        nodes: Vec<u32>,
+        samples: usize,
+    },
+}
+
+impl AcquisitionWarning {
+    /// A stable name of the kind of problem.
+    pub fn code(&self) -> &'static str {
+        use AcquisitionWarning::*;
+        match self {
+            RebootInCurve { .. } => "reboot_in_curve",
+            UnusableHello { .. } => "unusable_hello",
+            KindChanged { .. } => "device_kind_changed",
+            WheelJump { .. } => "wheel_jump",
+            BadSegmentLength { .. } => "bad_segment_length",
+            SegmentLengthWithoutCurve { .. } => "segment_length_without_curve",
+            NoSuchSegment { .. } => "no_such_segment",
+            NoSamples { .. } => "curve_without_samples",
+            WheelBack { .. } => "wheel_back",
+            NeverEnded { .. } => "curve_never_ended",
+        }
+    }
+
+    /// The curve it names.
+    pub fn curve(&self) -> Option<usize> {
+        use AcquisitionWarning::*;
+        match self {
+            RebootInCurve { curve, .. }
+            | NoSuchSegment { curve, .. }
+            | NoSamples { curve, .. }
+            | WheelBack { curve, .. }
+            | NeverEnded { curve, .. } => Some(*curve),
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for AcquisitionWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use AcquisitionWarning::*;
+        match self {
+            RebootInCurve { curve, t } => write!(
+                f,
+                "curve {curve}, t = {t:.3} s: the device rebooted during the curve; its distance and time are bridged"
+            ),
+            UnusableHello { device_id, error } => write!(
+                f,
+                "HELLO of device {device_id} is unusable: {error}; its samples are ignored until a valid HELLO"
+            ),
+            KindChanged { kind } => write!(
+                f,
+                "the device kind changed mid-session (now {kind:?}); later samples use it"
+            ),
+            WheelJump { t, step_m } => write!(
+                f,
+                "t = {t:.3} s: the wheel counter jumped {step_m:.3} m between two samples; such jumps are ignored"
+            ),
+            BadSegmentLength {
+                t,
+                segment,
+                length_m,
+            } => write!(
+                f,
+                "t = {t:.3} s: SEGMENT_LENGTH of segment {segment} is {length_m} m; ignored"
+            ),
+            SegmentLengthWithoutCurve { t, segment } => write!(
+                f,
+                "t = {t:.3} s: SEGMENT_LENGTH {segment} with no curve scanned yet; ignored"
+            ),
+            NoSuchSegment {
+                curve,
+                t,
+                segment,
+                segments,
+            } => write!(
+                f,
+                "curve {curve}, t = {t:.3} s: SEGMENT_LENGTH for segment {segment}, but the curve has {segments} segment(s); ignored"
+            ),
+            NoSamples { curve, nodes } => write!(
+                f,
+                "curve {curve}: no samples between its B/I and E (nodes {nodes:?}); it carries no shape"
+            ),
+            WheelBack {
+                curve,
+                node,
+                t,
+                back_m,
+                segment,
+                from,
+            } => write!(
+                f,
+                "curve {curve}, node {node}, t = {t:.3} s: the wheel went back {back_m:.3} m over segment {segment} (from node {from}); backwards scanning?"
+            ),
+            NeverEnded {
+                curve,
+                nodes,
+                samples,
+            } => write!(
+                f,
+                "curve {curve}: the session ended before its E (nodes {nodes:?}, {samples} samples); not used"
+            ),
+        }
     }
 }
 

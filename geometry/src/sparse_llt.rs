@@ -144,7 +144,7 @@ impl SpdPattern {
 /// let mut cache = CachedPattern::default();
 /// let entries = vec![(0, 0), (1, 0), (1, 1)];
 /// for scale in [1.0, 2.0] {
-///     let f = cache.factor(2, &entries, &[4.0 * scale, scale, 3.0 * scale]).unwrap();
+///     let f = cache.factor(2, entries.clone(), &[4.0 * scale, scale, 3.0 * scale]).unwrap();
 ///     let mut b = vec![[1.0], [2.0]];
 ///     f.solve(&mut b);
 /// }
@@ -165,14 +165,14 @@ impl CachedPattern {
     pub fn pattern(
         &mut self,
         n: usize,
-        entries: &[(usize, usize)],
+        entries: Vec<(usize, usize)>,
     ) -> Result<(&SpdPattern, bool), SolveError> {
         let same = matches!(&self.cached, Some(p) if p.n == n && self.entries == entries);
         if !same {
             self.cached = None;
-            let pattern = SpdPattern::new(n, entries)?;
+            let pattern = SpdPattern::new(n, &entries)?;
             self.symbolic_count += 1;
-            self.entries = entries.to_vec();
+            self.entries = entries;
             self.cached = Some(pattern);
         }
         Ok((self.cached.as_ref().expect("set above"), !same))
@@ -183,7 +183,7 @@ impl CachedPattern {
     pub fn factor(
         &mut self,
         n: usize,
-        entries: &[(usize, usize)],
+        entries: Vec<(usize, usize)>,
         values: &[f64],
     ) -> Result<SpdFactor, SolveError> {
         self.pattern(n, entries)?.0.factor(values)

@@ -1,5 +1,8 @@
-//! Resolved configuration, read from `config/*.toml` (serde). Every error names the key and the
-//! reason. Command-line flags are kept apart (`cli`) and applied on top by `main`.
+//! The configuration file (`config/*.toml`, serde), resolved once into
+//! [`Settings`](crate::settings::Settings): one module per section (`source`, `acquisition`
+//! with `[calibration]`, `network`, `surface`, `output`, `monitor`), each checking its keys.
+//! Every error names the key and the reason ([`ConfigError`]). Command-line flags are kept
+//! apart (`cli`) and applied on top by `main`.
 //!
 //! ```toml
 //! [source]

@@ -131,7 +131,7 @@ impl PoissonSolver {
         for &g in &gauges {
             vals[g] += mean_w.max(1.0);
         }
-        let f = self.pattern.factor(n, &entries, &vals)?;
+        let f = self.pattern.factor(n, entries, &vals)?;
         f.solve(&mut rhs);
         let x: Vec<Vector3<f64>> = rhs.iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
         let out_curves = curves

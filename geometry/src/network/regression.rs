@@ -328,8 +328,8 @@ impl RegressionSolver {
             return RegressionReport::default();
         }
         let mut x = start(&pb, curves, init);
-        let normal = NormalPattern::of(&pb, p);
-        let symbolic = match self.pattern.pattern(3 * n, &normal.entries) {
+        let (normal, entries) = NormalPattern::of(&pb, p);
+        let symbolic = match self.pattern.pattern(3 * n, entries) {
             Ok((s, _)) => s,
             Err(e) => {
                 tracing::error!("regression: {e}");
@@ -423,12 +423,14 @@ struct NormalPattern {
     block_index: HashMap<(usize, usize), usize>,
     /// The block of each variable's diagonal.
     diag_slot: Vec<usize>,
-    entries: Vec<(usize, usize)>,
+    /// Scalar entries of the lower triangle.
+    entries: usize,
 }
 
 impl NormalPattern {
-    /// The pattern of problem `pb` under the settings `p` (terms of weight zero add none).
-    fn of(pb: &Problem, p: &Resolved) -> Self {
+    /// The pattern of problem `pb` under the settings `p` (terms of weight zero add none),
+    /// and its scalar entries (`(row, col)`, `row ≥ col`, in the order of [`values`](Self::values)).
+    fn of(pb: &Problem, p: &Resolved) -> (Self, Vec<(usize, usize)>) {
         let n = pb.a.len();
         let mut block_keys: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
         let mut add = |a: usize, b: usize| {
@@ -469,12 +471,13 @@ impl NormalPattern {
                 }
             }
         }
-        NormalPattern {
+        let pattern = NormalPattern {
             block_keys,
             block_index,
             diag_slot,
-            entries,
-        }
+            entries: entries.len(),
+        };
+        (pattern, entries)
     }
 
     /// The block of every (term, variable pair) of `t`: the terms keep their order and
@@ -499,7 +502,7 @@ impl NormalPattern {
     /// The entries' values of the normal matrix of `blocks` with `damping` added to its
     /// diagonal (Levenberg–Marquardt: `λ (1 + JᵀJ_ii)`).
     fn values(&self, blocks: &[Matrix3<f64>], damping: f64) -> Vec<f64> {
-        let mut vals = Vec::with_capacity(self.entries.len());
+        let mut vals = Vec::with_capacity(self.entries);
         for (k, &(bi, bj)) in self.block_keys.iter().enumerate() {
             for a in 0..3 {
                 for b in 0..3 {

@@ -425,7 +425,7 @@ impl SoftSolver {
                 vals.push(if i < c { w } else { 0.0 });
             }
         }
-        let factor = cache.factor(n, &entries, &vals)?;
+        let factor = cache.factor(n, entries, &vals)?;
         Ok(SoftSolver { c, w, factor })
     }
 
@@ -492,11 +492,11 @@ impl FreeSolver {
                 }
             }
         }
-        let (pat, fresh) = cache.pattern(nf, &entries)?;
+        let count = entries.len();
+        let (pat, fresh) = cache.pattern(nf, entries)?;
         if fresh {
             tracing::debug!(
-                "surface: symbolic factorisation of {nf} free unknowns, {} entries, fill {}",
-                entries.len(),
+                "surface: symbolic factorisation of {nf} free unknowns, {count} entries, fill {}",
                 pat.fill()
             );
         }
