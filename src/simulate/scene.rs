@@ -269,7 +269,7 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
     let mut raw = Vec::new();
     for (i, c) in t.curves.iter().enumerate() {
         let key = format!("curve[{i}]");
-        let pl = piece(&surface, &tess, c, spacing).map_err(|r| err(&key, r))?;
+        let pl = piece(&surface, &tess, c, spacing).map_err(|r| err(&key, r.to_string()))?;
         raw.push(pl);
     }
     let (curves, nodes) =
@@ -477,16 +477,41 @@ fn resample(
     (out_p, out_n)
 }
 
-fn piece(s: &Surface, tess: &TriMesh, c: &CurveToml, h: f64) -> Result<Piece, String> {
+/// Why a scene curve cannot be built (its key is named by [`SceneError`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CurveError {
+    #[error("kind = \"mesh-boundary\" needs a mesh surface")]
+    NotAMesh,
+    #[error("the mesh has no boundary")]
+    NoBoundary,
+    #[error("unknown curve kind {0:?}: section or mesh-boundary")]
+    UnknownKind(String),
+    #[error("normal must be a non-zero vector")]
+    ZeroNormal,
+    #[error("the three `through` points are collinear")]
+    Collinear,
+    #[error("give either normal (+ offset) or through")]
+    NoPlane,
+    #[error("the plane does not cut the surface")]
+    NoCut,
+    #[error("closed = true, but this section is not a loop")]
+    NotALoop,
+    #[error("give both from and to, or neither")]
+    HalfArc,
+    #[error("from and to are the same point of the section")]
+    EmptyArc,
+}
+
+fn piece(s: &Surface, tess: &TriMesh, c: &CurveToml, h: f64) -> Result<Piece, CurveError> {
     if c.kind == "mesh-boundary" {
         let Surface::Mesh(m) = s else {
-            return Err("kind = \"mesh-boundary\" needs a mesh surface".into());
+            return Err(CurveError::NotAMesh);
         };
         let loops = m.boundary_loops();
         let lp = loops
             .iter()
             .max_by_key(|l| l.len())
-            .ok_or("the mesh has no boundary")?;
+            .ok_or(CurveError::NoBoundary)?;
         let mut points: Vec<Vector3<f64>> = lp.iter().map(|&i| m.v[i as usize]).collect();
         let mut normals: Vec<Vector3<f64>> = lp.iter().map(|&i| m.n[i as usize]).collect();
         points.push(points[0]);
@@ -501,17 +526,14 @@ fn piece(s: &Surface, tess: &TriMesh, c: &CurveToml, h: f64) -> Result<Piece, St
         });
     }
     if c.kind != "section" {
-        return Err(format!(
-            "unknown curve kind {:?}: section or mesh-boundary",
-            c.kind
-        ));
+        return Err(CurveError::UnknownKind(c.kind.clone()));
     }
     let (normal, offset) = match (c.normal, c.through) {
         (Some(n), None) => {
             let n = v3(n);
             let l = n.norm();
             if !(l > 0.0 && l.is_finite()) {
-                return Err("normal must be a non-zero vector".into());
+                return Err(CurveError::ZeroNormal);
             }
             (n / l, c.offset.unwrap_or(0.0) / l)
         }
@@ -520,15 +542,15 @@ fn piece(s: &Surface, tess: &TriMesh, c: &CurveToml, h: f64) -> Result<Piece, St
             let n = (b - a).cross(&(q - a));
             let l = n.norm();
             if l.is_nan() || l < 1e-12 {
-                return Err("the three `through` points are collinear".into());
+                return Err(CurveError::Collinear);
             }
             (n / l, (n / l).dot(&a))
         }
-        _ => return Err("give either normal (+ offset) or through".into()),
+        _ => return Err(CurveError::NoPlane),
     };
     let pieces: Vec<Section> = tess.slice(&normal, offset);
     if pieces.is_empty() {
-        return Err("the plane does not cut the surface".into());
+        return Err(CurveError::NoCut);
     }
     let hint = c.near.or(c.from).map(v3).unwrap_or_else(Vector3::zeros);
     let sec = pieces
@@ -556,11 +578,11 @@ fn piece(s: &Surface, tess: &TriMesh, c: &CurveToml, h: f64) -> Result<Piece, St
         )?,
         (None, None) => {
             if c.closed && !sec.closed {
-                return Err("closed = true, but this section is not a loop".into());
+                return Err(CurveError::NotALoop);
             }
             (pts, nrm)
         }
-        _ => return Err("give both from and to, or neither".into()),
+        _ => return Err(CurveError::HalfArc),
     };
     let closed = c.closed && c.from.is_none();
     let (points, normals) = resample(&pts, &nrm, h, s, Some(&normal));
@@ -583,7 +605,7 @@ fn arc(
     f: &Vector3<f64>,
     t: &Vector3<f64>,
     via: Option<&Vector3<f64>>,
-) -> Result<Polyline, String> {
+) -> Result<Polyline, CurveError> {
     // Insert the exact closest points, then walk between them.
     let split = |p: &[Vector3<f64>],
                  n: &[Vector3<f64>],
@@ -609,7 +631,7 @@ fn arc(
         .position(|q| (q - closest_point(&p2, t)).norm() < 1e-12)
         .unwrap_or(p2.len() - 1);
     if fi == ti {
-        return Err("from and to are the same point of the section".into());
+        return Err(CurveError::EmptyArc);
     }
     let forward = |a: usize, b: usize| -> Polyline {
         let m = p2.len() - 1; // closed: last == first
