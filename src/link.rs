@@ -5,6 +5,7 @@
 //! { "bytes": 1234, "packets": { "RIDER_SAMPLE": 12000, "KEY": 40, ... },
 //!   "rejected": { "crc": 1, "cobs": 0, "length": 0 }, "unknown_types": 0,
 //!   "lost_packets": 3, "reboots": 0, "clock_wraps": 0, "partial_start_bytes": 0,
+//!   "partial_end_bytes": 0,
 //!   "connects": 1, "disconnects": 0, "hello": { ... }, "status": { ... } }
 //! ```
 
@@ -31,6 +32,9 @@ pub struct LinkStats {
     pub clock_wraps: u64,
     /// Bytes before the first delimiter that did not form a frame (joined mid-packet).
     pub partial_start_bytes: u64,
+    /// Bytes after the last delimiter when the stream ended inside a frame (a capture cut
+    /// mid-packet): set when the session ends.
+    pub partial_end_bytes: u64,
     /// Times the source (re)connected, and lost the device.
     pub connects: u64,
     pub disconnects: u64,

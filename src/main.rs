@@ -420,7 +420,7 @@ fn run_session(spec: SourceSpec, out: &Path, settings: &Settings, start: session
                 complain!("sfs: {e}");
                 match e {
                     SessionError::Source(SourceError::Thread(_)) => exit::INTERNAL,
-                    SessionError::Source(_) => exit::INPUT,
+                    SessionError::Source(_) | SessionError::Read { .. } => exit::INPUT,
                     SessionError::Output(_) | SessionError::Metrics { .. } => exit::OUTPUT,
                     SessionError::CaptureExists { .. } | SessionError::Resume(_) => exit::USAGE,
                 }

@@ -64,6 +64,9 @@ pub enum SessionError {
     /// The input (capture file, serial port, stdin) is unavailable.
     #[error(transparent)]
     Source(#[from] SourceError),
+    /// The input failed while it was read (written after the outputs of what was read).
+    #[error("reading {source_name} failed before its end (the error is in the log); the outputs hold what was read")]
+    Read { source_name: String },
 }
 
 /// What a finished session reports.
@@ -140,10 +143,11 @@ pub async fn run(
     }
     let end = flow.stream(&mut src, &shutdown, progress.as_ref()).await;
     stop_source(src).await;
-    if flow.decoder.buffered() > 0 {
-        tracing::debug!(
-            bytes = flow.decoder.buffered(),
-            "stream ended inside a frame"
+    flow.stats.partial_end_bytes = flow.decoder.buffered() as u64;
+    if flow.stats.partial_end_bytes > 0 {
+        tracing::info!(
+            bytes = flow.stats.partial_end_bytes,
+            "the stream ended inside a frame"
         );
     }
     if let Some(p) = progress {
@@ -151,6 +155,11 @@ pub async fn run(
     }
     log_stats("session ended", &flow.stats);
     let (report, report_path) = flow.finish(settings, out_dir, end, &description, started)?;
+    if end == EndReason::ReadError {
+        return Err(SessionError::Read {
+            source_name: description,
+        });
+    }
     if end == EndReason::CaptureFailed {
         return Err(
             OutputError::at(&prepared.capture_path.clone().unwrap_or_default())(

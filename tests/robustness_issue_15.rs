@@ -1,0 +1,67 @@
+//! Issue 15: the defects found by probing the daemon as a hostile world would, each pinned by
+//! a test named after what it pins.
+
+mod common;
+use common::*;
+use std::process::{Command, Stdio};
+
+fn sfs() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_sfs"))
+}
+
+fn read_report(dir: &std::path::Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap()
+}
+
+/// Point 6: a read error on standard input exits 3 (the input cannot be read), naming
+/// standard input; the report of what was read is still written.
+#[test]
+fn issue_15_a_read_error_on_standard_input_exits_3() {
+    let dir = tmpdir("stdin-read-error");
+    // Reading a directory fails (EISDIR) at the first read.
+    let stdin = std::fs::File::open("/").unwrap();
+    let out = sfs()
+        .args(["--log", "off", "run", "--stdin", "--session"])
+        .arg(dir.join("s"))
+        .stdin(Stdio::from(stdin))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(sfs::exit::INPUT), "{err}");
+    assert!(err.contains("standard input"), "{err}");
+    assert_eq!(read_report(&dir.join("s"))["ended"], "read_error");
+}
+
+/// Point 8: a capture that ends inside a frame counts the bytes after its last complete frame
+/// (`link.partial_end_bytes`); a whole capture counts none.
+#[test]
+fn issue_15_bytes_after_the_last_frame_are_counted() {
+    let dir = tmpdir("partial-end");
+    let (bytes, _) = fault_stream(300);
+    assert_eq!(
+        *bytes.last().unwrap(),
+        0,
+        "a whole capture ends on a delimiter"
+    );
+    let last = bytes[..bytes.len() - 1]
+        .iter()
+        .rposition(|&b| b == 0)
+        .unwrap();
+    // Cut the last frame short: its first 5 bytes stay.
+    let cut = &bytes[..last + 1 + 5];
+    for (name, capture, expected) in [("whole", &bytes[..], 0), ("cut", cut, 5)] {
+        let cap = dir.join(format!("{name}.bin"));
+        std::fs::write(&cap, capture).unwrap();
+        let st = sfs()
+            .args(["--log", "off", "replay"])
+            .arg(&cap)
+            .arg("--out")
+            .arg(dir.join(name))
+            .status()
+            .unwrap();
+        assert!(st.success());
+        let link = &read_report(&dir.join(name))["link"];
+        assert_eq!(link["partial_end_bytes"], expected, "{name}: {link}");
+        assert_eq!(link["bytes"], capture.len() as u64);
+    }
+}
