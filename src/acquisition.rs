@@ -117,6 +117,8 @@ struct ArraySensor {
     mag: Vector3<f64>,
     n: u32,
     flags: u8,
+    /// Session time of its newest sample, s.
+    last_t: f64,
 }
 
 /// The acquisition state. See the module documentation.
@@ -696,6 +698,7 @@ impl Acquisition {
             self.scan.counts.array_late += 1;
             return;
         }
+        st.last_t = st.last_t.max(t);
         if sat {
             st.flags |= flags::SATURATED;
             return;
@@ -762,6 +765,32 @@ impl Acquisition {
             samples: st.n,
             flags: f,
         });
+    }
+
+    /// End of input for sensor arrays: the window of the shared grid still held is closed
+    /// for every sensor, as when the grid moves on, when it is complete (its newest sample
+    /// within one sample interval of its end, at the HELLO's rate); an incomplete one is
+    /// dropped. Its epochs join [`take_array`](Self::take_array)'s; returns the time up to
+    /// which epochs are then complete.
+    pub fn close_array(&mut self) -> Option<f64> {
+        let grid = self.array_grid?;
+        let rate = self.scan.device.as_ref().map_or(0, |d| d.rate_hz);
+        let interval = if rate > 0 { 1.0 / rate as f64 } else { 0.0 };
+        let end = (grid + 1) as f64 * self.cfg.array_window;
+        let newest = self
+            .array
+            .values()
+            .map(|st| st.last_t)
+            .fold(f64::MIN, f64::max);
+        let held = std::mem::take(&mut self.array);
+        if newest + interval < end - 1e-6 {
+            return None;
+        }
+        for (id, st) in held {
+            self.close_array_window(id, st);
+        }
+        self.array_grid = Some(grid + 1);
+        Some(end)
     }
 
     /// Ends acquisition: an open curve is reported and dropped (it was never ended).

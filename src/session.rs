@@ -405,12 +405,21 @@ impl Flow {
         description: &str,
         started: Instant,
     ) -> Result<(Report, PathBuf), SessionError> {
+        // The last windows of a sensor array, when complete, are epochs too.
+        let mut acq = self.acq;
+        let last = acq.close_array();
         let monitor_report = self.monitor.map(|mut m| {
+            for e in acq.take_array() {
+                m.feed(&e);
+            }
+            if let Some(t) = last {
+                m.close_until(t);
+            }
             m.finish();
             m.report
         });
         let live = self.live.map(|l| l.finish());
-        let scan = self.acq.finish();
+        let scan = acq.finish();
         let scan_path = out_dir.join(SCAN_FILE);
         crate::atomic::write_json(&scan_path, &scan, false).map_err(OutputError::at(&scan_path))?;
         let (products, mut live_report) = match live {

@@ -65,3 +65,39 @@ fn issue_15_bytes_after_the_last_frame_are_counted() {
         assert_eq!(link["bytes"], capture.len() as u64);
     }
 }
+
+/// Point 10: the last averaging window of a monitored stream is an epoch too when it is
+/// complete: 150 s of the riser at 5 epochs/s give 750 epochs (749 before), each with its
+/// metrics line.
+#[test]
+fn issue_15_the_last_monitoring_window_is_reported() {
+    let dir = tmpdir("last-window");
+    let prefix = dir.join("riser");
+    let st = sfs()
+        .args(["--log", "off", "simulate", "--structure", "riser"])
+        .args(["--duration", "150", "--out"])
+        .arg(&prefix)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/riser.toml");
+    let out = sfs()
+        .args(["--log", "off", "replay"])
+        .arg(prefix.with_extension("bin"))
+        .arg("--config")
+        .arg(&config)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report = read_report(&dir.join("out"));
+    assert_eq!(report["monitor"]["epochs"], 750, "{}", report["monitor"]);
+    let csv = std::fs::read_to_string(dir.join("out/metrics.csv")).unwrap();
+    let last = csv.lines().last().unwrap();
+    assert!(last.starts_with("150.000,"), "{last}");
+}
