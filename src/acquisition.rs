@@ -52,6 +52,8 @@ pub struct AcquisitionConfig {
     pub ahrs: AhrsParams,
     /// Sensor arrays: averaging window, s. Default 1.
     pub array_window: f64,
+    /// Largest node index the keypad accepts; a larger one is not tagged. Default 999 999.
+    pub max_node: u32,
 }
 
 impl Default for AcquisitionConfig {
@@ -67,6 +69,7 @@ impl Default for AcquisitionConfig {
             segment_lengths: BTreeMap::new(),
             ahrs: AhrsParams::default(),
             array_window: 1.0,
+            max_node: crate::keypad::MAX_NODE,
         }
     }
 }
@@ -169,6 +172,7 @@ impl Acquisition {
     /// session time goes on from `start`).
     pub fn starting_at(cfg: AcquisitionConfig, start: &crate::clock::CaptureStart) -> Self {
         let ahrs = Ahrs::new(cfg.ahrs);
+        let keypad = Keypad::with_max_node(cfg.max_node);
         let mut acq = Acquisition {
             cfg,
             model: None,
@@ -177,7 +181,7 @@ impl Acquisition {
             wheel_last: None,
             wheel_m: 0.0,
             wheel_reset: false,
-            keypad: Keypad::new(),
+            keypad,
             key_events: Vec::new(),
             open: None,
             scan: Scan::default(),

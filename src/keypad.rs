@@ -74,8 +74,10 @@ pub enum Issue {
     TimedOut { digits: String },
     /// A digit with no curve open.
     DigitWithoutCurve,
-    /// A seventh digit.
+    /// A seventh digit: the index is not tagged.
     IndexTooLong { digits: String },
+    /// An index above the configured maximum: not tagged.
+    IndexAboveMax { max: u32 },
     /// Enter with no curve open.
     EnterWithoutCurve,
     /// Enter with no digits after packets were lost: tagged as an anonymous node.
@@ -108,6 +110,7 @@ impl Issue {
             Issue::TimedOut { .. } => "keypad_digits_timed_out",
             Issue::DigitWithoutCurve => "keypad_digit_without_curve",
             Issue::IndexTooLong { .. } => "keypad_index_too_long",
+            Issue::IndexAboveMax { .. } => "keypad_index_above_max",
             Issue::EnterWithoutCurve => "keypad_enter_without_curve",
             Issue::IndexLost => "keypad_index_lost",
             Issue::EnterWithoutIndex => "keypad_enter_without_index",
@@ -139,9 +142,14 @@ impl std::fmt::Display for Issue {
                 "digits {digits:?} not confirmed with Enter within {DIGIT_TIMEOUT} s; ignored"
             ),
             Issue::DigitWithoutCurve => f.write_str("digit with no curve open; ignored"),
-            Issue::IndexTooLong { digits } => {
-                write!(f, "node index longer than 6 digits ({digits}…); ignored")
-            }
+            Issue::IndexTooLong { digits } => write!(
+                f,
+                "node index longer than 6 digits ({digits}…); ignored, no node tagged"
+            ),
+            Issue::IndexAboveMax { max } => write!(
+                f,
+                "node index above the configured maximum {max}; ignored, no node tagged"
+            ),
             Issue::EnterWithoutCurve => f.write_str("Enter with no curve open; ignored"),
             Issue::IndexLost => f.write_str("Enter after packets were lost and with no digits: the node index was lost; tagged as an anonymous node that joins no other curve"),
             Issue::EnterWithoutIndex => f.write_str("Enter with no node index typed; ignored"),
@@ -222,6 +230,10 @@ pub struct Keypad {
     digits_uncertain: bool,
     /// Anonymous nodes handed out so far.
     anonymous: u32,
+    /// The index being typed passed six digits: it is not tagged (said once).
+    overlong: bool,
+    /// Largest node index accepted (`None`: [`MAX_NODE`]).
+    max_node: Option<u32>,
 }
 
 /// Digits not confirmed within this many seconds are stale (the operator moved on).
@@ -230,6 +242,14 @@ pub const DIGIT_TIMEOUT: f64 = 2.0;
 impl Keypad {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// A keypad that refuses node indices above `max` (at most [`MAX_NODE`]).
+    pub fn with_max_node(max: u32) -> Self {
+        Keypad {
+            max_node: Some(max.min(MAX_NODE)),
+            ..Self::default()
+        }
     }
 
     /// Index the next started curve will get.
@@ -259,6 +279,9 @@ impl Keypad {
     }
 
     fn drop_digits(&mut self, t: f64, key: u8, out: &mut Vec<KeyEvent>) {
+        if std::mem::take(&mut self.overlong) {
+            self.digits.clear(); // said when the index became too long
+        }
         if !self.digits.is_empty() {
             let d = std::mem::take(&mut self.digits);
             self.warn(
@@ -314,6 +337,12 @@ impl Keypad {
         if !(late_digit || (other_key && self.gap_since_digit)) {
             return;
         }
+        if std::mem::take(&mut self.overlong) {
+            // An index too long is never tagged (said when it became too long).
+            self.digits.clear();
+            self.gap_since_digit = false;
+            return;
+        }
         let digits = std::mem::take(&mut self.digits);
         let node: u32 = digits.parse().expect("only digits, at most 6");
         let t_tag = self.last_digit;
@@ -361,7 +390,10 @@ impl Keypad {
             b'0'..=b'9' => {
                 if self.open.is_none() {
                     self.warn(out, t, Some((key - b'0') as u32), Issue::DigitWithoutCurve);
+                } else if self.overlong {
+                    // Said once for the index.
                 } else if self.digits.len() >= 6 {
+                    self.overlong = true;
                     self.warn(
                         out,
                         t,
@@ -380,6 +412,9 @@ impl Keypad {
                 if self.open.is_none() {
                     self.warn(out, t, digits.parse().ok(), Issue::EnterWithoutCurve);
                     return;
+                }
+                if std::mem::take(&mut self.overlong) {
+                    return; // not tagged: said when the index became too long
                 }
                 if digits.is_empty() {
                     if gap_before {
@@ -400,6 +435,11 @@ impl Keypad {
                     return;
                 }
                 let node: u32 = digits.parse().expect("only digits, at most 6");
+                let max = self.max_node.unwrap_or(MAX_NODE);
+                if node > max {
+                    self.warn(out, t, Some(node), Issue::IndexAboveMax { max });
+                    return;
+                }
                 // A loss between the last digit and the Enter may have taken a digit too.
                 let uncertain = std::mem::take(&mut self.digits_uncertain) || gap_before;
                 let open = self.open.as_mut().expect("checked");
@@ -706,5 +746,60 @@ mod tests {
         assert_eq!(ended(&ev), [0, 1, 2]);
         assert!(ev.contains(&KeyEvent::Discarded { curve: 2 }));
         assert_eq!(warnings(&ev).len(), 3, "{ev:?}"); // no E, stray digit, E with one tag
+    }
+
+    fn tagged(ev: &[KeyEvent]) -> Vec<u32> {
+        ev.iter()
+            .filter_map(|e| match e {
+                KeyEvent::Tagged { node, .. } => Some(*node),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Issue 15 point 2: an index longer than six digits is refused with one warning (a
+    /// stuck key too) and no node is tagged (`1000000⏎` tagged node 100000).
+    #[test]
+    fn issue_15_an_index_longer_than_six_digits_tags_nothing() {
+        for long in ["1000000".to_string(), "7".repeat(1000)] {
+            let ev = run(&format!("B1\n{long}\n2\nE"));
+            assert_eq!(tagged(&ev), [1, 2], "{}", &long[..7]);
+            let w = warnings(&ev);
+            assert_eq!(w.len(), 1, "{w:?}");
+            assert!(matches!(w[0].issue, Issue::IndexTooLong { .. }), "{}", w[0]);
+        }
+        // Left unconfirmed, it goes stale quietly and the next index is whole again.
+        let mut k = Keypad::new();
+        let mut ev = Vec::new();
+        let keys = [(0.0, b'B'), (1.0, b'1'), (2.0, b'\n')]
+            .into_iter()
+            .chain((0..8).map(|i| (3.0 + i as f64, b'1' + i as u8)))
+            .chain([
+                (13.0, b'3'),
+                (14.0, b'\n'),
+                (15.0, b'2'),
+                (16.0, b'\n'),
+                (17.0, b'E'),
+            ]);
+        for (t, c) in keys {
+            k.key(t, c, &mut ev);
+        }
+        assert_eq!(tagged(&ev), [1, 3, 2]);
+        assert_eq!(warnings(&ev).len(), 1, "{:?}", warnings(&ev));
+    }
+
+    /// Issue 15 point 2: an index above the configured maximum is refused, naming it.
+    #[test]
+    fn issue_15_an_index_above_the_configured_maximum_tags_nothing() {
+        let mut k = Keypad::with_max_node(50);
+        let mut ev = Vec::new();
+        for (i, c) in "B1\n51\n50\nE".bytes().enumerate() {
+            k.key(i as f64, c, &mut ev);
+        }
+        assert_eq!(tagged(&ev), [1, 50]);
+        let w = warnings(&ev);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert_eq!(w[0].issue, Issue::IndexAboveMax { max: 50 });
+        assert_eq!(w[0].node, Some(51));
     }
 }

@@ -68,6 +68,7 @@ pub struct AcquisitionToml {
     pub tilt_bias_tau_s: Option<f64>,
     pub nominal_speed: Option<f64>,
     pub array_window_s: Option<f64>,
+    pub max_node: Option<u32>,
     #[serde(default)]
     pub segment_lengths: BTreeMap<String, Vec<f64>>,
 }
@@ -191,6 +192,15 @@ impl ConfigFile {
         }
         if let Some(x) = positive("acquisition.array_window_s", a.array_window_s, 3600.0)? {
             out.array_window = x;
+        }
+        if let Some(m) = a.max_node {
+            if !(1..=crate::keypad::MAX_NODE).contains(&m) {
+                return Err(err(
+                    "acquisition.max_node",
+                    format!("{m} is out of range [1, {}]", crate::keypad::MAX_NODE),
+                ));
+            }
+            out.max_node = m;
         }
         for (k, v) in &a.segment_lengths {
             let key = format!("acquisition.segment_lengths.{k}");

@@ -37,6 +37,7 @@
 //! tilt_bias_tau_s = 0.0              #   and tilt corrections (time constants; 0 = off)
 //! nominal_speed = 0.05               # phone: m/s where no segment length is known
 //! array_window_s = 1.0               # sensor arrays: averaging window
+//! max_node = 999999                  # largest node index typed; a larger one is not tagged
 //! [acquisition.segment_lengths]      # phone: measured segment lengths (m) per curve index
 //! "0" = [0.30, 0.25]
 //!
@@ -495,6 +496,8 @@ mod tests {
             ("[calibration]\nmounting_deg = [0.0, 90.0, 0.0]\n", "calibration.mounting_deg", "45"),
             ("[calibration]\nacc_bias = [0.0, 0.0]\n", "calibration.acc_bias", ""),
             ("[acquisition]\nnominal_speed = -1.0\n", "acquisition.nominal_speed", "out of range"),
+            ("[acquisition]\nmax_node = 0\n", "acquisition.max_node", "out of range"),
+            ("[acquisition]\nmax_node = 1000000\n", "acquisition.max_node", "out of range"),
             (
                 "[acquisition.segment_lengths]\nfirst = [0.3]\n",
                 "acquisition.segment_lengths.first",
@@ -513,6 +516,9 @@ mod tests {
         ))
         .unwrap();
         let a = ok.acquisition;
+        assert_eq!(a.max_node, crate::keypad::MAX_NODE);
+        let limited = parse(&format!("{base}[acquisition]\nmax_node = 50\n")).unwrap();
+        assert_eq!(limited.acquisition.max_node, 50);
         let e = parse(&format!("{base}[network]\nh = -1.0\n")).unwrap_err();
         assert_eq!(e.key, "network.h", "{e}");
         let e = parse(&format!("{base}[network]\nsmoothing = 1.0\n")).unwrap_err();
