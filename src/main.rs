@@ -350,8 +350,20 @@ fn plural(n: usize, word: &str) -> String {
     format!("{n} {word}{}", if n == 1 { "" } else { "s" })
 }
 
+/// `sfs config check`: a replayed capture must exist (`sfs run` would fail to open it).
+fn replay_exists(settings: Settings, file: &Path) -> Result<Settings, ConfigError> {
+    match &settings.source {
+        Some(SourceSpec::Replay { path, .. }) if !path.is_file() => Err(ConfigError::new(
+            file,
+            "source.path",
+            format!("{} is not a file", path.display()),
+        )),
+        _ => Ok(settings),
+    }
+}
+
 fn config_check(file: &Path) -> i32 {
-    match config::load(file) {
+    match config::load(file).and_then(|s| replay_exists(s, file)) {
         Ok(settings) => {
             say!("{}: ok", file.display());
             // What a monitoring configuration describes, to check it against the structure.

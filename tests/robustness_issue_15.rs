@@ -101,3 +101,30 @@ fn issue_15_the_last_monitoring_window_is_reported() {
     let last = csv.lines().last().unwrap();
     assert!(last.starts_with("150.000,"), "{last}");
 }
+
+/// Point 7: `sfs config check` refuses a replay source whose capture does not exist, naming
+/// the key (exit 2); the shipped demo, whose capture exists, passes.
+#[test]
+fn issue_15_config_check_finds_a_missing_replay_capture() {
+    let dir = tmpdir("check-replay");
+    let file = dir.join("missing.toml");
+    std::fs::write(
+        &file,
+        "[source]\nkind = \"replay\"\npath = \"no-such-capture.bin\"\n",
+    )
+    .unwrap();
+    let out = sfs().args(["config", "check"]).arg(&file).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(sfs::exit::USAGE), "{err}");
+    assert!(
+        err.contains("source.path") && err.contains("no-such-capture.bin"),
+        "{err}"
+    );
+    let demo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/demo.toml");
+    let out = sfs().args(["config", "check"]).arg(&demo).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

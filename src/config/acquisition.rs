@@ -59,8 +59,6 @@ pub struct AcquisitionToml {
     pub mag_norm_tolerance: Option<f64>,
     pub mag_dip_tolerance_deg: Option<f64>,
     pub stationary_window_s: Option<f64>,
-    /// Accepted but not applied yet: issue 15 point 7 makes it a checked setting.
-    #[allow(dead_code)]
     pub stationary_distance: Option<f64>,
     pub stationary_gyro_deg_s: Option<f64>,
     pub stand_margin_s: Option<f64>,
@@ -165,6 +163,13 @@ impl ConfigFile {
             10.0,
         )? {
             out.stationary_window = x;
+        }
+        if let Some(x) = positive(
+            "acquisition.stationary_distance",
+            a.stationary_distance,
+            1.0,
+        )? {
+            out.stationary_distance = x;
         }
         if let Some(x) = positive(
             "acquisition.stationary_gyro_deg_s",

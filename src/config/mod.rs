@@ -30,7 +30,7 @@
 //! mag_norm_tolerance = 0.08          # relative: field norm off the session's median
 //! mag_dip_tolerance_deg = 4.0        # field dip off the session's median
 //! stationary_window_s = 0.25         # half-width of the standing-still test
-//! stationary_distance = 0.002        # Morphorider: still if the wheel moves less (m)
+//! stationary_distance = 0.002        # Morphorider: still if the wheel moves less (m; (0, 1])
 //! stationary_gyro_deg_s = 3.0        # phone: still below this rotation rate
 //! stand_margin_s = 2.0               # phone: standing only this close to typing an index
 //! heading_bias_tau_s = 0.0           # phone: learn the gyro bias in motion from the heading
@@ -147,6 +147,26 @@ struct ConfigFile {
     output: output::OutputToml,
     /// Monitoring of an instrumented structure (see the module documentation).
     monitor: Option<monitor::MonitorToml>,
+}
+
+/// Largest file a configuration may name (a reference shape), bytes: a larger one (or one
+/// that never ends, like `/dev/zero`) is refused instead of read until memory runs out.
+pub const MAX_NAMED_FILE: u64 = 64 << 20;
+
+/// Reads the text of `path`, refusing it when it is longer than `limit` bytes.
+fn read_limited(path: &Path, limit: u64) -> std::io::Result<String> {
+    use std::io::Read;
+    let mut text = String::new();
+    std::fs::File::open(path)?
+        .take(limit + 1)
+        .read_to_string(&mut text)?;
+    if text.len() as u64 > limit {
+        return Err(std::io::Error::other(format!(
+            "longer than {} MB: not a reference shape",
+            limit >> 20
+        )));
+    }
+    Ok(text)
 }
 
 /// Reads `path` and resolves it into the settings it describes (every key checked, each
@@ -423,6 +443,8 @@ mod tests {
         assert_eq!(m.reference.unwrap().curves[0].1.len(), 401);
         let cases = [
             ("reference_file = \"none.json\"", "none.json"),
+            // Issue 15 point 7: read with a size limit, not until memory runs out.
+            ("reference_file = \"/dev/zero\"", "longer than 64 MB"),
             ("reference_file = \"anchor.json\"", "anchored at node 1"),
             (
                 "reference_file = \"curve.json\"",
@@ -497,6 +519,9 @@ mod tests {
             ("[calibration]\nacc_bias = [0.0, 0.0]\n", "calibration.acc_bias", ""),
             ("[acquisition]\nnominal_speed = -1.0\n", "acquisition.nominal_speed", "out of range"),
             ("[acquisition]\nmax_node = 0\n", "acquisition.max_node", "out of range"),
+            ("[acquisition]\nstationary_distance = nan\n", "acquisition.stationary_distance", "out of range"),
+            ("[acquisition]\nstationary_distance = -0.1\n", "acquisition.stationary_distance", "out of range"),
+            ("[acquisition]\nstationary_distance = 0.0\n", "acquisition.stationary_distance", "out of range"),
             ("[acquisition]\nmax_node = 1000000\n", "acquisition.max_node", "out of range"),
             (
                 "[acquisition.segment_lengths]\nfirst = [0.3]\n",
@@ -519,6 +544,11 @@ mod tests {
         assert_eq!(a.max_node, crate::keypad::MAX_NODE);
         let limited = parse(&format!("{base}[acquisition]\nmax_node = 50\n")).unwrap();
         assert_eq!(limited.acquisition.max_node, 50);
+        let still = parse(&format!(
+            "{base}[acquisition]\nstationary_distance = 0.004\n"
+        ))
+        .unwrap();
+        assert_eq!(still.acquisition.stationary_distance, 0.004);
         let e = parse(&format!("{base}[network]\nh = -1.0\n")).unwrap_err();
         assert_eq!(e.key, "network.h", "{e}");
         let e = parse(&format!("{base}[network]\nsmoothing = 1.0\n")).unwrap_err();

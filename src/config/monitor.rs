@@ -147,7 +147,7 @@ impl ConfigFile {
                 } else {
                     p.clone()
                 };
-                let text = std::fs::read_to_string(&path)
+                let text = super::read_limited(&path, super::MAX_NAMED_FILE)
                     .map_err(|e| err(key(), format!("{}: {e}", path.display())))?;
                 let r = crate::monitor::metrics::ReferenceFile::parse(&text)
                     .map_err(|e| err(key(), format!("{}: {e}", path.display())))?;
