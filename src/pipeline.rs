@@ -101,8 +101,15 @@ impl Pipeline {
             network_ms: t0.elapsed().as_secs_f64() * 1e3,
             ..Default::default()
         };
-        let Some(net) = net else {
-            return out;
+        let net = match net {
+            Ok(net) => net,
+            Err(why) => {
+                // Nothing reconstructed: the report says why (each curve left out, or the
+                // failed solve).
+                out.warnings
+                    .extend(why.warnings.into_iter().map(Warning::Network));
+                return out;
+            }
         };
         out.warnings
             .extend(net.warnings.iter().cloned().map(Warning::Network));

@@ -69,7 +69,7 @@ proptest! {
             }
             prop_assert!(c.samples.d.iter().all(|x| x.is_finite()));
         }
-        if let Some(net) = Reconstructor::new().run(&scan.curves, &NetworkParams::default()) {
+        if let Ok(net) = Reconstructor::new().run(&scan.curves, &NetworkParams::default()) {
             let glb = sfs::gltf_out::network_glb(&sfs::gltf_out::network_curves(&net.positions), &net.positions.nodes, None);
             if let Ok(bytes) = glb {
                 let back = sfs::gltf_out::read_glb(&bytes).unwrap();
@@ -124,7 +124,7 @@ proptest! {
         }
         let scan = acq.finish();
         prop_assert!(scan.curves.len() <= curves);
-        if let Some(net) = Reconstructor::new().run(&scan.curves, &NetworkParams::default()) {
+        if let Ok(net) = Reconstructor::new().run(&scan.curves, &NetworkParams::default()) {
             for c in &net.positions.curves {
                 prop_assert!(c.points.iter().chain(&c.normals).all(|v| v.iter().all(|x| x.is_finite())));
             }

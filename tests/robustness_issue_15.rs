@@ -128,3 +128,43 @@ fn issue_15_config_check_finds_a_missing_replay_capture() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// Point 5: when nothing can be reconstructed, report.json says why (it said
+/// `"network": null` with no warning; the reasons were only in the log).
+#[test]
+fn issue_15_the_report_says_why_nothing_was_reconstructed() {
+    let dir = tmpdir("nothing-reconstructed");
+    let mut b = Builder::new();
+    b.packet(hello());
+    b.sample(0);
+    // A curve of zero length: both tags at the same place.
+    for k in *b"B1\n2\nE" {
+        b.key(k);
+    }
+    b.sample(1);
+    let cap = dir.join("zero.bin");
+    std::fs::write(&cap, &b.bytes).unwrap();
+    let st = sfs()
+        .args(["--log", "off", "replay"])
+        .arg(&cap)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let report = read_report(&dir.join("out"));
+    assert!(report["network"].is_null());
+    let codes: Vec<&str> = report["warning_codes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.as_str().unwrap())
+        .collect();
+    assert!(
+        codes.contains(&"curve_left_out") && codes.contains(&"nothing_reconstructed"),
+        "{codes:?}: {}",
+        report["warnings"]
+    );
+    let texts = report["warnings"].to_string();
+    assert!(texts.contains("curve 0: 0.0000 m long"), "{texts}");
+}

@@ -129,6 +129,28 @@ impl std::fmt::Display for NetworkWarning {
     }
 }
 
+/// Why nothing could be reconstructed: the warnings that say so (each curve left out and
+/// why, or the failed solve), in order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Unreconstructed {
+    pub warnings: Vec<NetworkWarning>,
+}
+
+impl std::fmt::Display for Unreconstructed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.warnings.is_empty() {
+            return f.write_str("no curve to reconstruct");
+        }
+        for (k, w) in self.warnings.iter().enumerate() {
+            if k > 0 {
+                f.write_str("; ")?;
+            }
+            w.fmt(f)?;
+        }
+        Ok(())
+    }
+}
+
 /// The reconstruction of a scan.
 #[derive(Debug, Clone)]
 pub struct Network {
@@ -191,10 +213,10 @@ impl Reconstructor {
         Self::default()
     }
 
-    /// Reconstructs the network of `curves` (a scan's accepted curves); `None` when no curve
-    /// can be used. The result depends only on `curves` and `p` (the caches change the time it takes, not the
+    /// Reconstructs the network of `curves` (a scan's accepted curves); when nothing can be
+    /// reconstructed, the warnings that say why. The result depends only on `curves` and `p` (the caches change the time it takes, not the
     /// bits).
-    pub fn run(&mut self, curves: &[Curve], p: &NetworkParams) -> Option<Network> {
+    pub fn run(&mut self, curves: &[Curve], p: &NetworkParams) -> Result<Network, Unreconstructed> {
         self.run_inner(curves, p, false)
     }
 
@@ -203,11 +225,20 @@ impl Reconstructor {
     /// Measured on a growing scan it starts lower but takes as many iterations (Gauss–Newton
     /// needs about three either way), so the live worker uses [`run`](Self::run), whose
     /// result depends on the curves alone.
-    pub fn run_warm(&mut self, curves: &[Curve], p: &NetworkParams) -> Option<Network> {
+    pub fn run_warm(
+        &mut self,
+        curves: &[Curve],
+        p: &NetworkParams,
+    ) -> Result<Network, Unreconstructed> {
         self.run_inner(curves, p, true)
     }
 
-    fn run_inner(&mut self, curves: &[Curve], p: &NetworkParams, warm: bool) -> Option<Network> {
+    fn run_inner(
+        &mut self,
+        curves: &[Curve],
+        p: &NetworkParams,
+        warm: bool,
+    ) -> Result<Network, Unreconstructed> {
         let mut warnings = Vec::new();
         let t0 = Instant::now();
         let mut uniform: Vec<UniformCurve> = Vec::new();
@@ -237,7 +268,7 @@ impl Reconstructor {
             for w in &warnings {
                 tracing::warn!("{w}");
             }
-            return None;
+            return Err(Unreconstructed { warnings });
         }
         let closure = if p.no_closure_check {
             closure::ClosureReport::default()
@@ -292,7 +323,7 @@ impl Reconstructor {
             Err(e) => {
                 tracing::error!("Poisson reconstruction failed: {e}");
                 warnings.push(NetworkWarning::PoissonFailed(e));
-                return None;
+                return Err(Unreconstructed { warnings });
             }
         };
         let t3 = Instant::now();
@@ -319,7 +350,7 @@ impl Reconstructor {
         for w in &warnings {
             tracing::warn!("{w}");
         }
-        Some(Network {
+        Ok(Network {
             positions,
             report,
             warnings,
