@@ -20,7 +20,7 @@ use crate::orientation::flags;
 use crate::orientation::triad::triad;
 use crate::scan::{ArrayEpoch, Curve, DeviceInfo, Samples, Scan, Tag};
 use crate::sensor::{saturated, CalibrationSpec, Scales, SensorModel};
-use crate::warning::AcquisitionWarning;
+use crate::warning::{AcquisitionWarning, Warning};
 use device_protocol::{DeviceKind, Event, Hello, Packet};
 use nalgebra::{UnitQuaternion, Vector3};
 use std::collections::BTreeMap;
@@ -73,6 +73,12 @@ impl Default for AcquisitionConfig {
         }
     }
 }
+
+/// Warnings kept in a scan (and so in scan.json and report.json); the rest are counted.
+pub const MAX_WARNINGS: usize = 1000;
+
+/// Warnings of one kind logged in full; after them, a summary line at every power of two.
+pub const LOGGED_PER_KIND: u64 = 20;
 
 /// Largest wheel advance between consecutive samples taken as real motion, m.
 pub const MAX_WHEEL_STEP: f64 = 0.5;
@@ -150,6 +156,8 @@ pub struct Acquisition {
     array: BTreeMap<u16, ArraySensor>,
     /// Per-curve segment lengths received after the curve ended (phone).
     late_lengths: BTreeMap<usize, BTreeMap<u16, f64>>,
+    /// Warnings so far, per kind.
+    warned: BTreeMap<&'static str, u64>,
 }
 
 impl Acquisition {
@@ -193,6 +201,7 @@ impl Acquisition {
             gap: false,
             array: BTreeMap::new(),
             late_lengths: BTreeMap::new(),
+            warned: BTreeMap::new(),
         };
         if let Some(h) = start.hello() {
             acq.hello(&h);
@@ -218,8 +227,35 @@ impl Acquisition {
     }
 
     fn warn(&mut self, w: AcquisitionWarning) {
-        tracing::warn!("{w}");
-        self.scan.warnings.push(w.into());
+        self.note(w.into());
+    }
+
+    /// Keeps a warning: logged while its kind is rare (the first [`LOGGED_PER_KIND`] of each
+    /// kind, then the 100th, 1000th, … with the count), kept in the scan up to
+    /// [`MAX_WARNINGS`] (the rest counted as `warnings_left_out`): a stuck key must not fill
+    /// the log, the memory or report.json.
+    fn note(&mut self, w: Warning) {
+        let n = self.warned.entry(w.code()).or_insert(0);
+        *n += 1;
+        if *n <= LOGGED_PER_KIND {
+            if w.code().starts_with("keypad") {
+                tracing::warn!("keypad: {w}");
+            } else {
+                tracing::warn!("{w}");
+            }
+        } else if n.is_power_of_two() && *n >= 128 {
+            tracing::warn!(
+                kind = w.code(),
+                count = *n,
+                "{} warnings of this kind so far (only the first {LOGGED_PER_KIND} are logged); the latest: {w}",
+                *n
+            );
+        }
+        if self.scan.warnings.len() < MAX_WARNINGS {
+            self.scan.warnings.push(w);
+        } else {
+            self.scan.counts.warnings_left_out += 1;
+        }
     }
 
     /// Processes one decoder event.
@@ -449,7 +485,7 @@ impl Acquisition {
                         update = Some(Update::CurveEnded(curve));
                     }
                 }
-                KeyEvent::Warning(w) => self.scan.warnings.push(w.into()),
+                KeyEvent::Warning(w) => self.note(w.into()),
             }
         }
         self.key_events = events;

@@ -274,7 +274,6 @@ impl Keypad {
             t,
             issue,
         };
-        tracing::warn!("keypad: {w}");
         out.push(KeyEvent::Warning(w));
     }
 

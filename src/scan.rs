@@ -40,6 +40,13 @@ pub struct Counts {
     /// Sensor-array samples older than the window they fall in (out of time order; ignored).
     #[serde(default)]
     pub array_late: u64,
+    /// Warnings beyond the first `acquisition::MAX_WARNINGS`, counted but not kept.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub warnings_left_out: u64,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }
 
 /// Per-sensor orientations of a sensor array, one per averaging window.

@@ -168,3 +168,39 @@ fn issue_15_the_report_says_why_nothing_was_reconstructed() {
     let texts = report["warnings"].to_string();
     assert!(texts.contains("curve 0: 0.0000 m long"), "{texts}");
 }
+
+/// Point 3: warnings are limited per kind in the log and capped in the outputs, with a count
+/// of those left out: 200 000 presses of a stuck unknown key give at most 1000 warnings in
+/// report.json and a few dozen log lines, not one each.
+#[test]
+fn issue_15_a_stuck_key_cannot_flood_the_log_or_the_report() {
+    let dir = tmpdir("stuck-key");
+    let mut b = Builder::new();
+    b.packet(hello());
+    let n = 200_000u64;
+    for _ in 0..n {
+        b.key(b'X');
+    }
+    let cap = dir.join("stuck.bin");
+    std::fs::write(&cap, &b.bytes).unwrap();
+    let out = sfs()
+        .args(["--log", "warn", "replay"])
+        .arg(&cap)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let log_lines = String::from_utf8_lossy(&out.stderr).lines().count();
+    assert!(log_lines < 60, "{log_lines} log lines");
+    let report = read_report(&dir.join("out"));
+    let kept = report["warnings"].as_array().unwrap().len() as u64;
+    assert_eq!(kept, 1000);
+    assert_eq!(report["acquisition"]["warnings_left_out"], n - kept);
+    assert!(
+        std::fs::metadata(dir.join("out/report.json"))
+            .unwrap()
+            .len()
+            < 1 << 20
+    );
+}
