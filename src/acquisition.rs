@@ -238,10 +238,9 @@ impl Acquisition {
         let n = self.warned.entry(w.code()).or_insert(0);
         *n += 1;
         if *n <= LOGGED_PER_KIND {
-            if w.code().starts_with("keypad") {
-                tracing::warn!("keypad: {w}");
-            } else {
-                tracing::warn!("{w}");
+            match &w {
+                Warning::Keypad(k) => tracing::warn!("keypad: {k}"),
+                w => tracing::warn!("{w}"),
             }
         } else if n.is_power_of_two() && *n >= 128 {
             tracing::warn!(

@@ -406,15 +406,10 @@ impl Flow {
         started: Instant,
     ) -> Result<(Report, PathBuf), SessionError> {
         // The last windows of a sensor array, when complete, are epochs too.
-        let mut acq = self.acq;
-        let last = acq.close_array();
-        let monitor_report = self.monitor.map(|mut m| {
-            for e in acq.take_array() {
-                m.feed(&e);
-            }
-            if let Some(t) = last {
-                m.close_until(t);
-            }
+        let (mut acq, mut monitor) = (self.acq, self.monitor);
+        acq.close_array();
+        feed_monitor(&mut monitor, &mut acq);
+        let monitor_report = monitor.map(|mut m| {
             m.finish();
             m.report
         });

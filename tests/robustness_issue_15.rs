@@ -9,6 +9,23 @@ fn sfs() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sfs"))
 }
 
+/// `sfs --log LOG replay CAPTURE [--config CONFIG] --out OUT`, which must succeed.
+fn replay(
+    log: &str,
+    capture: &std::path::Path,
+    config: Option<&std::path::Path>,
+    out: &std::path::Path,
+) -> std::process::Output {
+    let mut c = sfs();
+    c.args(["--log", log, "replay"]).arg(capture);
+    if let Some(f) = config {
+        c.arg("--config").arg(f);
+    }
+    let o = c.arg("--out").arg(out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    o
+}
+
 fn read_report(dir: &std::path::Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap()
 }
@@ -52,14 +69,7 @@ fn issue_15_bytes_after_the_last_frame_are_counted() {
     for (name, capture, expected) in [("whole", &bytes[..], 0), ("cut", cut, 5)] {
         let cap = dir.join(format!("{name}.bin"));
         std::fs::write(&cap, capture).unwrap();
-        let st = sfs()
-            .args(["--log", "off", "replay"])
-            .arg(&cap)
-            .arg("--out")
-            .arg(dir.join(name))
-            .status()
-            .unwrap();
-        assert!(st.success());
+        replay("off", &cap, None, &dir.join(name));
         let link = &read_report(&dir.join(name))["link"];
         assert_eq!(link["partial_end_bytes"], expected, "{name}: {link}");
         assert_eq!(link["bytes"], capture.len() as u64);
@@ -81,19 +91,11 @@ fn issue_15_the_last_monitoring_window_is_reported() {
         .unwrap();
     assert!(st.success());
     let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/riser.toml");
-    let out = sfs()
-        .args(["--log", "off", "replay"])
-        .arg(prefix.with_extension("bin"))
-        .arg("--config")
-        .arg(&config)
-        .arg("--out")
-        .arg(dir.join("out"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    replay(
+        "off",
+        &prefix.with_extension("bin"),
+        Some(&config),
+        &dir.join("out"),
     );
     let report = read_report(&dir.join("out"));
     assert_eq!(report["monitor"]["epochs"], 750, "{}", report["monitor"]);
@@ -144,14 +146,7 @@ fn issue_15_the_report_says_why_nothing_was_reconstructed() {
     b.sample(1);
     let cap = dir.join("zero.bin");
     std::fs::write(&cap, &b.bytes).unwrap();
-    let st = sfs()
-        .args(["--log", "off", "replay"])
-        .arg(&cap)
-        .arg("--out")
-        .arg(dir.join("out"))
-        .status()
-        .unwrap();
-    assert!(st.success());
+    replay("off", &cap, None, &dir.join("out"));
     let report = read_report(&dir.join("out"));
     assert!(report["network"].is_null());
     let codes: Vec<&str> = report["warning_codes"]
@@ -183,14 +178,7 @@ fn issue_15_a_stuck_key_cannot_flood_the_log_or_the_report() {
     }
     let cap = dir.join("stuck.bin");
     std::fs::write(&cap, &b.bytes).unwrap();
-    let out = sfs()
-        .args(["--log", "warn", "replay"])
-        .arg(&cap)
-        .arg("--out")
-        .arg(dir.join("out"))
-        .output()
-        .unwrap();
-    assert!(out.status.success());
+    let out = replay("warn", &cap, None, &dir.join("out"));
     let log_lines = String::from_utf8_lossy(&out.stderr).lines().count();
     assert!(log_lines < 60, "{log_lines} log lines");
     let report = read_report(&dir.join("out"));
