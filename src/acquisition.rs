@@ -3,8 +3,19 @@
 //!
 //! Feed every decoder [`Event`] to [`Acquisition::event`]; it reports when a curve ends (or a
 //! late SEGMENT_LENGTH changes a finished one). Raw samples of the open curve are kept until
-//! its `E`; then the curve is finalised: orientations (Morphorider: [`triad`] per sample;
-//! phone: the [`Ahrs`] output, computed causally as samples arrive), distances, flags.
+//! its `E`, compactly (raw counts, time, wheel or filter orientation: 64 bytes a sample, in
+//! chunks given back as the curve is finalised); a curve that reaches
+//! [`AcquisitionConfig::max_curve_samples`] is ended there with a warning (a curve left open
+//! for a day must not take the memory). Then the curve is finalised: orientations
+//! (Morphorider: [`triad`] per sample; phone: the [`Ahrs`] output, computed causally as
+//! samples arrive), distances, flags.
+//!
+//! The same node tagged twice in a row closes a loop through it (a closed curve with one
+//! node) when the device travelled at least [`AcquisitionConfig::loop_distance`] of wheel
+//! (Morphorider) or turned through [`AcquisitionConfig::loop_turn`] (phone, which measures no
+//! distance: going round a closed curve turns its tangent, and so the device, through at
+//! least 360° — Fenchel's theorem) since the first; otherwise it is a repeated Enter (see
+//! [`crate::keypad`]).
 //!
 //! Time: the device clock (`t_us`, wrapping, restarting at power-up) becomes a monotonic
 //! session time in seconds: increments are `t_us` differences (wraps included), and a reboot
@@ -54,6 +65,15 @@ pub struct AcquisitionConfig {
     pub array_window: f64,
     /// Largest node index the keypad accepts; a larger one is not tagged. Default 999 999.
     pub max_node: u32,
+    /// A curve that reaches this many samples is ended there, with a warning naming it.
+    /// Default 2 000 000 (5.5 h at 100 Hz; 128 MB held).
+    pub max_curve_samples: usize,
+    /// Morphorider: wheel travel (m) between two tags of the same node that makes them a loop
+    /// through it rather than a repeated Enter. Default 0.05.
+    pub loop_distance: f64,
+    /// Phone: the angle (rad) the device turned through between two tags of the same node
+    /// that makes them a loop. Default π (a loop turns through 2π at least).
+    pub loop_turn: f64,
 }
 
 impl Default for AcquisitionConfig {
@@ -70,6 +90,9 @@ impl Default for AcquisitionConfig {
             ahrs: AhrsParams::default(),
             array_window: 1.0,
             max_node: crate::keypad::MAX_NODE,
+            max_curve_samples: 2_000_000,
+            loop_distance: 0.05,
+            loop_turn: std::f64::consts::PI,
         }
     }
 }
@@ -92,17 +115,52 @@ pub enum Update {
     CurveUpdated(usize),
 }
 
-#[derive(Debug, Clone)]
+/// One sample of an open curve as received: raw counts and what was measured causally, 64
+/// bytes (calibration is applied when the curve is finalised, with the sensor model of the
+/// sample: [`OpenCurve::models`]).
+#[derive(Debug, Clone, Copy)]
 struct Raw {
+    /// Session time, s.
     t: f64,
-    /// Session wheel distance (m), Morphorider.
-    wheel: f64,
-    acc: Vector3<f64>,
-    mag: Vector3<f64>,
-    gyro: Vector3<f64>,
-    /// Phone: the filter's orientation at this sample.
-    q: Option<UnitQuaternion<f64>>,
+    /// Morphorider: `[session wheel distance (m), 0, 0, 0]`; phone: the filter's orientation
+    /// at this sample, `[w, i, j, k]`.
+    x: [f64; 4],
+    /// Raw counts of the accelerometer, magnetometer and gyroscope (zero on a Morphorider).
+    acc: [i16; 3],
+    mag: [i16; 3],
+    gyro: [i16; 3],
     flags: u8,
+}
+const _: () = assert!(std::mem::size_of::<Raw>() <= 64);
+
+/// Samples per chunk of an open curve (4 MB): a long curve grows a chunk at a time (no
+/// reallocation that holds the old and the new buffer at once) and is given back chunk by
+/// chunk as it is finalised.
+const CHUNK: usize = 1 << 16;
+
+/// The raw samples of an open curve, in chunks of [`CHUNK`].
+#[derive(Debug, Clone, Default)]
+struct RawSamples {
+    chunks: Vec<Vec<Raw>>,
+    len: usize,
+}
+
+impl RawSamples {
+    fn push(&mut self, r: Raw) {
+        match self.chunks.last_mut() {
+            Some(c) if c.len() < CHUNK => c.push(r),
+            _ => {
+                let mut c = Vec::with_capacity(CHUNK.min(self.len.max(256).next_power_of_two()));
+                c.push(r);
+                self.chunks.push(c);
+            }
+        }
+        self.len += 1;
+    }
+
+    fn len(&self) -> usize {
+        self.len
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -110,11 +168,17 @@ struct OpenCurve {
     index: usize,
     boundary: bool,
     tags: Vec<(u32, f64, bool)>,
+    /// The travel measure (see [`Acquisition::travel`]) at each tag.
+    tag_travel: Vec<f64>,
     /// `(first digit, Enter)` times of every node tag: the operator stands while typing.
     typing: Vec<(f64, f64)>,
     /// Time of the first digit of the index being typed.
     first_digit: Option<f64>,
-    raw: Vec<Raw>,
+    raw: RawSamples,
+    /// The sensor model of the samples from each index on (a HELLO with other scales can
+    /// come in the middle of a curve), with the model's generation
+    /// ([`Acquisition::model_generation`]).
+    models: Vec<(usize, u64, SensorModel)>,
     segment_lengths: BTreeMap<u16, f64>,
 }
 
@@ -158,7 +222,21 @@ pub struct Acquisition {
     late_lengths: BTreeMap<usize, BTreeMap<u16, f64>>,
     /// Warnings so far, per kind.
     warned: BTreeMap<&'static str, u64>,
+    /// Counts the sensor models taken from HELLOs (an open curve notes the one of its
+    /// samples).
+    model_generation: u64,
+    /// Phone: the angle the filter's orientation turned through in the session (rad), summed
+    /// over steps of [`TURN_STEP`] seconds, and the orientation at the last step.
+    turned: f64,
+    turn_anchor: Option<(f64, UnitQuaternion<f64>)>,
+    /// Phone: the filter's latest orientation.
+    last_q: Option<UnitQuaternion<f64>>,
 }
+
+/// Phone: the turning of the device is summed over steps of this many seconds: a step is
+/// long enough that the filter's jitter at rest adds little, short enough that a turn and
+/// its return are both counted.
+const TURN_STEP: f64 = 0.5;
 
 impl Acquisition {
     /// The scan of a whole capture held in memory (decoder and acquisition in one call; for
@@ -202,6 +280,10 @@ impl Acquisition {
             array: BTreeMap::new(),
             late_lengths: BTreeMap::new(),
             warned: BTreeMap::new(),
+            model_generation: 0,
+            turned: 0.0,
+            turn_anchor: None,
+            last_q: None,
         };
         if let Some(h) = start.hello() {
             acq.hello(&h);
@@ -301,6 +383,7 @@ impl Acquisition {
         }
         let cal = self.cfg.calibration.resolve(h.kind);
         self.model = Some(SensorModel::new(scales, cal));
+        self.model_generation += 1;
         self.kind = Some(h.kind);
         self.scan.device = Some(DeviceInfo {
             kind: h.kind.to_string(),
@@ -346,14 +429,12 @@ impl Acquisition {
                 }
                 self.sample(Raw {
                     t,
-                    wheel: self.wheel_m,
-                    acc,
-                    mag,
-                    gyro: Vector3::zeros(),
-                    q: None,
+                    x: [self.wheel_m, 0.0, 0.0, 0.0],
+                    acc: s.acc,
+                    mag: s.mag,
+                    gyro: [0; 3],
                     flags: f,
-                });
-                None
+                })
             }
             Packet::PhoneSample(s) => {
                 self.scan.counts.samples += 1;
@@ -373,16 +454,15 @@ impl Acquisition {
                 if !acc_motion(&acc, &self.cfg.thresholds) {
                     self.field.add(&acc, &mag);
                 }
+                self.turn(t, q);
                 self.sample(Raw {
                     t,
-                    wheel: 0.0,
-                    acc,
-                    mag,
-                    gyro,
-                    q: Some(q),
+                    x: quat_array(&q),
+                    acc: s.acc,
+                    mag: s.mag,
+                    gyro: s.gyro,
                     flags: f,
-                });
-                None
+                })
             }
             Packet::ArraySample(s) => {
                 self.scan.counts.samples += 1;
@@ -423,13 +503,80 @@ impl Acquisition {
         }
     }
 
-    fn sample(&mut self, mut raw: Raw) {
+    /// Keeps a sample of the open curve (counted outside curves when none is open); ends the
+    /// curve when it reaches [`AcquisitionConfig::max_curve_samples`].
+    fn sample(&mut self, mut raw: Raw) -> Option<Update> {
         if std::mem::take(&mut self.gap) {
             raw.flags |= flags::AFTER_GAP;
         }
-        match &mut self.open {
-            Some(o) => o.raw.push(raw),
-            None => self.scan.counts.outside_curves += 1,
+        let Some(o) = &mut self.open else {
+            self.scan.counts.outside_curves += 1;
+            return None;
+        };
+        if o.models.last().is_none_or(|m| m.1 != self.model_generation) {
+            let model = self
+                .model
+                .clone()
+                .expect("samples are kept only with a model");
+            o.models.push((o.raw.len(), self.model_generation, model));
+        }
+        o.raw.push(raw);
+        if o.raw.len() < self.cfg.max_curve_samples {
+            return None;
+        }
+        let w = AcquisitionWarning::CurveTooLong {
+            curve: o.index,
+            t: raw.t,
+            samples: o.raw.len(),
+            nodes: o.tags.iter().map(|t| t.0).collect(),
+        };
+        self.warn(w);
+        let mut events = std::mem::take(&mut self.key_events);
+        events.clear();
+        self.keypad
+            .end_curve(raw.t, "ended at its largest size", &mut events);
+        self.key_events(events)
+    }
+
+    /// Phone: adds the turning of the filter's orientation `q` at time `t` to
+    /// [`turned`](Self::turned).
+    fn turn(&mut self, t: f64, q: UnitQuaternion<f64>) {
+        self.last_q = Some(q);
+        match self.turn_anchor {
+            Some((t0, _)) if t - t0 < TURN_STEP => {}
+            Some((_, q0)) => {
+                self.turned += q0.angle_to(&q);
+                self.turn_anchor = Some((t, q));
+            }
+            None => self.turn_anchor = Some((t, q)),
+        }
+    }
+
+    /// The measure of travel whose change between two tags of one node tells a loop from a
+    /// repeat: the session wheel distance (m) on a Morphorider, the angle turned (rad) on a
+    /// phone.
+    fn travel(&self) -> f64 {
+        match self.kind {
+            Some(DeviceKind::Phone) => {
+                let since_anchor = match (self.turn_anchor, self.last_q) {
+                    (Some((_, q0)), Some(q)) => q0.angle_to(&q),
+                    _ => 0.0,
+                };
+                self.turned + since_anchor
+            }
+            _ => self.wheel_m,
+        }
+    }
+
+    /// Whether the device travelled a loop since the open curve's last tag.
+    fn travelled_loop(&self) -> bool {
+        let Some(last) = self.open.as_ref().and_then(|o| o.tag_travel.last()) else {
+            return false;
+        };
+        let moved = (self.travel() - last).abs();
+        match self.kind {
+            Some(DeviceKind::Phone) => moved >= self.cfg.loop_turn,
+            _ => moved >= self.cfg.loop_distance,
         }
     }
 
@@ -443,8 +590,15 @@ impl Acquisition {
         }
         let mut events = std::mem::take(&mut self.key_events);
         events.clear();
+        self.keypad.set_travelled(self.travelled_loop());
         self.keypad.key(t, key, &mut events);
+        self.key_events(events)
+    }
+
+    /// Acts on what the keypad did.
+    fn key_events(&mut self, mut events: Vec<KeyEvent>) -> Option<Update> {
         let mut update = None;
+        let travel = self.travel();
         for ev in events.drain(..) {
             match ev {
                 KeyEvent::Started { curve, boundary } => {
@@ -452,9 +606,11 @@ impl Acquisition {
                         index: curve,
                         boundary,
                         tags: Vec::new(),
+                        tag_travel: Vec::new(),
                         typing: Vec::new(),
                         first_digit: None,
-                        raw: Vec::new(),
+                        raw: RawSamples::default(),
+                        models: Vec::new(),
                         segment_lengths: BTreeMap::new(),
                     });
                 }
@@ -463,12 +619,14 @@ impl Acquisition {
                 } => {
                     if let Some(o) = &mut self.open {
                         o.tags.push((node, t, uncertain));
+                        o.tag_travel.push(travel);
                         o.typing.push((o.first_digit.take().unwrap_or(t), t));
                     }
                 }
                 KeyEvent::Untagged { .. } => {
                     if let Some(o) = &mut self.open {
                         o.tags.pop();
+                        o.tag_travel.pop();
                     }
                 }
                 KeyEvent::Discarded { .. } => {
@@ -536,29 +694,53 @@ impl Acquisition {
     }
 
     /// Turns an open curve's raw samples into a [`Curve`].
-    fn finalise(&mut self, o: OpenCurve) -> Curve {
+    fn finalise(&mut self, mut o: OpenCurve) -> Curve {
         let n = o.raw.len();
         let mut s = Samples {
-            t: o.raw.iter().map(|r| r.t).collect(),
+            t: Vec::with_capacity(n),
             d: vec![0.0; n],
             q: Vec::with_capacity(n),
-            flags: o.raw.iter().map(|r| r.flags).collect(),
+            flags: Vec::with_capacity(n),
             w: Vec::new(),
         };
         let th = self.cfg.thresholds;
         let phone = self.kind == Some(DeviceKind::Phone);
-        // Orientations and per-sample flags.
+        // Orientations and per-sample flags, giving the raw samples back a chunk at a time.
         let field_ref = self.field.reference();
+        let bias = self.ahrs.bias();
         let mut last_q: Option<UnitQuaternion<f64>> = None;
         let mut missing_before_first = 0;
-        for (i, r) in o.raw.iter().enumerate() {
-            if acc_motion(&r.acc, &th) {
+        // Morphorider: the wheel; phone: whether the gyroscope is still.
+        let mut wheel: Vec<f64> = Vec::with_capacity(if phone { 0 } else { n });
+        let mut gyro_still: Vec<bool> = Vec::with_capacity(if phone { n } else { 0 });
+        let models = std::mem::take(&mut o.models);
+        let mut model = 0;
+        let raw = std::mem::take(&mut o.raw).chunks.into_iter().flatten();
+        for (i, r) in raw.enumerate() {
+            while models.get(model + 1).is_some_and(|m| m.0 <= i) {
+                model += 1;
+            }
+            let m = &models[model].2;
+            let (acc, mag) = (m.acc(r.acc), m.mag(r.mag));
+            s.t.push(r.t);
+            s.flags.push(r.flags);
+            if acc_motion(&acc, &th) {
                 s.flags[i] |= flags::ACC_MOTION;
             }
-            if !phone && mag_disturbed(field_ref, &r.acc, &r.mag, &th) {
+            if !phone && mag_disturbed(field_ref, &acc, &mag, &th) {
                 s.flags[i] |= flags::MAG_DISTURBED;
             }
-            let q = if phone { r.q } else { triad(&r.acc, &r.mag) };
+            let q = if phone {
+                let gyro = m.gyro(r.gyro);
+                gyro_still.push((gyro - bias).norm() < self.cfg.stationary_gyro);
+                let [w, i, j, k] = r.x;
+                Some(UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(
+                    w, i, j, k,
+                )))
+            } else {
+                wheel.push(r.x[0]);
+                triad(&acc, &mag)
+            };
             let q = match q {
                 Some(q) => {
                     last_q = Some(q);
@@ -587,12 +769,6 @@ impl Acquisition {
         // Stationary.
         let w = self.cfg.stationary_window;
         if phone {
-            let bias = self.ahrs.bias();
-            let gyro_still: Vec<bool> = o
-                .raw
-                .iter()
-                .map(|r| (r.gyro - bias).norm() < self.cfg.stationary_gyro)
-                .collect();
             let mut still = stationary_mask(&s.t, w, |a, b| gyro_still[a..=b].iter().all(|&x| x));
             // A phone moving straight on a flat part does not rotate either: only still runs
             // that contain the typing of a node index count (the operator stands to type).
@@ -610,7 +786,6 @@ impl Acquisition {
                 .and_then(|m| m.scales.wheel_m_per_tick)
                 .unwrap_or(0.0);
             let still_range = self.cfg.stationary_distance.max(1.5 * tick);
-            let wheel: Vec<f64> = o.raw.iter().map(|r| r.wheel).collect();
             let still = stationary_mask(&s.t, w, |a, b| {
                 let (lo, hi) = wheel[a..=b]
                     .iter()
@@ -658,7 +833,6 @@ impl Acquisition {
             }
             phone_distances(&mut curve, self.cfg.nominal_speed);
         } else if n > 0 {
-            let wheel: Vec<f64> = o.raw.iter().map(|r| r.wheel).collect();
             let start = interp(&curve.samples.t, &wheel, curve.tags[0].t);
             for (d, w) in curve.samples.d.iter_mut().zip(&wheel) {
                 *d = w - start;

@@ -4,17 +4,25 @@
 //! |---|---|
 //! | `B` / `I` | start a curve on the boundary / in the interior |
 //! | `0`–`9` then Enter | tag the node with this index at the position of the Enter press |
-//! | `U` | undo the last node tag of the current curve |
+//! | `U` | undo the operator's last Enter in the current curve (a tag, or a repeat of one) |
 //! | `C` | cancel the current curve |
 //! | `E` | end the current curve (it needs at least two tags) |
 //!
 //! Anything out of grammar yields a [`Warning`] naming the curve, the node and the device
 //! time, and is handled without touching the other curves:
 //! a digit or Enter with no curve open is ignored; Enter with no digits is ignored; digits
-//! followed by another key are dropped; a repeated tag of the same node is ignored; `U` with
-//! no tag and `C`/`E` with no curve are ignored; `E` with fewer than two tags discards the
+//! followed by another key are dropped; a repeated tag of the same node is ignored (and a `U`
+//! after it undoes that repeat, not the tag before it); `U` with no tag and `C`/`E` with no
+//! curve are ignored; `E` with fewer than two tags discards the
 //! curve; `B`/`I` while a curve is open ends it first (kept if it has two tags, else
 //! discarded); an unknown key is ignored.
+//!
+//! The same node tagged twice in a row is a *repeat* (an Enter pressed again at the node) or a
+//! *loop* (a closed curve through that one node, `B 1⏎ … 1⏎ E`): the keypad cannot tell them
+//! apart by the keys, only by how far the device went between the two Enters. The caller
+//! says so before each key with [`Keypad::set_travelled`] (acquisition measures it: the
+//! wheel's advance on a Morphorider, the angle the phone turned through); without it a
+//! repeated node is a repeat.
 //!
 //! Packets lost on the link ([`Keypad::link_gap`]) can take keys with them. Digits left
 //! without their Enter after a loss are tagged at their last digit (the Enter is presumed
@@ -211,6 +219,9 @@ const _: () = assert!(MAX_NODE < ANONYMOUS_NODE_BASE);
 struct Open {
     curve: CurveIndex,
     tags: Vec<u32>,
+    /// Repeats of the last tag not undone yet (Enters that re-tagged the node just tagged;
+    /// `U` undoes them first, one per press).
+    repeats: u64,
 }
 
 /// The state machine. Feed it every KEY packet in order.
@@ -234,6 +245,9 @@ pub struct Keypad {
     overlong: bool,
     /// Largest node index accepted (`None`: [`MAX_NODE`]).
     max_node: Option<u32>,
+    /// The device travelled far since the open curve's last tag (see
+    /// [`set_travelled`](Keypad::set_travelled)).
+    travelled: bool,
 }
 
 /// Digits not confirmed within this many seconds are stale (the operator moved on).
@@ -250,6 +264,29 @@ impl Keypad {
             max_node: Some(max.min(MAX_NODE)),
             ..Self::default()
         }
+    }
+
+    /// Tells the keypad whether the device has travelled, since the open curve's last tag, far
+    /// enough that tagging the same node again closes a loop through it (a closed curve with
+    /// one node) rather than repeating the tag. Holds until changed; `false` by default (a
+    /// caller that measures no travel gets repeats).
+    pub fn set_travelled(&mut self, travelled: bool) {
+        self.travelled = travelled;
+    }
+
+    /// Whether tagging `node` now would repeat the open curve's last tag (the same node, and
+    /// the device has not travelled a loop since).
+    fn is_repeat(&self, node: u32) -> bool {
+        let open = self.open.as_ref().expect("checked by the caller");
+        open.tags.last() == Some(&node) && !self.travelled
+    }
+
+    /// Adds a tag to the open curve (a new tag ends the repeats of the one before).
+    fn push_tag(&mut self, node: u32) -> CurveIndex {
+        let open = self.open.as_mut().expect("checked by the caller");
+        open.tags.push(node);
+        open.repeats = 0;
+        open.curve
     }
 
     /// Index the next started curve will get.
@@ -312,6 +349,16 @@ impl Keypad {
         }
     }
 
+    /// Ends the open curve as `E` would, for a reason of the caller's (`why`, in the warning
+    /// if the curve has fewer than two tags): acquisition ends a curve that reached its
+    /// largest size. Digits not confirmed are dropped. Nothing happens with no curve open.
+    pub fn end_curve(&mut self, t: f64, why: &'static str, out: &mut Vec<KeyEvent>) {
+        if self.open.is_some() {
+            self.drop_digits(t, b'E', out);
+            self.finish(t, why, out);
+        }
+    }
+
     /// Tells the keypad that packets were lost on the link (a sequence gap) after session
     /// time `t`: a key may be missing.
     pub fn link_gap(&mut self, t: f64) {
@@ -347,10 +394,8 @@ impl Keypad {
         let t_tag = self.last_digit;
         if self.gap_since_digit {
             self.gap_since_digit = false;
-            let open = self.open.as_mut().expect("digits only with a curve open");
-            if open.tags.last() != Some(&node) {
-                open.tags.push(node);
-                let curve = open.curve;
+            if !self.is_repeat(node) {
+                let curve = self.push_tag(node);
                 self.warn(out, t_tag, Some(node), Issue::EnterPresumedLost);
                 out.push(KeyEvent::Tagged {
                     curve,
@@ -420,10 +465,9 @@ impl Keypad {
                         let node = ANONYMOUS_NODE_BASE + self.anonymous;
                         self.anonymous += 1;
                         self.warn(out, t, Some(node), Issue::IndexLost);
-                        let open = self.open.as_mut().expect("checked");
-                        open.tags.push(node);
+                        let curve = self.push_tag(node);
                         out.push(KeyEvent::Tagged {
-                            curve: open.curve,
+                            curve,
                             node,
                             t,
                             uncertain: false, // anonymous: joins nothing
@@ -441,14 +485,14 @@ impl Keypad {
                 }
                 // A loss between the last digit and the Enter may have taken a digit too.
                 let uncertain = std::mem::take(&mut self.digits_uncertain) || gap_before;
-                let open = self.open.as_mut().expect("checked");
-                if open.tags.last() == Some(&node) {
+                if self.is_repeat(node) {
                     self.warn(out, t, Some(node), Issue::Repeat);
+                    self.open.as_mut().expect("checked").repeats += 1;
                     return;
                 }
-                open.tags.push(node);
+                let curve = self.push_tag(node);
                 out.push(KeyEvent::Tagged {
-                    curve: open.curve,
+                    curve,
                     node,
                     t,
                     uncertain,
@@ -469,6 +513,7 @@ impl Keypad {
                 self.open = Some(Open {
                     curve,
                     tags: Vec::new(),
+                    repeats: 0,
                 });
                 out.push(KeyEvent::Started {
                     curve,
@@ -477,9 +522,17 @@ impl Keypad {
             }
             b'U' => {
                 self.drop_digits(t, key, out);
-                match self.open.as_mut().map(|o| (o.curve, o.tags.pop())) {
-                    Some((curve, Some(node))) => out.push(KeyEvent::Untagged { curve, node }),
-                    Some((_, None)) => self.warn(out, t, None, Issue::UndoNothing),
+                match self.open.as_mut() {
+                    // The last Enter repeated the tag before it: undo the repeat (already
+                    // ignored), keep the tag.
+                    Some(o) if o.repeats > 0 => o.repeats -= 1,
+                    Some(o) => match o.tags.pop() {
+                        Some(node) => out.push(KeyEvent::Untagged {
+                            curve: o.curve,
+                            node,
+                        }),
+                        None => self.warn(out, t, None, Issue::UndoNothing),
+                    },
                     None => self.warn(out, t, None, Issue::UndoWithoutCurve),
                 }
             }
@@ -800,5 +853,67 @@ mod tests {
         assert_eq!(w.len(), 1, "{w:?}");
         assert_eq!(w[0].issue, Issue::IndexAboveMax { max: 50 });
         assert_eq!(w[0].node, Some(51));
+    }
+
+    /// Issue 15 point 1: `U` after an Enter that repeated the node before it undoes that
+    /// repeat, not the tag (an operator typing the previous index again by mistake lost a
+    /// correct node); each further `U` undoes the Enter before.
+    #[test]
+    fn issue_15_undo_after_a_repeated_tag_undoes_the_repeat() {
+        let ev = run("B1\n2\n2\nU3\nE");
+        assert_eq!(tagged(&ev), [1, 2, 3]);
+        assert!(
+            !ev.iter().any(|e| matches!(e, KeyEvent::Untagged { .. })),
+            "{ev:?}"
+        );
+        let w = warnings(&ev);
+        assert!(
+            w.len() == 1 && w[0].issue == Issue::Repeat && w[0].node == Some(2),
+            "{w:?}"
+        );
+        assert_eq!(ended(&ev), [0]);
+        // Two repeats, three undos: both repeats, then the tag of node 2.
+        let mut k = Keypad::new();
+        let mut ev = Vec::new();
+        for (i, c) in "B1\n2\n2\n2\nUUU".bytes().enumerate() {
+            k.key(i as f64, c, &mut ev);
+        }
+        assert_eq!(k.open_tags(), [1]);
+        assert_eq!(
+            ev.iter()
+                .filter(|e| matches!(e, KeyEvent::Untagged { node: 2, .. }))
+                .count(),
+            1
+        );
+        // A tag after a repeat ends it: U then undoes the new tag.
+        let ev = run("B1\n2\n2\n3\nU4\nE");
+        assert_eq!(tagged(&ev), [1, 2, 3, 4]);
+        assert!(ev.contains(&KeyEvent::Untagged { curve: 0, node: 3 }));
+    }
+
+    /// Issue 15 point 1: a closed curve through a single node (`B 1⏎ … 1⏎ E`) is a curve, not
+    /// a repeat, when the device travelled the loop between the two Enters.
+    #[test]
+    fn issue_15_a_loop_through_one_node_is_a_closed_curve() {
+        let keys = |travelled: bool| {
+            let mut k = Keypad::new();
+            let mut ev = Vec::new();
+            for (i, c) in "B1\n".bytes().enumerate() {
+                k.key(i as f64, c, &mut ev);
+            }
+            k.set_travelled(travelled);
+            for (i, c) in "1\nE".bytes().enumerate() {
+                k.key(10.0 + i as f64, c, &mut ev);
+            }
+            ev
+        };
+        let ev = keys(true);
+        assert_eq!(tagged(&ev), [1, 1]);
+        assert!(warnings(&ev).is_empty(), "{ev:?}");
+        assert_eq!(ended(&ev), [0]);
+        // Standing at the node, the same keys are a repeat and the curve has one tag.
+        let ev = keys(false);
+        assert_eq!(tagged(&ev), [1]);
+        assert!(ev.contains(&KeyEvent::Discarded { curve: 0 }));
     }
 }

@@ -117,6 +117,13 @@ pub enum AcquisitionWarning {
         segment: usize,
         from: u32,
     },
+    /// A curve reached the configured maximum number of samples and was ended there.
+    CurveTooLong {
+        curve: usize,
+        t: f64,
+        samples: usize,
+        nodes: Vec<u32>,
+    },
     /// The session ended with a curve open.
     NeverEnded {
         curve: usize,
@@ -139,6 +146,7 @@ impl AcquisitionWarning {
             NoSuchSegment { .. } => "no_such_segment",
             NoSamples { .. } => "curve_without_samples",
             WheelBack { .. } => "wheel_back",
+            CurveTooLong { .. } => "curve_too_long",
             NeverEnded { .. } => "curve_never_ended",
         }
     }
@@ -151,6 +159,7 @@ impl AcquisitionWarning {
             | NoSuchSegment { curve, .. }
             | NoSamples { curve, .. }
             | WheelBack { curve, .. }
+            | CurveTooLong { curve, .. }
             | NeverEnded { curve, .. } => Some(*curve),
             _ => None,
         }
@@ -212,6 +221,15 @@ impl std::fmt::Display for AcquisitionWarning {
             } => write!(
                 f,
                 "curve {curve}, node {node}, t = {t:.3} s: the wheel went back {back_m:.3} m over segment {segment} (from node {from}); backwards scanning?"
+            ),
+            CurveTooLong {
+                curve,
+                t,
+                samples,
+                nodes,
+            } => write!(
+                f,
+                "curve {curve}, t = {t:.3} s: {samples} samples, the most a curve may have (acquisition.max_curve_samples): ended here (nodes {nodes:?}); was its E forgotten?"
             ),
             NeverEnded {
                 curve,

@@ -192,3 +192,189 @@ fn issue_15_a_stuck_key_cannot_flood_the_log_or_the_report() {
             < 1 << 20
     );
 }
+
+/// The scan of a capture, decoded in memory with the default acquisition settings.
+fn scan_of(bytes: &[u8]) -> sfs::scan::Scan {
+    sfs::acquisition::Acquisition::scan_bytes(bytes, Default::default())
+}
+
+/// Point 1: `U` after an Enter that repeated the previous node undoes the repeat, not the
+/// correct tag before it (the curve came out with one node fewer).
+#[test]
+fn issue_15_undo_after_a_repeated_enter_keeps_the_node() {
+    let mut b = Builder::new();
+    b.packet(hello());
+    let mut i = 0;
+    let mut roll = |b: &mut Builder, n: i32| {
+        for _ in 0..n {
+            b.sample(i);
+            i += 1;
+        }
+    };
+    for k in *b"B1\n" {
+        b.key(k);
+    }
+    roll(&mut b, 200);
+    // Node 2 tagged, typed again by mistake while standing, undone.
+    for k in *b"2\n2\nU" {
+        b.key(k);
+    }
+    roll(&mut b, 200);
+    for k in *b"3\nE" {
+        b.key(k);
+    }
+    let scan = scan_of(&b.bytes);
+    assert_eq!(scan.curves.len(), 1, "{:?}", scan.warnings);
+    assert_eq!(scan.curves[0].nodes(), [1, 2, 3]);
+}
+
+/// Point 1: a closed curve through a single node (`B 1⏎ … 1⏎ E`) is a closed curve, not a
+/// repeat, when the device travelled between the two tags (it was discarded with its
+/// samples); the same keys standing still are a repeat.
+#[test]
+fn issue_15_a_loop_through_one_node_is_a_closed_curve() {
+    let capture = |samples: i32| {
+        let mut b = Builder::new();
+        b.packet(hello());
+        for k in *b"B1\n" {
+            b.key(k);
+        }
+        // 3 ticks a sample: 0.29 mm; 400 samples roll 0.12 m.
+        for i in 0..samples {
+            b.sample(i);
+        }
+        for k in *b"1\nE" {
+            b.key(k);
+        }
+        b.bytes
+    };
+    let scan = scan_of(&capture(400));
+    assert_eq!(scan.curves.len(), 1, "{:?}", scan.warnings);
+    let c = &scan.curves[0];
+    assert!(c.closed && c.nodes() == [1, 1], "{:?}", c.nodes());
+    assert_eq!(c.samples.t.len(), 400);
+    assert!((c.tags[1].d - 0.1166).abs() < 1e-3, "{}", c.tags[1].d);
+    // Standing at the node (1 cm of wheel): the second Enter repeats the tag.
+    let scan = scan_of(&capture(34));
+    assert!(scan.curves.is_empty());
+    let codes: Vec<&str> = scan.warnings.iter().map(|w| w.code()).collect();
+    assert_eq!(codes, ["keypad_repeat", "keypad_too_few_tags"]);
+}
+
+/// Point 1, end to end: a torus scanned along its outer equator and one meridian, each a loop
+/// through the one node where they cross, is reconstructed from either device within the
+/// device's accuracy target (the paper's metric against the simulated truth).
+#[test]
+fn issue_15_loops_through_one_node_reconstruct() {
+    use sfs::simulate::{self, scene, Profile};
+    use sfs_geometry::network::{NetworkParams, Reconstructor};
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
+    let s = scene::load(&scene::find("torus-loops", &dir)).unwrap();
+    for (device, target_pct) in [
+        (device_protocol::DeviceKind::Morphorider, 0.10),
+        (device_protocol::DeviceKind::Phone, 0.40),
+    ] {
+        let sim = simulate::run(&s, device, Profile::Default, 1);
+        let scan = scan_of(&sim.bytes);
+        let nodes: Vec<Vec<u32>> = scan.curves.iter().map(|c| c.nodes()).collect();
+        assert_eq!(nodes, [[0, 0], [0, 0]], "{device}: {:?}", scan.warnings);
+        assert!(scan.curves.iter().all(|c| c.closed));
+        let net = Reconstructor::new()
+            .run(&scan.curves, &NetworkParams::default())
+            .unwrap();
+        let e = sfs::eval::evaluate(&sim.truth, &sfs::gltf_out::as_read_network(&net.positions))
+            .unwrap();
+        assert!(
+            e.curves.mean_pct <= target_pct,
+            "{device}: mean {} % of the diagonal",
+            e.curves.mean_pct
+        );
+    }
+}
+
+/// Point 1, as seen in the field: on field-profile captures of either device (3× noise, the
+/// operator's hand not quite still), an index typed twice at a node and the repeat undone
+/// with `U` leaves the curve with all its nodes; standing still, the repeat is never taken
+/// for a loop.
+#[test]
+fn issue_15_a_repeat_undone_in_the_field_keeps_every_node() {
+    use sfs::simulate::{self, scene, Mistakes, Profile};
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
+    let s = scene::load(&scene::find("cone", &dir)).unwrap();
+    let more = Mistakes {
+        repeated_index: Some((2, 1)),
+        ..Default::default()
+    };
+    for device in [
+        device_protocol::DeviceKind::Morphorider,
+        device_protocol::DeviceKind::Phone,
+    ] {
+        let sim = simulate::run_with(&s, device, Profile::Field, 3, &more);
+        let scan = scan_of(&sim.bytes);
+        let truth: Vec<Vec<u32>> = sim.truth.curves.iter().map(|c| c.nodes.clone()).collect();
+        let nodes: Vec<Vec<u32>> = scan.curves.iter().map(|c| c.nodes()).collect();
+        assert_eq!(nodes, truth, "{device}");
+        let repeats: Vec<_> = scan
+            .warnings
+            .iter()
+            .filter(|w| w.code() == "keypad_repeat")
+            .map(|w| w.curve())
+            .collect();
+        assert_eq!(repeats, [Some(2)], "{device}: {:?}", scan.warnings);
+    }
+}
+
+/// Point 4: a curve that reaches `acquisition.max_curve_samples` is ended there with a warning
+/// naming it (kept when it has two tags); the samples after it count as outside curves and
+/// the next curve is scanned as usual.
+#[test]
+fn issue_15_a_curve_past_its_largest_size_is_ended_with_a_warning() {
+    let mut b = Builder::new();
+    b.packet(hello());
+    let mut i = 0;
+    let mut roll = |b: &mut Builder, n: i32| {
+        for _ in 0..n {
+            b.sample(i % 10_000);
+            i += 1;
+        }
+    };
+    for k in *b"B1\n" {
+        b.key(k);
+    }
+    roll(&mut b, 500);
+    for k in *b"2\n" {
+        b.key(k);
+    }
+    roll(&mut b, 2000); // E forgotten
+    for k in *b"I2\n" {
+        b.key(k);
+    }
+    roll(&mut b, 300);
+    for k in *b"3\nE" {
+        b.key(k);
+    }
+    let cfg = sfs::acquisition::AcquisitionConfig {
+        max_curve_samples: 1000,
+        ..Default::default()
+    };
+    let scan = sfs::acquisition::Acquisition::scan_bytes(&b.bytes, cfg);
+    let shape: Vec<(Vec<u32>, usize)> = scan
+        .curves
+        .iter()
+        .map(|c| (c.nodes(), c.samples.t.len()))
+        .collect();
+    assert_eq!(shape, [(vec![1, 2], 1000), (vec![2, 3], 300)]);
+    let too_long: Vec<String> = scan
+        .warnings
+        .iter()
+        .filter(|w| w.code() == "curve_too_long")
+        .map(|w| w.to_string())
+        .collect();
+    assert_eq!(too_long.len(), 1, "{:?}", scan.warnings);
+    assert!(
+        too_long[0].starts_with("curve 0,") && too_long[0].contains("1000 samples"),
+        "{}",
+        too_long[0]
+    );
+    assert_eq!(scan.counts.outside_curves, 1500);
+}

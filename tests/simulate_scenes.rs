@@ -45,6 +45,7 @@ fn shipped_scenes_build_the_expected_networks() {
         ("bowl", 9, 4, 2, 1),
         ("lilium", 32, 9, 1, 1),
         ("bumpy-cube", 6, 3, 3, 0),
+        ("torus-loops", 1, 2, 2, 0),
     ];
     for &(name, nodes, curves, closed, boundary) in expected {
         if matches!(name, "lilium" | "bumpy-cube") && !shared_data_present() {

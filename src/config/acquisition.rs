@@ -67,6 +67,9 @@ pub struct AcquisitionToml {
     pub nominal_speed: Option<f64>,
     pub array_window_s: Option<f64>,
     pub max_node: Option<u32>,
+    pub max_curve_samples: Option<u64>,
+    pub loop_distance: Option<f64>,
+    pub loop_turn_deg: Option<f64>,
     #[serde(default)]
     pub segment_lengths: BTreeMap<String, Vec<f64>>,
 }
@@ -206,6 +209,22 @@ impl ConfigFile {
                 ));
             }
             out.max_node = m;
+        }
+        if let Some(m) = a.max_curve_samples {
+            const MAX: u64 = 1 << 30;
+            if !(2..=MAX).contains(&m) {
+                return Err(err(
+                    "acquisition.max_curve_samples",
+                    format!("{m} is out of range [2, {MAX}]"),
+                ));
+            }
+            out.max_curve_samples = m as usize;
+        }
+        if let Some(x) = positive("acquisition.loop_distance", a.loop_distance, 100.0)? {
+            out.loop_distance = x;
+        }
+        if let Some(x) = positive("acquisition.loop_turn_deg", a.loop_turn_deg, 360.0)? {
+            out.loop_turn = x.to_radians();
         }
         for (k, v) in &a.segment_lengths {
             let key = format!("acquisition.segment_lengths.{k}");

@@ -38,6 +38,10 @@
 //! nominal_speed = 0.05               # phone: m/s where no segment length is known
 //! array_window_s = 1.0               # sensor arrays: averaging window
 //! max_node = 999999                  # largest node index typed; a larger one is not tagged
+//! max_curve_samples = 2000000        # a curve is ended (with a warning) at this many samples
+//! loop_distance = 0.05               # Morphorider: wheel travel (m) making a node tagged twice
+//!                                    #   in a row a loop through it, not a repeated Enter
+//! loop_turn_deg = 180.0              # phone: the same, as the angle turned through
 //! [acquisition.segment_lengths]      # phone: measured segment lengths (m) per curve index
 //! "0" = [0.30, 0.25]
 //!
@@ -523,6 +527,9 @@ mod tests {
             ("[acquisition]\nstationary_distance = -0.1\n", "acquisition.stationary_distance", "out of range"),
             ("[acquisition]\nstationary_distance = 0.0\n", "acquisition.stationary_distance", "out of range"),
             ("[acquisition]\nmax_node = 1000000\n", "acquisition.max_node", "out of range"),
+            ("[acquisition]\nmax_curve_samples = 1\n", "acquisition.max_curve_samples", "out of range"),
+            ("[acquisition]\nloop_distance = 0\n", "acquisition.loop_distance", "out of range"),
+            ("[acquisition]\nloop_turn_deg = 400\n", "acquisition.loop_turn_deg", "out of range"),
             (
                 "[acquisition.segment_lengths]\nfirst = [0.3]\n",
                 "acquisition.segment_lengths.first",

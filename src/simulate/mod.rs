@@ -27,6 +27,7 @@ pub mod truth;
 use device::{render, DeviceParams, Disturbance, LinkFaults, SampleTruth};
 use device_protocol::DeviceKind;
 use nalgebra::{Rotation3, Vector3};
+pub use operator::Mistakes;
 use operator::{perform, OperatorParams};
 use rng::Rng;
 use scene::Scene;
@@ -65,6 +66,18 @@ pub struct Simulation {
 
 /// Simulates a scan of `scene` by `device` (Morphorider, phone or sensor array).
 pub fn run(scene: &Scene, device: DeviceKind, profile: Profile, seed: u64) -> Simulation {
+    run_with(scene, device, profile, seed, &Mistakes::default())
+}
+
+/// [`run`], with the operator also making the mistakes set in `more` (on top of the
+/// profile's).
+pub fn run_with(
+    scene: &Scene,
+    device: DeviceKind,
+    profile: Profile,
+    seed: u64,
+    more: &Mistakes,
+) -> Simulation {
     let mut rng = Rng::new(seed);
     let mut p = match device {
         DeviceKind::Phone => DeviceParams::phone(),
@@ -113,6 +126,15 @@ pub fn run(scene: &Scene, device: DeviceKind, profile: Profile, seed: u64) -> Si
         op.mistakes.cancel_and_rescan = Some(cancel);
         events.push(format!(
             "curve {cancel}: started, cancelled with C, rescanned"
+        ));
+    }
+    let m = &mut op.mistakes;
+    m.wrong_index = more.wrong_index.or(m.wrong_index);
+    m.cancel_and_rescan = more.cancel_and_rescan.or(m.cancel_and_rescan);
+    m.repeated_index = more.repeated_index.or(m.repeated_index);
+    if let Some((c, k)) = more.repeated_index {
+        events.push(format!(
+            "curve {c}: tag {k} typed twice, the repeat undone with U"
         ));
     }
     let script = perform(&scene.specs(), &op, p.rate_hz, p.jitter, &mut rng);

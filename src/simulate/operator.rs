@@ -48,6 +48,9 @@ pub struct Mistakes {
     /// Start this curve, tag its first node, roll 40 % of its first segment, press `C`, carry
     /// the device back and scan the curve again.
     pub cancel_and_rescan: Option<usize>,
+    /// `(curve, tag)`: after the right index and Enter there, type it again and Enter (a
+    /// repeated tag), notice, `U` (which must undo the repeat, not the tag: issue 15).
+    pub repeated_index: Option<(usize, usize)>,
 }
 
 impl Default for OperatorParams {
@@ -349,6 +352,11 @@ pub fn perform(
                 tl.script.keys.last().map_or(tl.t, |k| k.0),
                 tl.wheel,
             ));
+            if op.mistakes.repeated_index == Some((ci, k)) {
+                tl.type_index(&p, Some(ci), s, node, op);
+                tl.key(b'U');
+                tl.stand(&p, Some(ci), s, op.key_interval, op.stand_wobble);
+            }
             if k + 1 == spec.tags.len() {
                 tl.key(b'E');
                 tl.stand(&p, None, s, 0.3, 0.0);
