@@ -92,12 +92,19 @@ pub async fn run(
     start: Start,
     shutdown: Shutdown,
 ) -> Result<Outcome, SessionError> {
+    // Everything that can refuse the session is done before a byte is captured: the port
+    // bound, the directory prepared, the monitor's outputs opened; then the source starts.
+    let listener = match settings.monitor.as_ref().and_then(|m| m.http) {
+        Some(addr) => Some(
+            crate::monitor::http::bind(addr)
+                .await
+                .map_err(|source| SessionError::Metrics { addr, source })?,
+        ),
+        None => None,
+    };
     let prepared = prepare(&spec, out_dir, settings, &start)?;
     let description = spec.describe();
     let progress = replay_progress(&spec);
-    tracing::info!(source = %description, out = %out_dir.display(), "session started");
-    let started = Instant::now();
-    let mut src = source::spawn(spec, prepared.capture, shutdown.clone())?;
     let begin = match start {
         Start::Resume => Begin::Resume,
         Start::New | Start::NewWithConfig(_) => Begin::Fresh,
@@ -106,14 +113,17 @@ pub async fn run(
         Some(m) => Some(Monitor::new(m.clone(), out_dir, begin).map_err(OutputError::at(out_dir))?),
         None => None,
     };
-    let _http = match (&monitor, settings.monitor.as_ref().and_then(|m| m.http)) {
-        (Some(m), Some(addr)) => Some(
-            crate::monitor::http::serve(addr, m.exposition.clone(), shutdown.clone())
-                .await
-                .map_err(|source| SessionError::Metrics { addr, source })?,
-        ),
+    let _http = match (&monitor, listener) {
+        (Some(m), Some(l)) => Some(crate::monitor::http::serve(
+            l,
+            m.exposition.clone(),
+            shutdown.clone(),
+        )),
         _ => None,
     };
+    tracing::info!(source = %description, out = %out_dir.display(), "session started");
+    let started = Instant::now();
+    let mut src = source::spawn(spec, prepared.capture, shutdown.clone())?;
     // Resume: the capture files to decode again, from the newest that starts before what a
     // monitor needs (all of them otherwise).
     let prior = prepared.prior.map(|mut files| {

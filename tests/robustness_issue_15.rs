@@ -378,3 +378,52 @@ fn issue_15_a_curve_past_its_largest_size_is_ended_with_a_warning() {
     );
     assert_eq!(scan.counts.outside_curves, 1500);
 }
+
+/// Point 6: a taken metrics port is found before a byte is captured, so that the same
+/// `--session` can be run again once the port is free (the retry was refused: 64 KB had gone
+/// to capture.bin).
+#[test]
+fn issue_15_a_taken_port_stops_the_session_before_any_capture() {
+    let dir = tmpdir("taken-port");
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let panel = std::fs::read_to_string(root.join("config/panel.toml")).unwrap();
+    let config = dir.join("panel.toml");
+    std::fs::write(
+        &config,
+        panel.replace("[monitor]\n", &format!("[monitor]\nhttp_port = {port}\n")),
+    )
+    .unwrap();
+    let (bytes, _) = fault_stream(300);
+    let session = dir.join("s");
+    let run = || {
+        let mut child = sfs()
+            .args(["--log", "off", "run", "--stdin", "--config"])
+            .arg(&config)
+            .arg("--session")
+            .arg(&session)
+            .stdin(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The port is refused at once; a broken pipe then is expected.
+        let _ = std::io::Write::write_all(child.stdin.as_mut().unwrap(), &bytes);
+        drop(child.stdin.take());
+        child.wait_with_output().unwrap()
+    };
+    let out = run();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(sfs::exit::OUTPUT), "{err}");
+    assert!(err.contains(&port.to_string()), "{err}");
+    let captured = std::fs::metadata(session.join("capture.bin")).map_or(0, |m| m.len());
+    assert_eq!(captured, 0, "bytes were captured before the port was tried");
+    drop(taken);
+    let out = run();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(std::fs::read(session.join("capture.bin")).unwrap(), bytes);
+}

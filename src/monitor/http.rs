@@ -11,15 +11,22 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 /// The latest exposition text, shared between the monitor and the server.
 pub type Exposition = Arc<Mutex<String>>;
 
-/// Binds `addr` and serves `text` until `shutdown`.
-pub async fn serve(
-    addr: SocketAddr,
+/// Binds `addr`: done before a session captures a byte, so that a taken port stops it while
+/// its directory is untouched (a retry with the same `--session` then works).
+pub async fn bind(addr: SocketAddr) -> std::io::Result<tokio::net::TcpListener> {
+    tokio::net::TcpListener::bind(addr).await
+}
+
+/// Serves `text` on `listener` (from [`bind`]) until `shutdown`.
+pub fn serve(
+    listener: tokio::net::TcpListener,
     text: Exposition,
     shutdown: Shutdown,
-) -> std::io::Result<tokio::task::JoinHandle<()>> {
-    let listener = tokio::net::TcpListener::bind(addr).await?;
-    tracing::info!("monitor: metrics at http://{addr}/metrics");
-    Ok(tokio::spawn(async move {
+) -> tokio::task::JoinHandle<()> {
+    if let Ok(addr) = listener.local_addr() {
+        tracing::info!("monitor: metrics at http://{addr}/metrics");
+    }
+    tokio::spawn(async move {
         loop {
             let conn = tokio::select! {
                 c = listener.accept() => c,
@@ -54,5 +61,5 @@ pub async fn serve(
                 .await;
             });
         }
-    }))
+    })
 }
