@@ -433,7 +433,9 @@ fn run_session(spec: SourceSpec, out: &Path, settings: &Settings, start: session
                 match e {
                     SessionError::Source(SourceError::Thread(_)) => exit::INTERNAL,
                     SessionError::Source(_) | SessionError::Read { .. } => exit::INPUT,
-                    SessionError::Output(_) | SessionError::Metrics { .. } => exit::OUTPUT,
+                    SessionError::Output(_)
+                    | SessionError::Capture(_)
+                    | SessionError::Metrics { .. } => exit::OUTPUT,
                     SessionError::CaptureExists { .. } | SessionError::Resume(_) => exit::USAGE,
                 }
             }

@@ -61,6 +61,10 @@ pub enum SessionError {
     /// The output directory or a file in it cannot be written.
     #[error(transparent)]
     Output(#[from] OutputError),
+    /// Appending to the capture failed (the first write that failed): the source was stopped
+    /// so that no byte is read uncaptured; the outputs hold what was captured.
+    #[error("{0} (the source was stopped there, so that no byte is read without being captured; the outputs hold what was captured)")]
+    Capture(OutputError),
     /// The input (capture file, serial port, stdin) is unavailable.
     #[error(transparent)]
     Source(#[from] SourceError),
@@ -164,19 +168,26 @@ pub async fn run(
         p.finish_and_clear();
     }
     log_stats("session ended", &flow.stats);
-    let (report, report_path) = flow.finish(settings, out_dir, end, &description, started)?;
+    let capture_failure = flow.capture_failure.take();
+    let finished = flow.finish(settings, out_dir, end, &description, started);
+    if end == EndReason::CaptureFailed {
+        // The first write that failed is named (on a full disk the outputs written after it
+        // fail too: said in the log).
+        if let Err(e) = &finished {
+            tracing::error!("{e}");
+        }
+        let failure = capture_failure.unwrap_or_else(|| {
+            OutputError::at(&prepared.capture_path.clone().unwrap_or_default())(
+                std::io::Error::other("appending to the capture failed"),
+            )
+        });
+        return Err(SessionError::Capture(failure));
+    }
+    let (report, report_path) = finished?;
     if end == EndReason::ReadError {
         return Err(SessionError::Read {
             source_name: description,
         });
-    }
-    if end == EndReason::CaptureFailed {
-        return Err(
-            OutputError::at(&prepared.capture_path.clone().unwrap_or_default())(
-                std::io::Error::other("appending to the capture failed"),
-            )
-            .into(),
-        );
     }
     Ok(Outcome {
         report,
@@ -272,6 +283,8 @@ struct Flow {
     acq: Acquisition,
     monitor: Option<Monitor>,
     live: Option<crate::live::Live>,
+    /// The first failed append to the capture (the source stopped there).
+    capture_failure: Option<OutputError>,
 }
 
 impl Flow {
@@ -306,6 +319,7 @@ impl Flow {
             acq: Acquisition::starting_at(settings.acquisition.clone(), clock_start),
             monitor,
             live,
+            capture_failure: None,
         })
     }
 
@@ -398,6 +412,12 @@ impl Flow {
                 }
                 Some(SourceEvent::Connected { .. }) => self.stats.connects += 1,
                 Some(SourceEvent::Disconnected { .. }) => self.stats.disconnects += 1,
+                Some(SourceEvent::CaptureFailed { path, kind, error }) => {
+                    self.capture_failure.get_or_insert(OutputError {
+                        path,
+                        source: std::io::Error::new(kind, error),
+                    });
+                }
                 Some(SourceEvent::End { reason }) => return reason,
                 None => return EndReason::Shutdown,
             }

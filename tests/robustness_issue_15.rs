@@ -427,3 +427,37 @@ fn issue_15_a_taken_port_stops_the_session_before_any_capture() {
     );
     assert_eq!(std::fs::read(session.join("capture.bin")).unwrap(), bytes);
 }
+
+/// Point 6: on a full disk the message names the first write that failed and why (it said
+/// "appending to the capture failed"); the capture stands on `/dev/full`, which fails every
+/// write with ENOSPC.
+#[test]
+fn issue_15_a_full_disk_names_the_first_write_that_failed() {
+    if !std::path::Path::new("/dev/full").exists() {
+        eprintln!("skipping: no /dev/full");
+        return;
+    }
+    let dir = tmpdir("full-disk");
+    let session = dir.join("s");
+    std::fs::create_dir_all(&session).unwrap();
+    std::os::unix::fs::symlink("/dev/full", session.join("capture.bin")).unwrap();
+    let (bytes, _) = fault_stream(300);
+    let mut child = sfs()
+        .args(["--log", "off", "run", "--stdin", "--session"])
+        .arg(&session)
+        .stdin(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let _ = std::io::Write::write_all(child.stdin.as_mut().unwrap(), &bytes);
+    drop(child.stdin.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(sfs::exit::OUTPUT), "{err}");
+    let first = format!(
+        "cannot write {}: No space left on device",
+        session.join("capture.bin").display()
+    );
+    assert!(err.contains(&first), "{err}");
+    assert_eq!(read_report(&session)["ended"], "capture_failed");
+}

@@ -97,6 +97,13 @@ pub enum SourceEvent {
     Bytes(Vec<u8>),
     /// The link was lost (unplug, read error, watchdog); a serial source keeps reconnecting.
     Disconnected { reason: String },
+    /// Appending to the capture failed (a full disk, say): the source stops (then `End`).
+    CaptureFailed {
+        path: PathBuf,
+        kind: std::io::ErrorKind,
+        /// The error's text ("No space left on device (os error 28)").
+        error: String,
+    },
     /// The source is finished (end of file, end of input, shutdown). Always the last event.
     End { reason: EndReason },
 }
@@ -179,6 +186,12 @@ impl Out {
             if let Err(e) = c.append(bytes) {
                 tracing::error!(path = %c.path().display(), error = %e,
                     "cannot append to the capture file; stopping the source so no byte is read uncaptured");
+                let failed = SourceEvent::CaptureFailed {
+                    path: c.path().to_owned(),
+                    kind: e.kind(),
+                    error: e.to_string(),
+                };
+                let _ = self.send(failed);
                 return Err(Stop::CaptureFailed);
             }
         }
