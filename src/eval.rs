@@ -1,6 +1,8 @@
 //! `sfs eval`: the error metric of the shape-from-sensors paper. The reconstructed network is
 //! registered rigidly on the truth (Kabsch on the matching nodes, then ICP on all curve points;
-//! no scaling), then every reconstructed curve point is measured to the truth network, and
+//! no scaling; a glb without node positions is started from each of the 24 orientations that
+//! map its principal axes onto the truth's, a short ICP from each, the best kept, since from
+//! one start ICP lands in a wrong minimum on symmetric shapes), then every reconstructed curve point is measured to the truth network, and
 //! every surface vertex to the truth surface; mean and max, in metres and in % of the truth
 //! network's bounding-box diagonal.
 
@@ -28,6 +30,9 @@ pub struct Distances {
 pub struct Registration {
     /// Nodes present in both and used for the initial alignment.
     pub nodes_matched: usize,
+    /// How the alignment was started: `"nodes"` (Kabsch on the matched nodes), or
+    /// `"principal axes k/24"` (the best of the 24 starts without nodes).
+    pub initialisation: String,
     pub rotation_deg: f64,
     pub translation_m: [f64; 3],
     pub icp_iterations: usize,
@@ -82,15 +87,13 @@ impl SegmentGrid {
             if r > 100_000 {
                 break;
             }
-            let mut any = false;
+            // Only the shell of the ring: all z where x or y is on it, else its two z faces.
             for x in -r..=r {
                 for y in -r..=r {
-                    for z in -r..=r {
-                        if x.abs().max(y.abs()).max(z.abs()) != r {
-                            continue;
-                        }
+                    let side = x.abs() == r || y.abs() == r;
+                    let step = if side || r == 0 { 1 } else { (2 * r) as usize };
+                    for z in (-r..=r).step_by(step) {
                         if let Some(ids) = self.map.get(&[c[0] + x, c[1] + y, c[2] + z]) {
-                            any = true;
                             for &i in ids {
                                 let (a, b) = self.segs[i as usize];
                                 let q = closest_on_segment(p, &a, &b);
@@ -103,7 +106,6 @@ impl SegmentGrid {
                     }
                 }
             }
-            let _ = any;
             if r > 4 && best.1.is_infinite() && self.map.is_empty() {
                 break;
             }
@@ -156,6 +158,83 @@ pub fn kabsch(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Option<(Rotation3<f64>,
     Some((r, cb - r * ca))
 }
 
+/// ICP of `sample` onto the truth polylines in `grid` from `(r, t)`, at most `max_iter`
+/// iterations (stopping when the RMS distance changes less than 1e-9 of `diag`): the rotation,
+/// translation, the last RMS distance and the iterations done.
+fn icp(
+    sample: &[Vector3<f64>],
+    grid: &SegmentGrid,
+    mut r: Rotation3<f64>,
+    mut t: Vector3<f64>,
+    max_iter: usize,
+    diag: f64,
+) -> (Rotation3<f64>, Vector3<f64>, f64, usize) {
+    let mut iterations = 0;
+    let mut last_rms = f64::INFINITY;
+    for it in 0..max_iter {
+        iterations = it + 1;
+        let moved: Vec<Vector3<f64>> = sample.iter().map(|p| r * p + t).collect();
+        let near: Vec<(Vector3<f64>, f64)> = moved.iter().map(|p| grid.nearest(p)).collect();
+        let rms = (near.iter().map(|n| n.1 * n.1).sum::<f64>() / near.len() as f64).sqrt();
+        let converged = (last_rms - rms).abs() <= 1e-9 * diag;
+        last_rms = rms;
+        let targets: Vec<Vector3<f64>> = near.iter().map(|n| n.0).collect();
+        let Some((dr, dt)) = kabsch(&moved, &targets) else {
+            break;
+        };
+        r = dr * r;
+        t = dr * t + dt;
+        if converged {
+            break;
+        }
+    }
+    (r, t, last_rms, iterations)
+}
+
+/// The 24 rigid motions that take the centroid of `a` to that of `b` and the principal axes
+/// of `a` onto those of `b` (each of the 24 rotations of a cube between the two frames: the
+/// axes' order and signs are ambiguous when their spreads are alike, as on symmetric shapes).
+fn principal_axes_starts(
+    a: &[Vector3<f64>],
+    b: &[Vector3<f64>],
+) -> Vec<(Rotation3<f64>, Vector3<f64>)> {
+    let frame = |p: &[Vector3<f64>]| {
+        let c = p.iter().sum::<Vector3<f64>>() / p.len().max(1) as f64;
+        let mut cov = Matrix3::zeros();
+        for x in p {
+            cov += (x - c) * (x - c).transpose();
+        }
+        let mut e = cov.symmetric_eigen().eigenvectors;
+        if e.determinant() < 0.0 {
+            e.set_column(2, &(-e.column(2)));
+        }
+        (c, e)
+    };
+    let ((ca, fa), (cb, fb)) = (frame(a), frame(b));
+    let mut starts = Vec::with_capacity(24);
+    for perm in [
+        [0, 1, 2],
+        [1, 2, 0],
+        [2, 0, 1],
+        [1, 0, 2],
+        [0, 2, 1],
+        [2, 1, 0],
+    ] {
+        for signs in [[1.0, 1.0], [1.0, -1.0], [-1.0, 1.0], [-1.0, -1.0]] {
+            let mut s = Matrix3::zeros();
+            s[(perm[0], 0)] = signs[0];
+            s[(perm[1], 1)] = signs[1];
+            s[(perm[2], 2)] = 1.0;
+            if s.determinant() < 0.0 {
+                s[(perm[2], 2)] = -1.0;
+            }
+            let r = Rotation3::from_matrix_unchecked(fb * s * fa.transpose());
+            starts.push((r, cb - r * ca));
+        }
+    }
+    starts
+}
+
 fn distances(d: &[f64], diag: f64) -> Distances {
     let n = d.len().max(1) as f64;
     let mean = d.iter().sum::<f64>() / n;
@@ -204,7 +283,7 @@ pub fn evaluate(truth: &Truth, rec: &ReadNetwork) -> Result<Evaluation, EvalErro
     let diag = truth.bbox_diagonal.max(1e-12);
     let grid = SegmentGrid::new(segs, (diag / 100.0).max(1e-6));
 
-    // Initial alignment: matching nodes, else centroids.
+    // Initial alignment: matching nodes, else the best of the principal-axes starts.
     let mut a = Vec::new();
     let mut b = Vec::new();
     for (k, p) in &rec.nodes {
@@ -214,37 +293,55 @@ pub fn evaluate(truth: &Truth, rec: &ReadNetwork) -> Result<Evaluation, EvalErro
         }
     }
     let nodes_matched = a.len();
-    let (mut r, mut t) = kabsch(&a, &b).unwrap_or_else(|| {
-        let ca = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
-        let tp: Vec<Vector3<f64>> = truth
-            .curves
-            .iter()
-            .flat_map(|c| c.points.iter().map(|p| Vector3::from(*p)))
-            .collect();
-        let cb = tp.iter().sum::<Vector3<f64>>() / tp.len() as f64;
-        (Rotation3::identity(), cb - ca)
-    });
     // ICP (point to closest point on the truth polylines), subsampled for speed.
     let step = (pts.len() / 20_000).max(1);
     let sample: Vec<Vector3<f64>> = pts.iter().step_by(step).copied().collect();
-    let mut iterations = 0;
-    let mut last_rms = f64::INFINITY;
-    for it in 0..100 {
-        iterations = it + 1;
-        let moved: Vec<Vector3<f64>> = sample.iter().map(|p| r * p + t).collect();
-        let near: Vec<(Vector3<f64>, f64)> = moved.iter().map(|p| grid.nearest(p)).collect();
-        let rms = (near.iter().map(|n| n.1 * n.1).sum::<f64>() / near.len() as f64).sqrt();
-        let targets: Vec<Vector3<f64>> = near.iter().map(|n| n.0).collect();
-        let Some((dr, dt)) = kabsch(&moved, &targets) else {
-            break;
-        };
-        r = dr * r;
-        t = dr * t + dt;
-        if (last_rms - rms).abs() <= 1e-9 * diag {
-            break;
+    let (start, initialisation) = match kabsch(&a, &b) {
+        Some(rt) => (rt, "nodes".to_string()),
+        None => {
+            let truth_pts: Vec<Vector3<f64>> = truth
+                .curves
+                .iter()
+                .flat_map(|c| c.points.iter().map(|p| Vector3::from(*p)))
+                .collect();
+            // The starts are compared by a short ICP of ~500 points onto the truth polylines
+            // thinned to ~2000 segments, in a coarse grid (a wrong start leaves points far
+            // from every curve, where a fine grid's search would be slow).
+            let stride = (truth_pts.len() / 2000).max(1);
+            let mut thin = Vec::new();
+            for c in &truth.curves {
+                let mut last: Option<Vector3<f64>> = None;
+                let n = c.points.len();
+                for (i, p) in c.points.iter().enumerate() {
+                    if i % stride == 0 || i + 1 == n {
+                        let p = Vector3::from(*p);
+                        if let Some(l) = last {
+                            thin.push((l, p));
+                        }
+                        last = Some(p);
+                    }
+                }
+            }
+            let coarse_grid = SegmentGrid::new(thin, diag / 20.0);
+            let coarse: Vec<Vector3<f64>> = pts
+                .iter()
+                .step_by((pts.len() / 500).max(1))
+                .copied()
+                .collect();
+            let (k, rt) = principal_axes_starts(&pts, &truth_pts)
+                .into_iter()
+                .enumerate()
+                .map(|(k, (r, t))| {
+                    let (r, t, rms, _) = icp(&coarse, &coarse_grid, r, t, 15, diag);
+                    (k, (r, t), rms)
+                })
+                .min_by(|x, y| x.2.total_cmp(&y.2))
+                .map(|(k, rt, _)| (k, rt))
+                .expect("24 starts");
+            (rt, format!("principal axes {}/24", k + 1))
         }
-        last_rms = rms;
-    }
+    };
+    let (r, t, _, iterations) = icp(&sample, &grid, start.0, start.1, 100, diag);
     let d: Vec<f64> = pts.iter().map(|p| grid.nearest(&(r * p + t)).1).collect();
     let surface = match &rec.surface {
         Some(s) if !s.positions.is_empty() => {
@@ -271,6 +368,7 @@ pub fn evaluate(truth: &Truth, rec: &ReadNetwork) -> Result<Evaluation, EvalErro
         bbox_diagonal_m: diag,
         registration: Registration {
             nodes_matched,
+            initialisation,
             rotation_deg: UnitQuaternion::from_rotation_matrix(&r)
                 .angle()
                 .to_degrees(),
