@@ -193,6 +193,40 @@ fn issue_15_a_stuck_key_cannot_flood_the_log_or_the_report() {
     );
 }
 
+/// A Morphorider capture: after the HELLO, each step presses its keys, then rolls its number
+/// of samples (3 wheel ticks, 0.29 mm, a sample).
+fn rider_capture(steps: &[(&[u8], i32)]) -> Vec<u8> {
+    let mut b = Builder::new();
+    b.packet(hello());
+    let mut i = 0;
+    for (keys, samples) in steps {
+        for &k in *keys {
+            b.key(k);
+        }
+        for _ in 0..*samples {
+            b.sample(i);
+            i += 1;
+        }
+    }
+    assert!(i < 10_000, "Builder::sample takes small indices");
+    b.bytes
+}
+
+/// `sfs --log off run --stdin` with `args`, `bytes` on its standard input (a broken pipe is
+/// expected when it refuses to start).
+fn run_stdin(args: &[&std::ffi::OsStr], bytes: &[u8]) -> std::process::Output {
+    let mut child = sfs()
+        .args(["--log", "off", "run", "--stdin"])
+        .args(args)
+        .stdin(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let _ = std::io::Write::write_all(child.stdin.as_mut().unwrap(), bytes);
+    drop(child.stdin.take());
+    child.wait_with_output().unwrap()
+}
+
 /// The scan of a capture, decoded in memory with the default acquisition settings.
 fn scan_of(bytes: &[u8]) -> sfs::scan::Scan {
     sfs::acquisition::Acquisition::scan_bytes(bytes, Default::default())
@@ -202,28 +236,12 @@ fn scan_of(bytes: &[u8]) -> sfs::scan::Scan {
 /// correct tag before it (the curve came out with one node fewer).
 #[test]
 fn issue_15_undo_after_a_repeated_enter_keeps_the_node() {
-    let mut b = Builder::new();
-    b.packet(hello());
-    let mut i = 0;
-    let mut roll = |b: &mut Builder, n: i32| {
-        for _ in 0..n {
-            b.sample(i);
-            i += 1;
-        }
-    };
-    for k in *b"B1\n" {
-        b.key(k);
-    }
-    roll(&mut b, 200);
     // Node 2 tagged, typed again by mistake while standing, undone.
-    for k in *b"2\n2\nU" {
-        b.key(k);
-    }
-    roll(&mut b, 200);
-    for k in *b"3\nE" {
-        b.key(k);
-    }
-    let scan = scan_of(&b.bytes);
+    let scan = scan_of(&rider_capture(&[
+        (b"B1\n", 200),
+        (b"2\n2\nU", 200),
+        (b"3\nE", 0),
+    ]));
     assert_eq!(scan.curves.len(), 1, "{:?}", scan.warnings);
     assert_eq!(scan.curves[0].nodes(), [1, 2, 3]);
 }
@@ -233,21 +251,8 @@ fn issue_15_undo_after_a_repeated_enter_keeps_the_node() {
 /// samples); the same keys standing still are a repeat.
 #[test]
 fn issue_15_a_loop_through_one_node_is_a_closed_curve() {
-    let capture = |samples: i32| {
-        let mut b = Builder::new();
-        b.packet(hello());
-        for k in *b"B1\n" {
-            b.key(k);
-        }
-        // 3 ticks a sample: 0.29 mm; 400 samples roll 0.12 m.
-        for i in 0..samples {
-            b.sample(i);
-        }
-        for k in *b"1\nE" {
-            b.key(k);
-        }
-        b.bytes
-    };
+    // 400 samples roll 0.12 m.
+    let capture = |samples: i32| rider_capture(&[(b"B1\n", samples), (b"1\nE", 0)]);
     let scan = scan_of(&capture(400));
     assert_eq!(scan.curves.len(), 1, "{:?}", scan.warnings);
     let c = &scan.curves[0];
@@ -329,35 +334,17 @@ fn issue_15_a_repeat_undone_in_the_field_keeps_every_node() {
 /// the next curve is scanned as usual.
 #[test]
 fn issue_15_a_curve_past_its_largest_size_is_ended_with_a_warning() {
-    let mut b = Builder::new();
-    b.packet(hello());
-    let mut i = 0;
-    let mut roll = |b: &mut Builder, n: i32| {
-        for _ in 0..n {
-            b.sample(i % 10_000);
-            i += 1;
-        }
-    };
-    for k in *b"B1\n" {
-        b.key(k);
-    }
-    roll(&mut b, 500);
-    for k in *b"2\n" {
-        b.key(k);
-    }
-    roll(&mut b, 2000); // E forgotten
-    for k in *b"I2\n" {
-        b.key(k);
-    }
-    roll(&mut b, 300);
-    for k in *b"3\nE" {
-        b.key(k);
-    }
+    let bytes = rider_capture(&[
+        (b"B1\n", 500),
+        (b"2\n", 2000), // E forgotten
+        (b"I2\n", 300),
+        (b"3\nE", 0),
+    ]);
     let cfg = sfs::acquisition::AcquisitionConfig {
         max_curve_samples: 1000,
         ..Default::default()
     };
-    let scan = sfs::acquisition::Acquisition::scan_bytes(&b.bytes, cfg);
+    let scan = sfs::acquisition::Acquisition::scan_bytes(&bytes, cfg);
     let shape: Vec<(Vec<u32>, usize)> = scan
         .curves
         .iter()
@@ -398,19 +385,15 @@ fn issue_15_a_taken_port_stops_the_session_before_any_capture() {
     let (bytes, _) = fault_stream(300);
     let session = dir.join("s");
     let run = || {
-        let mut child = sfs()
-            .args(["--log", "off", "run", "--stdin", "--config"])
-            .arg(&config)
-            .arg("--session")
-            .arg(&session)
-            .stdin(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        // The port is refused at once; a broken pipe then is expected.
-        let _ = std::io::Write::write_all(child.stdin.as_mut().unwrap(), &bytes);
-        drop(child.stdin.take());
-        child.wait_with_output().unwrap()
+        run_stdin(
+            &[
+                "--config".as_ref(),
+                config.as_ref(),
+                "--session".as_ref(),
+                session.as_ref(),
+            ],
+            &bytes,
+        )
     };
     let out = run();
     let err = String::from_utf8_lossy(&out.stderr);
@@ -442,16 +425,7 @@ fn issue_15_a_full_disk_names_the_first_write_that_failed() {
     std::fs::create_dir_all(&session).unwrap();
     std::os::unix::fs::symlink("/dev/full", session.join("capture.bin")).unwrap();
     let (bytes, _) = fault_stream(300);
-    let mut child = sfs()
-        .args(["--log", "off", "run", "--stdin", "--session"])
-        .arg(&session)
-        .stdin(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let _ = std::io::Write::write_all(child.stdin.as_mut().unwrap(), &bytes);
-    drop(child.stdin.take());
-    let out = child.wait_with_output().unwrap();
+    let out = run_stdin(&["--session".as_ref(), session.as_ref()], &bytes);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(sfs::exit::OUTPUT), "{err}");
     let first = format!(
