@@ -106,6 +106,18 @@ pub const LOGGED_PER_KIND: u64 = 20;
 /// Largest wheel advance between consecutive samples taken as real motion, m.
 pub const MAX_WHEEL_STEP: f64 = 0.5;
 
+/// The curve being scanned ([`Acquisition::open_curve`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OpenCurveInfo {
+    pub index: usize,
+    pub boundary: bool,
+    /// Nodes tagged so far.
+    pub nodes: Vec<u32>,
+    pub samples: usize,
+    /// Wheel distance since the first tag (Morphorider), m.
+    pub distance_m: Option<f64>,
+}
+
 /// What [`Acquisition::event`] reports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Update {
@@ -294,6 +306,31 @@ impl Acquisition {
     /// The scan so far (accepted curves only).
     pub fn scan(&self) -> &Scan {
         &self.scan
+    }
+
+    /// Session time of the latest packet, s.
+    pub fn session_time(&self) -> f64 {
+        self.clock.now()
+    }
+
+    /// The curve being scanned, if one is open.
+    pub fn open_curve(&self) -> Option<OpenCurveInfo> {
+        let o = self.open.as_ref()?;
+        let distance_m = match self.kind {
+            Some(DeviceKind::Phone) => None,
+            _ => Some(
+                o.tag_travel
+                    .first()
+                    .map_or(0.0, |first| self.wheel_m - first),
+            ),
+        };
+        Some(OpenCurveInfo {
+            index: o.index,
+            boundary: o.boundary,
+            nodes: o.tags.iter().map(|t| t.0).collect(),
+            samples: o.raw.len(),
+            distance_m,
+        })
     }
 
     /// Sensor arrays: the session time up to which every sensor's windows are complete (the

@@ -137,6 +137,11 @@ pub struct ReplayArgs {
     /// Configuration file for calibration and processing settings (its `[source]` is ignored).
     #[arg(long, short)]
     pub config: Option<PathBuf>,
+    /// Serve the live view (a web page: the network as it grows, the status, the warnings)
+    /// at ADDR (default 127.0.0.1:8040), with live updates after every curve; it keeps
+    /// serving after the end of the capture until interrupted.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::view::DEFAULT_ADDRESS)]
+    pub view: Option<std::net::SocketAddr>,
 }
 
 #[derive(Debug, Args)]
@@ -166,6 +171,11 @@ pub struct RunArgs {
     /// configuration the session started with (SESSION/config.toml) is used.
     #[arg(long, value_name = "SESSION")]
     pub resume: Option<PathBuf>,
+    /// Serve the live view (a web page: the network as it grows, the curve being scanned,
+    /// the status, the warnings) at ADDR (default 127.0.0.1:8040) while the session runs;
+    /// overrides `[view] address`.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::view::DEFAULT_ADDRESS)]
+    pub view: Option<std::net::SocketAddr>,
 }
 
 #[derive(Debug, Subcommand)]

@@ -22,13 +22,16 @@
 //!   `network.glb` bytes, warnings), with the caches kept between runs.
 //! - [`gltf_out`]: all glTF writing and reading (the output contract).
 //! - [`live`]: the worker that rebuilds the outputs after every curve (coalescing).
+//! - [`view`]: the operator's live view, a web page served while the session runs (the
+//!   network, surface, curve being scanned, status and warnings, kept current by server-sent
+//!   events), with the Prometheus [`metrics`] on the same server.
 //! - [`report`]: `report.json`, assembled in one place; [`warning`]: the typed warnings
 //!   it lists; [`memory`]: resident size; [`atomic`]: atomic replacement of output files.
 //! - [`session`]: one session, prepared, streamed (source → decoder → acquisition → live
 //!   worker and monitor) and finished (scan.json, network.glb, report.json).
 //! - [`monitor`]: instrumented structures (sensor arrays): layout → shape per epoch →
 //!   metrics against a reference → alarms → rolling outputs (metrics.csv, events.log,
-//!   latest.glb, a Prometheus endpoint).
+//!   latest.glb, gauges on the view's `/metrics`).
 //! - [`settings`]: everything a session runs with, resolved once; [`config`]: the
 //!   configuration file (`config/*.toml`), one module per section, resolved into settings;
 //!   [`cli`]: the raw flags; `main.rs` the thin binary over them.
@@ -53,6 +56,7 @@ pub mod keypad;
 pub mod link;
 pub mod live;
 pub mod memory;
+pub mod metrics;
 pub mod monitor;
 pub mod orientation;
 pub mod pipeline;
@@ -64,6 +68,7 @@ pub mod settings;
 pub mod shutdown;
 pub mod simulate;
 pub mod source;
+pub mod view;
 pub mod warning;
 
 /// Exit codes of the `sfs` binary (a stated policy, also in the README).

@@ -71,6 +71,14 @@ impl PacketCounts {
     pub fn total(&self) -> u64 {
         self.0.iter().sum()
     }
+
+    /// `(wire-format name, count)` of every type, in [`PacketType::ALL`] order.
+    pub fn by_name(&self) -> Vec<(&'static str, u64)> {
+        PacketType::ALL
+            .iter()
+            .map(|&t| (t.name(), self.get(t)))
+            .collect()
+    }
 }
 
 impl Serialize for PacketCounts {
@@ -95,6 +103,15 @@ pub struct Rejected {
 impl Rejected {
     pub fn total(&self) -> u64 {
         self.crc + self.cobs + self.length
+    }
+
+    /// `(reason, count)` of every reason.
+    pub fn by_reason(&self) -> [(&'static str, u64); 3] {
+        [
+            ("crc", self.crc),
+            ("cobs", self.cobs),
+            ("length", self.length),
+        ]
     }
 }
 

@@ -79,6 +79,8 @@ pub struct LiveSettings {
     pub snapshots: bool,
     pub source: String,
     pub started: Instant,
+    /// The live view to tell of every new network.
+    pub view: Option<crate::view::View>,
 }
 
 impl Live {
@@ -209,6 +211,10 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
         let path = settings.out_dir.join(REPORT_FILE);
         if let Err(e) = live_report.write(&path) {
             tracing::error!("live update: cannot write {}: {e}", path.display());
+        }
+        if let Some(v) = &settings.view {
+            v.network(products.glb.as_deref(), &report, scan.curves.len());
+            v.reconstruction_warnings(&products.warnings);
         }
         status_lines(&scan, &products, &lat, compute_ms);
         last = Some(products);

@@ -102,9 +102,12 @@ fn replay(a: ReplayArgs) -> i32 {
         },
         None => Settings::default(),
     };
-    // Offline: the outputs once, at the end (no live updates).
+    // Offline: the outputs once, at the end (no live updates), unless the view shows them.
+    let view = a.view.or(settings.view);
     let settings = Settings {
-        live: false,
+        live: view.is_some(),
+        view,
+        keep_serving: view.is_some(),
         ..settings
     };
     run_session(spec, &a.out, &settings, session::Start::New)
@@ -156,11 +159,14 @@ fn run(a: RunArgs) -> i32 {
 fn resolve_run(a: &RunArgs, config: Option<&Path>) -> Result<(SourceSpec, Settings), ConfigError> {
     let cli_err =
         |key: &str, reason: &str| ConfigError::new(Path::new("command line"), key, reason);
-    let settings = match config {
+    let mut settings = match config {
         // A kept copy resolves its relative paths where it was copied from.
         Some(f) => config::load_kept(f)?,
         None => Settings::default(),
     };
+    if a.view.is_some() {
+        settings.view = a.view;
+    }
     let mut spec = if a.stdin {
         SourceSpec::Stdin
     } else if let Some(p) = &a.serial {
@@ -435,7 +441,7 @@ fn run_session(spec: SourceSpec, out: &Path, settings: &Settings, start: session
                     SessionError::Source(_) | SessionError::Read { .. } => exit::INPUT,
                     SessionError::Output(_)
                     | SessionError::Capture(_)
-                    | SessionError::Metrics { .. } => exit::OUTPUT,
+                    | SessionError::Serve { .. } => exit::OUTPUT,
                     SessionError::CaptureExists { .. } | SessionError::Resume(_) => exit::USAGE,
                 }
             }

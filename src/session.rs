@@ -7,6 +7,7 @@ use crate::acquisition::{Acquisition, Update};
 use crate::atomic::OutputError;
 use crate::capture::CaptureWriter;
 use crate::link::LinkStats;
+use crate::metrics::SessionMetrics;
 use crate::monitor::run::{Begin, Monitor};
 use crate::pipeline::{Pipeline, REPORT_FILE, SCAN_FILE};
 use crate::report::{Progress, Report};
@@ -51,9 +52,9 @@ pub enum SessionError {
     /// `--resume` where there is nothing to resume, or with a source that is not captured.
     #[error("cannot resume: {0}")]
     Resume(String),
-    /// The monitoring metrics endpoint cannot listen (address in use, not this machine's).
-    #[error("cannot serve the metrics on {addr}: {source}")]
-    Metrics {
+    /// The view or the metrics cannot be served (address in use, not this machine's).
+    #[error("cannot serve the view and metrics on {addr}: {source}")]
+    Serve {
         addr: std::net::SocketAddr,
         #[source]
         source: std::io::Error,
@@ -98,14 +99,20 @@ pub async fn run(
 ) -> Result<Outcome, SessionError> {
     // Everything that can refuse the session is done before a byte is captured: the port
     // bound, the directory prepared, the monitor's outputs opened; then the source starts.
-    let listener = match settings.monitor.as_ref().and_then(|m| m.http) {
-        Some(addr) => Some(
-            crate::monitor::http::bind(addr)
+    let mut addrs: Vec<std::net::SocketAddr> = settings.view.into_iter().collect();
+    if let Some(a) = settings.monitor.as_ref().and_then(|m| m.http) {
+        if !addrs.contains(&a) {
+            addrs.push(a);
+        }
+    }
+    let mut listeners = Vec::new();
+    for addr in addrs {
+        listeners.push(
+            crate::view::bind(addr)
                 .await
-                .map_err(|source| SessionError::Metrics { addr, source })?,
-        ),
-        None => None,
-    };
+                .map_err(|source| SessionError::Serve { addr, source })?,
+        );
+    }
     let prepared = prepare(&spec, out_dir, settings, &start)?;
     let description = spec.describe();
     let progress = replay_progress(&spec);
@@ -117,14 +124,17 @@ pub async fn run(
         Some(m) => Some(Monitor::new(m.clone(), out_dir, begin).map_err(OutputError::at(out_dir))?),
         None => None,
     };
-    let _http = match (&monitor, listener) {
-        (Some(m), Some(l)) => Some(crate::monitor::http::serve(
-            l,
-            m.exposition.clone(),
-            shutdown.clone(),
-        )),
-        _ => None,
-    };
+    // The view and the metrics: one server, stopped when the session ends (or, to keep a
+    // recorded session on screen, when interrupted).
+    let server_stop = Shutdown::new();
+    let view = (!listeners.is_empty()).then(|| {
+        let metrics = SessionMetrics::new(monitor.as_ref().map(|m| &m.metrics));
+        crate::view::View::new(&description, metrics)
+    });
+    let server = view
+        .as_ref()
+        .map(|v| crate::view::serve(listeners, v.clone(), server_stop.clone()));
+    let _stop_server = StopOnDrop(server_stop.clone());
     tracing::info!(source = %description, out = %out_dir.display(), "session started");
     let started = Instant::now();
     let mut src = source::spawn(spec, prepared.capture, shutdown.clone())?;
@@ -151,6 +161,7 @@ pub async fn run(
         monitor,
         &description,
         started,
+        view.clone(),
     )?;
     if let Some(files) = prior {
         flow.resume(files)?;
@@ -188,6 +199,14 @@ pub async fn run(
         return Err(SessionError::Read {
             source_name: description,
         });
+    }
+    if let (Some(server), true) = (server, settings.keep_serving) {
+        if !shutdown.is_triggered() {
+            tracing::info!("the session is over; the view is still served until interrupted");
+            shutdown.triggered().await;
+        }
+        server_stop.trigger();
+        let _ = tokio::time::timeout(std::time::Duration::from_secs(2), server).await;
     }
     Ok(Outcome {
         report,
@@ -285,6 +304,9 @@ struct Flow {
     live: Option<crate::live::Live>,
     /// The first failed append to the capture (the source stopped there).
     capture_failure: Option<OutputError>,
+    /// The live view, and the scan's warnings it has been given.
+    view: Option<crate::view::View>,
+    warnings_shown: usize,
 }
 
 impl Flow {
@@ -297,6 +319,7 @@ impl Flow {
         monitor: Option<Monitor>,
         description: &str,
         started: Instant,
+        view: Option<crate::view::View>,
     ) -> Result<Flow, SessionError> {
         let live = if settings.live {
             Some(
@@ -307,6 +330,7 @@ impl Flow {
                     snapshots: settings.snapshots,
                     source: description.to_owned(),
                     started,
+                    view: view.clone(),
                 })
                 .map_err(|e| SessionError::Source(SourceError::Thread(e)))?,
             )
@@ -320,6 +344,8 @@ impl Flow {
             monitor,
             live,
             capture_failure: None,
+            view,
+            warnings_shown: 0,
         })
     }
 
@@ -332,8 +358,34 @@ impl Flow {
             if let (true, Some(Update::CurveEnded(i) | Update::CurveUpdated(i))) = (post, update) {
                 post_curve(&mut self.live, &self.acq, i, &self.stats);
             }
+            if let (Some(v), Some(Update::CurveEnded(i))) = (&self.view, update) {
+                v.curve_ended(i, self.acq.scan().curves.len());
+            }
         }
         feed_monitor(&mut self.monitor, &mut self.acq);
+        self.show();
+    }
+
+    /// Tells the view the link's counters, the curve being scanned and the new warnings.
+    fn show(&mut self) {
+        let Some(v) = &self.view else { return };
+        v.link(&self.stats, self.acq.session_time());
+        let curve = self.acq.open_curve().map(|c| crate::view::CurrentCurve {
+            index: c.index,
+            kind: if c.boundary { "boundary" } else { "interior" },
+            nodes: c.nodes,
+            samples: c.samples,
+            distance_m: c.distance_m,
+        });
+        v.update(|s| {
+            s.curve = curve;
+            s.curves_accepted = self.acq.scan().curves.len();
+        });
+        let warnings = &self.acq.scan().warnings;
+        if warnings.len() > self.warnings_shown {
+            v.warnings(&warnings[self.warnings_shown..]);
+            self.warnings_shown = warnings.len();
+        }
     }
 
     /// Resume: the same decoder and acquisition state as if the session had not stopped.
@@ -447,18 +499,28 @@ impl Flow {
         let scan = acq.finish();
         let scan_path = out_dir.join(SCAN_FILE);
         crate::atomic::write_json(&scan_path, &scan, false).map_err(OutputError::at(&scan_path))?;
-        let (products, mut live_report) = match live {
+        let (products, mut live_report, fresh) = match live {
             Some(crate::live::LiveOutcome {
                 report,
                 products: Some(p),
                 curves,
-            }) if curves == scan.curves.len() => (p, Some(report)),
+            }) if curves == scan.curves.len() => (p, Some(report), false),
             other => (
                 Pipeline::new().run(&scan.curves, &settings.network, settings.surface.as_ref()),
                 other.map(|o| o.report),
+                true,
             ),
         };
         products.write_glb(out_dir)?;
+        if let Some(v) = &self.view {
+            v.warnings(scan.warnings.iter().chain(&products.warnings));
+            v.reconstruction_warnings(&[]);
+            if fresh {
+                let report = live_report.clone().unwrap_or_default();
+                v.network(products.glb.as_deref(), &report, scan.curves.len());
+            }
+            v.ended();
+        }
         if let Some(l) = &mut live_report {
             crate::memory::release_free_memory();
             (l.rss_mb, l.peak_rss_mb) = crate::memory::rss_mb();
@@ -616,5 +678,15 @@ async fn sleep_until(deadline: Option<tokio::time::Instant>) {
     match deadline {
         Some(d) => tokio::time::sleep_until(d).await,
         None => std::future::pending().await,
+    }
+}
+
+/// Triggers a [`Shutdown`] when dropped (the view's server stops with the session, however
+/// it ends).
+struct StopOnDrop(Shutdown);
+
+impl Drop for StopOnDrop {
+    fn drop(&mut self) {
+        self.0.trigger();
     }
 }

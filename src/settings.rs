@@ -35,6 +35,11 @@ pub struct Settings {
     pub monitor: Option<MonitorConfig>,
     /// Rotation of a live session's capture; `None`: one file.
     pub capture_rotation: Option<Rotation>,
+    /// Where the live view is served (`[view] address`, `--view`); `None`: no view.
+    pub view: Option<std::net::SocketAddr>,
+    /// Keep serving the view (and the metrics) after the session ends, until interrupted
+    /// (`sfs replay --view`, so a recorded session can be looked at).
+    pub keep_serving: bool,
 }
 
 /// A serial link's settings.
@@ -70,6 +75,8 @@ impl Default for Settings {
             snapshots: false,
             monitor: None,
             capture_rotation: None,
+            view: None,
+            keep_serving: false,
         }
     }
 }

@@ -191,6 +191,7 @@ fn curves_that_end_during_a_reconstruction_coalesce() {
         snapshots: false,
         source: "test".into(),
         started: Instant::now(),
+        view: None,
     })
     .unwrap();
     // Every curve ends at once, far faster than one reconstruction.

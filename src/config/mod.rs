@@ -104,6 +104,7 @@ mod network;
 mod output;
 mod source;
 mod surface;
+mod view;
 
 use crate::settings::{SerialSettings, Settings};
 use serde::Deserialize;
@@ -149,6 +150,8 @@ struct ConfigFile {
     surface: surface::SurfaceToml,
     #[serde(default)]
     output: output::OutputToml,
+    #[serde(default)]
+    view: view::ViewToml,
     /// Monitoring of an instrumented structure (see the module documentation).
     monitor: Option<monitor::MonitorToml>,
 }
@@ -234,6 +237,8 @@ impl ConfigFile {
             snapshots: self.output.snapshots.unwrap_or(false),
             monitor: None,
             capture_rotation: self.capture_rotation(file)?,
+            view: self.view_address(file)?,
+            keep_serving: false,
         };
         Ok(match monitor {
             Some(m) => settings.with_monitor(m),

@@ -8,11 +8,11 @@
 //! - [`metrics`]: displacement and curvature change from a reference shape.
 //! - [`alarm`]: thresholds with hysteresis on the metrics.
 //! - [`run`]: the monitoring loop of a session (epochs → shape → metrics → alarms → files).
-//! - [`http`]: the metrics for a Prometheus scraper (off unless configured).
+//! - the metrics for a Prometheus scraper: [`crate::metrics::MonitorMetrics`], served by the
+//!   view's server at `/metrics` (`[monitor] http_port`).
 
 pub mod alarm;
 pub mod epoch;
-pub mod http;
 pub mod layout;
 pub mod metrics;
 pub mod run;

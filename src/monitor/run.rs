@@ -182,8 +182,8 @@ pub struct Monitor {
     /// replay ends (a rotated capture may not go back far enough to rebuild them).
     resume_alarms: Option<Vec<String>>,
     pub report: MonitorReport,
-    /// The Prometheus exposition of the latest epoch ([`super::http`]).
-    pub exposition: super::http::Exposition,
+    /// The Prometheus metrics of the latest epoch (served by the view's server).
+    pub metrics: crate::metrics::MonitorMetrics,
 }
 
 impl Monitor {
@@ -221,7 +221,7 @@ impl Monitor {
             csv: None,
             csv_bytes: 0,
             report: MonitorReport::default(),
-            exposition: Default::default(),
+            metrics: Default::default(),
             cfg,
         };
         match begin {
@@ -424,101 +424,37 @@ impl Monitor {
         }
     }
 
-    /// Updates the Prometheus text (gauges of the latest epoch, counters of the session).
+    /// Updates the Prometheus metrics (gauges of the latest epoch, counters of the session).
     fn expose(&self, t: f64, m: &Metrics, missing: usize, saturated: usize, disturbed: usize) {
-        let mut s = String::new();
-        let mut put = |name: &str, kind: &str, help: &str, value: String| {
-            s += &format!("# HELP sfs_{name} {help}\n# TYPE sfs_{name} {kind}\n");
-            s += &format!("sfs_{name} {value}\n");
-        };
-        put(
-            "epoch_time_seconds",
-            "gauge",
-            "Session time of the latest epoch.",
-            format!("{t}"),
-        );
-        put(
-            "epochs_total",
-            "counter",
-            "Epochs closed.",
-            self.report.epochs.to_string(),
-        );
-        put(
-            "epochs_failed_total",
-            "counter",
-            "Epochs that could not be reconstructed.",
-            self.report.failed.to_string(),
-        );
-        put(
-            "epochs_late_total",
-            "counter",
-            "Sensor epochs ignored because their window had closed.",
-            self.report.late.to_string(),
-        );
-        put(
-            "sensors_unknown",
-            "gauge",
-            "Sensors streaming that the layout does not place.",
-            self.report.unknown_sensors.len().to_string(),
-        );
-        put(
-            "max_displacement_meters",
-            "gauge",
-            "Largest displacement from the reference shape.",
-            format!("{}", m.max_displacement),
-        );
-        put(
-            "mean_displacement_meters",
-            "gauge",
-            "Mean displacement from the reference shape.",
-            format!("{}", m.mean_displacement),
-        );
-        put(
-            "max_curvature_change_radians_per_meter",
-            "gauge",
-            "Largest change of curvature from the reference shape.",
-            format!("{}", m.max_curvature_change),
-        );
-        put(
-            "sensors_missing",
-            "gauge",
-            "Sensors of the layout without an orientation (no samples, or none usable), saturated and disturbed ones aside.",
-            missing.to_string(),
-        );
-        put(
-            "sensors_saturated",
-            "gauge",
-            "Sensors of the layout left out because saturated.",
-            saturated.to_string(),
-        );
-        put(
-            "sensors_disturbed",
-            "gauge",
-            "Sensors of the layout left out because their magnetic field is disturbed.",
-            disturbed.to_string(),
-        );
-        put(
-            "alarms_raised_total",
-            "counter",
-            "Alarms raised.",
-            self.report.alarms_raised.to_string(),
-        );
-        s +=
-            "# HELP sfs_alarm Whether an alarm is raised (1) or not (0).\n# TYPE sfs_alarm gauge\n";
+        use crate::metrics::count_to;
+        let x = &self.metrics;
+        x.epoch_time.set(t);
+        count_to(&x.epochs, self.report.epochs);
+        count_to(&x.epochs_failed, self.report.failed);
+        count_to(&x.epochs_late, self.report.late);
+        x.sensors_unknown
+            .set(self.report.unknown_sensors.len() as i64);
+        x.max_displacement.set(m.max_displacement);
+        x.mean_displacement.set(m.mean_displacement);
+        x.max_curvature_change.set(m.max_curvature_change);
+        x.sensors_missing.set(missing as i64);
+        x.sensors_saturated.set(saturated as i64);
+        x.sensors_disturbed.set(disturbed as i64);
+        count_to(&x.alarms_raised, self.report.alarms_raised);
         for a in &self.alarms {
-            s += &format!(
-                "sfs_alarm{{metric=\"{}\",threshold=\"{}\"}} {}\n",
-                a.metric,
-                a.threshold,
-                u8::from(a.is_raised())
-            );
+            let labels = vec![
+                ("metric".to_string(), a.metric.to_string()),
+                ("threshold".to_string(), a.threshold.to_string()),
+            ];
+            x.alarm.get_or_create(&labels).set(i64::from(a.is_raised()));
         }
-        s += "# HELP sfs_sensor_left_out A sensor of the layout left out of the latest shape, and why.\n# TYPE sfs_sensor_left_out gauge\n";
+        x.sensor_left_out.clear();
         for (sensor, reason) in &self.health {
-            s += &format!("sfs_sensor_left_out{{sensor=\"{sensor}\",reason=\"{reason}\"}} 1\n");
-        }
-        if let Ok(mut e) = self.exposition.lock() {
-            *e = s;
+            let labels = vec![
+                ("sensor".to_string(), sensor.to_string()),
+                ("reason".to_string(), reason.to_string()),
+            ];
+            x.sensor_left_out.get_or_create(&labels).set(1);
         }
     }
 

@@ -1,0 +1,257 @@
+// The operator's live view: the network and surface of /network.glb, the curve being scanned
+// (preview), the status bar and the warnings, kept current by the server's events (/events).
+// Read-only. `window.sfsView` exposes what is drawn, for tests.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+
+const COLOURS = { boundary: 0xff9800, interior: 0x4fc3f7, latest: 0xffee58, preview: 0xe040fb, node: 0xffffff };
+
+const state = {
+  ready: false, errors: [], updates: 0, curves: [], nodes: [], surfaceTriangles: 0,
+  lastCurve: null, warnings: 0, events: { status: 0, curve: 0, network: 0, warning: 0, preview: 0 },
+  status: null, previewPoints: 0,
+};
+window.sfsView = state;
+window.addEventListener('error', (e) => state.errors.push(String(e.message)));
+window.addEventListener('unhandledrejection', (e) => state.errors.push(String(e.reason)));
+const consoleError = console.error.bind(console);
+console.error = (...args) => { state.errors.push(args.map(String).join(' ')); consoleError(...args); };
+
+const canvas = document.getElementById('scene');
+const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+renderer.setPixelRatio(window.devicePixelRatio);
+const scene = new THREE.Scene();
+scene.background = new THREE.Color(0x1d2126);
+const camera = new THREE.PerspectiveCamera(45, 1, 0.001, 1000);
+camera.position.set(1, 1, 1);
+const controls = new OrbitControls(camera, canvas);
+scene.add(new THREE.HemisphereLight(0xffffff, 0x404040, 1.6));
+const sun = new THREE.DirectionalLight(0xffffff, 1.4);
+sun.position.set(2, 4, 3);
+scene.add(sun);
+
+const network = new THREE.Group();
+const labels = new THREE.Group();
+let surface = null;
+let preview = null;
+let framed = false;
+scene.add(network, labels);
+
+function resize() {
+  const w = canvas.clientWidth, h = canvas.clientHeight;
+  if (canvas.width !== w || canvas.height !== h) {
+    renderer.setSize(w, h, false);
+    camera.aspect = w / Math.max(h, 1);
+    camera.updateProjectionMatrix();
+  }
+}
+
+function label(text, at, size) {
+  const c = document.createElement('canvas');
+  c.width = 128; c.height = 64;
+  const g = c.getContext('2d');
+  g.font = 'bold 40px sans-serif';
+  g.fillStyle = '#ffffff';
+  g.textAlign = 'center';
+  g.fillText(text, 64, 44);
+  const sprite = new THREE.Sprite(new THREE.SpriteMaterial({ map: new THREE.CanvasTexture(c), depthTest: false }));
+  sprite.renderOrder = 10;
+  sprite.position.copy(at);
+  sprite.scale.set(size, size / 2, 1);
+  return sprite;
+}
+
+function clear(group) {
+  for (const o of [...group.children]) {
+    group.remove(o);
+    o.geometry?.dispose();
+    o.material?.map?.dispose();
+    o.material?.dispose();
+  }
+}
+
+// Rebuilds the scene from a glb (the output contract: a `network` node whose mesh has a
+// LINE_STRIP per curve with extras {curve, boundary, nodes} and node positions in its extras;
+// an optional `surface` node).
+function show(gltf) {
+  clear(network); clear(labels);
+  if (surface) { scene.remove(surface); surface = null; }
+  const curves = [], nodes = [];
+  const box = new THREE.Box3();
+  gltf.scene.traverse((o) => {
+    if (o.isLine) {
+      const x = o.geometry.userData || {};
+      curves.push({ index: x.curve, boundary: !!x.boundary, nodes: x.nodes || [] });
+      const latest = x.curve === state.lastCurve;
+      const colour = latest ? COLOURS.latest : (x.boundary ? COLOURS.boundary : COLOURS.interior);
+      const line = new THREE.Line(o.geometry.clone(), new THREE.LineBasicMaterial({ color: colour }));
+      line.userData = { curve: x.curve, boundary: !!x.boundary };
+      network.add(line);
+      o.geometry.computeBoundingBox();
+      box.union(o.geometry.boundingBox);
+    }
+    if (o.isMesh && (o.name === 'surface' || o.parent?.name === 'surface')) {
+      surface = new THREE.Mesh(o.geometry.clone(), new THREE.MeshStandardMaterial({
+        color: 0xb0bec5, roughness: 0.7, metalness: 0.0, side: THREE.DoubleSide,
+        polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1,
+      }));
+      surface.visible = document.getElementById('show-surface').checked;
+      scene.add(surface);
+    }
+  });
+  let positions = null;
+  gltf.scene.traverse((o) => { if (o.userData && o.userData.nodes && !positions) positions = o.userData.nodes; });
+  const size = box.isEmpty() ? 1 : box.getSize(new THREE.Vector3()).length();
+  if (positions) {
+    const pts = [];
+    for (const [k, p] of Object.entries(positions)) {
+      const v = new THREE.Vector3(p[0], p[1], p[2]);
+      pts.push(v);
+      nodes.push(Number(k));
+      if (Number(k) < 1000000) labels.add(label(k, v, size * 0.08));
+    }
+    const geo = new THREE.BufferGeometry().setFromPoints(pts);
+    network.add(new THREE.Points(geo, new THREE.PointsMaterial({ color: COLOURS.node, size: 6, sizeAttenuation: false })));
+  }
+  labels.visible = document.getElementById('show-labels').checked;
+  state.curves = curves;
+  state.nodes = nodes;
+  state.nodePositions = positions || {};
+  state.surfaceTriangles = surface ? (surface.geometry.index ? surface.geometry.index.count / 3 : 0) : 0;
+  if (!framed && !box.isEmpty()) {
+    const c = box.getCenter(new THREE.Vector3());
+    controls.target.copy(c);
+    camera.position.copy(c).add(new THREE.Vector3(0.8, 0.6, 0.9).multiplyScalar(size));
+    camera.near = size / 1000; camera.far = size * 100;
+    camera.updateProjectionMatrix();
+    framed = true;
+  }
+}
+
+const loader = new GLTFLoader();
+let loading = null;
+async function loadNetwork() {
+  if (loading) { loading.again = true; return; }
+  loading = { again: false };
+  try {
+    const r = await fetch('/network.glb', { cache: 'no-store' });
+    if (r.ok) {
+      const buf = await r.arrayBuffer();
+      const gltf = await loader.parseAsync(buf, '');
+      show(gltf);
+      state.updates += 1;
+      state.networkAt = performance.now();
+      if (preview) { scene.remove(preview); preview = null; state.previewPoints = 0; }
+    }
+  } catch (e) {
+    state.errors.push('network.glb: ' + e);
+  }
+  const again = loading.again;
+  loading = null;
+  if (again) loadNetwork();
+}
+
+function text(id, s, bad) {
+  const el = document.getElementById(id);
+  el.textContent = s;
+  el.classList.toggle('bad', !!bad);
+}
+
+function showStatus(s) {
+  state.status = s;
+  const pill = document.getElementById('state');
+  pill.textContent = s.state;
+  pill.className = 'pill ' + s.state;
+  if (s.curve) {
+    const d = s.curve.distance_m != null ? `, ${s.curve.distance_m.toFixed(2)} m` : '';
+    text('curve', `curve ${s.curve.index} (${s.curve.kind}): nodes ${s.curve.nodes.join(' → ') || '—'}, ${s.curve.samples} samples${d}`);
+  } else {
+    text('curve', 'no curve open');
+  }
+  text('accepted', `${s.curves_accepted} curve(s) accepted`);
+  const l = s.link;
+  text('link', `link ${l.packets_per_s.toFixed(0)} pkt/s · ${l.rejected} rejected · ${l.lost} lost · ${l.reboots} reboots`, l.lost > 0 || l.disconnects > 0);
+  if (s.device) {
+    const d = s.device;
+    const batt = d.battery_mv != null ? ` · battery ${(d.battery_mv / 1000).toFixed(2)} V` : '';
+    const flags = d.status_flags.length ? ' · ' + d.status_flags.join(', ') : '';
+    text('device', `${d.kind} #${d.id} · ${d.rate_hz} Hz${batt}${flags}`, (d.battery_mv != null && d.battery_mv < 3400) || d.status_flags.length > 0);
+  }
+  const rec = document.getElementById('reconstruction');
+  rec.replaceChildren(...(s.reconstruction.length ? s.reconstruction : [{ text: 'nothing to say' }]).map((w) => {
+    const li = document.createElement('li');
+    li.textContent = w.text;
+    return li;
+  }));
+  if (s.live && s.live.latency_ms.n > 0) {
+    text('latency', `update ${s.live.latency_ms.p50.toFixed(0)} / ${s.live.latency_ms.p95.toFixed(0)} ms`);
+  }
+}
+
+function addWarning(w) {
+  const li = document.createElement('li');
+  li.textContent = w.text;
+  li.title = w.code;
+  const list = document.getElementById('warnings');
+  list.prepend(li);
+  while (list.children.length > 200) list.lastChild.remove();
+  state.warnings += 1;
+  document.getElementById('warning-count').textContent = `(${state.warnings})`;
+}
+
+function showPreview(p) {
+  if (preview) { scene.remove(preview); preview.geometry.dispose(); preview = null; }
+  if (!p || !p.points || p.points.length < 2) { state.previewPoints = 0; return; }
+  const geo = new THREE.BufferGeometry().setFromPoints(p.points.map((q) => new THREE.Vector3(q[0], q[1], q[2])));
+  preview = new THREE.Line(geo, new THREE.LineDashedMaterial({ color: COLOURS.preview, dashSize: 0.01, gapSize: 0.006 }));
+  preview.computeLineDistances();
+  scene.add(preview);
+  state.previewPoints = p.points.length;
+}
+
+document.getElementById('show-surface').addEventListener('change', (e) => { if (surface) surface.visible = e.target.checked; });
+document.getElementById('show-labels').addEventListener('change', (e) => { labels.visible = e.target.checked; });
+
+// `?once`: no event stream; the status, warnings and network as they are now, then the
+// state in #sfs-state (for a headless browser's --dump-dom, whose virtual time cannot pass
+// with a stream open).
+if (new URLSearchParams(location.search).has('once')) {
+  (async () => {
+    try {
+      const s = await (await fetch('/status', { cache: 'no-store' })).json();
+      showStatus(s);
+      for (const w of s.warnings) addWarning(w);
+      await loadNetwork();
+    } catch (e) {
+      state.errors.push(String(e));
+    }
+    renderer.render(scene, camera);
+    const dump = document.createElement('pre');
+    dump.id = 'sfs-state';
+    dump.hidden = true;
+    dump.textContent = JSON.stringify({ ...state, status: undefined, rendered: renderer.info.render });
+    document.body.append(dump);
+  })();
+} else {
+  const events = new EventSource('/events');
+  events.addEventListener('status', (e) => { state.events.status += 1; showStatus(JSON.parse(e.data)); });
+  events.addEventListener('curve', (e) => { state.events.curve += 1; state.lastCurve = JSON.parse(e.data).index; });
+  events.addEventListener('network', () => { state.events.network += 1; loadNetwork(); });
+  events.addEventListener('warning', (e) => { state.events.warning += 1; addWarning(JSON.parse(e.data)); });
+  events.addEventListener('preview', (e) => { state.events.preview += 1; showPreview(JSON.parse(e.data)); });
+  events.addEventListener('open', () => loadNetwork());
+  events.onerror = () => {
+    const pill = document.getElementById('state');
+    if (events.readyState !== EventSource.OPEN) { pill.textContent = 'disconnected'; pill.className = 'pill lost'; }
+  };
+}
+
+function frame() {
+  resize();
+  controls.update();
+  renderer.render(scene, camera);
+  requestAnimationFrame(frame);
+}
+requestAnimationFrame(frame);
+state.ready = true;

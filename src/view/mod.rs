@@ -1,0 +1,336 @@
+//! The operator's live view: a web page served by the daemon while a session runs
+//! (`--view [ADDR]`, `[view] address`; the monitoring metrics share the server).
+//!
+//! Routes (stable: tests and scripts use them):
+//! - `GET /` the page, `GET /assets/…` its scripts (three.js vendored, embedded: [`assets`]);
+//! - `GET /network.glb` the latest reconstruction (the bytes of `SESSION/network.glb`);
+//! - `GET /status` one JSON object ([`Status`]);
+//! - `GET /metrics` Prometheus text ([`crate::metrics`]);
+//! - `GET /events` server-sent events: `status` (5 Hz while data flows, 1 Hz otherwise),
+//!   `curve` (a curve ended: `{"index"}`), `network` (a new `network.glb` is in place:
+//!   `{"update", "curves"}`), `warning` (each warning of `report.json` as it is raised:
+//!   `{"text", "code", "curve", "node"}`; acquisition's at once, the reconstruction's when
+//!   the session ends, since they change with every curve until then: meanwhile the latest
+//!   are in the status), `preview` (the curve being scanned, integrated so far).
+//!
+//! The session and the live worker publish into a [`View`] (a lock and an assignment, never a
+//! wait); the server reads it. Nothing the server does can hold them up: events go through a
+//! bounded broadcast queue, and a client that falls behind it is dropped (its browser
+//! reconnects); the number of event streams and of requests in flight is limited.
+
+pub mod assets;
+mod server;
+
+pub use server::{bind, serve, DEFAULT_ADDRESS};
+
+use crate::link::LinkStats;
+use crate::metrics::SessionMetrics;
+use crate::report::{LiveReport, Percentiles};
+use crate::warning::Warning;
+use serde::Serialize;
+use std::collections::HashSet;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+/// Warnings kept in [`Status::warnings`] (the latest).
+pub const STATUS_WARNINGS: usize = 20;
+/// Events queued for the event streams; a client further behind is dropped.
+pub const EVENT_QUEUE: usize = 1024;
+
+/// What `GET /status` returns.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Status {
+    /// `starting`, `running`, `ended`.
+    pub state: &'static str,
+    pub source: String,
+    /// Session time of the latest packet, s.
+    pub session_time_s: f64,
+    /// The curve being scanned.
+    pub curve: Option<CurrentCurve>,
+    pub curves_accepted: usize,
+    pub link: LinkStatus,
+    /// The device's HELLO and last STATUS.
+    pub device: Option<DeviceStatus>,
+    /// The latest warnings (at most [`STATUS_WARNINGS`]), oldest first.
+    pub warnings: Vec<WarningEvent>,
+    pub warnings_total: u64,
+    /// Live reconstruction figures.
+    pub live: Option<LiveStatus>,
+    /// What the latest reconstruction could not do (replaced at every update: a network
+    /// still being scanned has open faces; the final ones are `warning` events).
+    pub reconstruction: Vec<WarningEvent>,
+}
+
+/// The curve being scanned.
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct CurrentCurve {
+    pub index: usize,
+    /// `boundary` or `interior`.
+    pub kind: &'static str,
+    /// Nodes tagged so far.
+    pub nodes: Vec<u32>,
+    pub samples: usize,
+    /// Distance rolled since its first tag (Morphorider), m.
+    pub distance_m: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct LinkStatus {
+    pub bytes: u64,
+    pub packets: u64,
+    /// Over the last status period.
+    pub packets_per_s: f64,
+    pub rejected: u64,
+    pub lost: u64,
+    pub reboots: u64,
+    pub disconnects: u64,
+}
+
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct DeviceStatus {
+    pub kind: &'static str,
+    pub id: u32,
+    pub rate_hz: u16,
+    pub battery_mv: Option<u16>,
+    pub status_flags: Vec<&'static str>,
+    /// Samples the device itself dropped since power-up.
+    pub dropped: Option<u32>,
+}
+
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct LiveStatus {
+    pub updates: usize,
+    pub latency_ms: Percentiles,
+    pub update_ms: Percentiles,
+}
+
+/// A warning as the view shows it.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct WarningEvent {
+    pub text: String,
+    pub code: &'static str,
+    pub curve: Option<usize>,
+    pub node: Option<u32>,
+}
+
+impl From<&Warning> for WarningEvent {
+    fn from(w: &Warning) -> Self {
+        WarningEvent {
+            text: w.to_string(),
+            code: w.code(),
+            curve: w.curve(),
+            node: w.node(),
+        }
+    }
+}
+
+/// One server-sent event: its name and JSON data.
+#[derive(Debug, Clone)]
+pub struct Event {
+    pub name: &'static str,
+    pub data: Arc<str>,
+}
+
+/// The live state the view serves; cheap to clone, shared by the session, the live worker
+/// and the server.
+#[derive(Debug, Clone)]
+pub struct View {
+    shared: Arc<Shared>,
+}
+
+#[derive(Debug)]
+struct Shared {
+    metrics: SessionMetrics,
+    status: Mutex<Status>,
+    /// Bumped at every status change (the server sends `status` when it moved).
+    status_generation: AtomicU64,
+    glb: Mutex<Option<axum::body::Bytes>>,
+    events: tokio::sync::broadcast::Sender<Event>,
+    /// Texts of the warnings already sent.
+    warned: Mutex<HashSet<String>>,
+    preview: Mutex<Option<Arc<str>>>,
+    preview_generation: AtomicU64,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+impl View {
+    pub fn new(source: &str, metrics: SessionMetrics) -> View {
+        let (events, _) = tokio::sync::broadcast::channel(EVENT_QUEUE);
+        View {
+            shared: Arc::new(Shared {
+                metrics,
+                status: Mutex::new(Status {
+                    state: "starting",
+                    source: source.to_owned(),
+                    ..Default::default()
+                }),
+                status_generation: AtomicU64::new(0),
+                glb: Mutex::new(None),
+                events,
+                warned: Mutex::new(HashSet::new()),
+                preview: Mutex::new(None),
+                preview_generation: AtomicU64::new(0),
+            }),
+        }
+    }
+
+    pub fn metrics(&self) -> &SessionMetrics {
+        &self.shared.metrics
+    }
+
+    /// Changes the status (and marks it changed).
+    pub fn update(&self, f: impl FnOnce(&mut Status)) {
+        f(&mut lock(&self.shared.status));
+        self.shared
+            .status_generation
+            .fetch_add(1, Ordering::Release);
+    }
+
+    /// The status now.
+    pub fn status(&self) -> Status {
+        lock(&self.shared.status).clone()
+    }
+
+    fn status_generation(&self) -> u64 {
+        self.shared.status_generation.load(Ordering::Acquire)
+    }
+
+    /// The link's counters (status and metrics).
+    pub fn link(&self, stats: &LinkStats, session_time_s: f64) {
+        self.shared.metrics.link(stats);
+        self.update(|s| {
+            s.state = "running";
+            s.session_time_s = session_time_s;
+            s.link = LinkStatus {
+                bytes: stats.bytes,
+                packets: stats.packets.total(),
+                packets_per_s: s.link.packets_per_s,
+                rejected: stats.rejected.total(),
+                lost: stats.lost_packets,
+                reboots: stats.reboots,
+                disconnects: stats.disconnects,
+            };
+            s.device = stats.hello.as_ref().map(|h| DeviceStatus {
+                kind: h.kind,
+                id: h.device_id,
+                rate_hz: h.rate_hz,
+                battery_mv: stats.status.as_ref().map(|st| st.battery_mv),
+                status_flags: stats
+                    .status
+                    .as_ref()
+                    .map(|st| st.flag_names.clone())
+                    .unwrap_or_default(),
+                dropped: stats.status.as_ref().map(|st| st.dropped),
+            });
+        });
+    }
+
+    fn send(&self, name: &'static str, data: String) {
+        // No receiver is not an error: nobody is looking.
+        let _ = self.shared.events.send(Event {
+            name,
+            data: data.into(),
+        });
+    }
+
+    /// A curve was accepted.
+    pub fn curve_ended(&self, index: usize, accepted: usize) {
+        self.shared.metrics.curves_accepted.inc();
+        self.update(|s| s.curves_accepted = accepted);
+        self.send("curve", serde_json::json!({ "index": index }).to_string());
+    }
+
+    /// Warnings raised so far (those not sent yet are sent, in order).
+    pub fn warnings<'a>(&self, all: impl IntoIterator<Item = &'a Warning>) {
+        let mut new = Vec::new();
+        {
+            let mut warned = lock(&self.shared.warned);
+            for w in all {
+                let e = WarningEvent::from(w);
+                if warned.insert(e.text.clone()) {
+                    new.push(e);
+                }
+            }
+        }
+        if new.is_empty() {
+            return;
+        }
+        self.shared.metrics.warnings.inc_by(new.len() as u64);
+        for e in &new {
+            self.send("warning", serde_json::to_string(e).unwrap_or_default());
+        }
+        self.update(|s| {
+            s.warnings_total += new.len() as u64;
+            s.warnings.extend(new);
+            let excess = s.warnings.len().saturating_sub(STATUS_WARNINGS);
+            s.warnings.drain(..excess);
+        });
+    }
+
+    /// What the latest live reconstruction reported (in the status, not as `warning` events:
+    /// they change with every curve until the network is complete).
+    pub fn reconstruction_warnings(&self, ws: &[Warning]) {
+        let list: Vec<WarningEvent> = ws.iter().take(STATUS_WARNINGS).map(Into::into).collect();
+        self.update(|s| s.reconstruction = list);
+    }
+
+    /// A new `network.glb` is in place (`glb`: its bytes), after live update `live.updates`
+    /// over `curves` curves.
+    pub fn network(&self, glb: Option<&[u8]>, live: &LiveReport, curves: usize) {
+        if let Some(b) = glb {
+            *lock(&self.shared.glb) = Some(axum::body::Bytes::copy_from_slice(b));
+        }
+        let m = &self.shared.metrics;
+        crate::metrics::count_to(&m.updates, live.updates as u64);
+        m.latency_p50.set(live.latency_ms.p50 * 1e-3);
+        m.latency_p95.set(live.latency_ms.p95 * 1e-3);
+        self.update(|s| {
+            s.live = Some(LiveStatus {
+                updates: live.updates,
+                latency_ms: live.latency_ms.clone(),
+                update_ms: live.update_ms.clone(),
+            })
+        });
+        self.send(
+            "network",
+            serde_json::json!({ "update": live.updates, "curves": curves }).to_string(),
+        );
+    }
+
+    /// The latest `network.glb` bytes.
+    pub fn glb(&self) -> Option<axum::body::Bytes> {
+        lock(&self.shared.glb).clone()
+    }
+
+    /// The preview of the curve being scanned (JSON), or none.
+    pub fn preview(&self, json: Option<String>) {
+        *lock(&self.shared.preview) = json.map(Into::into);
+        self.shared
+            .preview_generation
+            .fetch_add(1, Ordering::Release);
+    }
+
+    fn take_preview(&self, seen: &mut u64) -> Option<Option<Arc<str>>> {
+        let g = self.shared.preview_generation.load(Ordering::Acquire);
+        if g == *seen {
+            return None;
+        }
+        *seen = g;
+        Some(lock(&self.shared.preview).clone())
+    }
+
+    /// The session ended.
+    pub fn ended(&self) {
+        self.update(|s| {
+            s.state = "ended";
+            s.curve = None;
+        });
+    }
+
+    fn subscribe(&self) -> tokio::sync::broadcast::Receiver<Event> {
+        self.shared.events.subscribe()
+    }
+}

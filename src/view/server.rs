@@ -1,0 +1,249 @@
+//! The view's HTTP server (axum): the routes of [`super`], the status ticker, and the limits
+//! that keep a browser from holding up the session.
+
+use super::{assets, Event, View};
+use crate::shutdown::Shutdown;
+use axum::error_handling::HandleErrorLayer;
+use axum::extract::{Path, State};
+use axum::http::{header, HeaderValue, StatusCode};
+use axum::response::sse::{KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+use axum::Router;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tower::ServiceBuilder;
+
+/// Where `--view` serves when given without an address.
+pub const DEFAULT_ADDRESS: &str = "127.0.0.1:8040";
+/// Event streams open at once; one more is answered 503.
+pub const MAX_STREAMS: usize = 32;
+/// Requests being answered at once (event streams aside); one more is answered 503.
+pub const MAX_IN_FLIGHT: usize = 64;
+/// A request not answered within this is dropped.
+const REQUEST_TIMEOUT: Duration = Duration::from_secs(10);
+/// `status` events while data flows.
+const STATUS_PERIOD: Duration = Duration::from_millis(200);
+/// `status` events when nothing changes.
+const HEARTBEAT: Duration = Duration::from_secs(1);
+
+/// Binds `addr`: done before a session captures a byte, so that a taken port stops it while
+/// its directory is untouched (a retry with the same `--session` then works).
+pub async fn bind(addr: SocketAddr) -> std::io::Result<tokio::net::TcpListener> {
+    tokio::net::TcpListener::bind(addr).await
+}
+
+#[derive(Clone)]
+struct App {
+    view: View,
+    streams: Arc<AtomicUsize>,
+    stop: Shutdown,
+}
+
+/// Serves `view` on every listener (from [`bind`]) until `stop`, with the status ticker.
+/// The returned task ends when every server has stopped.
+pub fn serve(
+    listeners: Vec<tokio::net::TcpListener>,
+    view: View,
+    stop: Shutdown,
+) -> tokio::task::JoinHandle<()> {
+    let app = App {
+        view: view.clone(),
+        streams: Arc::new(AtomicUsize::new(0)),
+        stop: stop.clone(),
+    };
+    let router = Router::new()
+        .route("/", get(index))
+        .route("/assets/{*path}", get(asset))
+        .route("/network.glb", get(glb))
+        .route("/status", get(status))
+        .route("/metrics", get(metrics))
+        .route("/events", get(events))
+        .fallback(not_found)
+        .with_state(app)
+        .layer(
+            ServiceBuilder::new()
+                .layer(HandleErrorLayer::new(|_: tower::BoxError| async {
+                    (StatusCode::SERVICE_UNAVAILABLE, "busy\n")
+                }))
+                .load_shed()
+                .concurrency_limit(MAX_IN_FLIGHT),
+        )
+        .layer(tower_http::timeout::TimeoutLayer::with_status_code(
+            StatusCode::REQUEST_TIMEOUT,
+            REQUEST_TIMEOUT,
+        ))
+        .layer(tower_http::set_header::SetResponseHeaderLayer::overriding(
+            header::X_CONTENT_TYPE_OPTIONS,
+            HeaderValue::from_static("nosniff"),
+        ));
+    let mut servers = Vec::new();
+    for listener in listeners {
+        if let Ok(addr) = listener.local_addr() {
+            tracing::info!("view at http://{addr}/ (metrics at /metrics)");
+        }
+        let stop = stop.clone();
+        let router = router.clone();
+        servers.push(tokio::spawn(async move {
+            let served = axum::serve(listener, router)
+                .with_graceful_shutdown(async move { stop.triggered().await })
+                .await;
+            if let Err(e) = served {
+                tracing::warn!("view server: {e}");
+            }
+        }));
+    }
+    let ticker = tokio::spawn(tick(view, stop));
+    tokio::spawn(async move {
+        for s in servers {
+            let _ = s.await;
+        }
+        let _ = ticker.await;
+    })
+}
+
+/// Sends `status` (at [`STATUS_PERIOD`] while it changes, every [`HEARTBEAT`] otherwise) and
+/// `preview` (when it changes), and keeps the packet rate.
+async fn tick(view: View, stop: Shutdown) {
+    let mut interval = tokio::time::interval(STATUS_PERIOD);
+    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let (mut seen, mut preview_seen) = (u64::MAX, 0);
+    let mut last_sent = Instant::now();
+    let mut rate_from = (Instant::now(), 0u64);
+    loop {
+        tokio::select! {
+            _ = interval.tick() => {}
+            _ = stop.triggered() => return,
+        }
+        let g = view.status_generation();
+        if g != seen || last_sent.elapsed() >= HEARTBEAT {
+            seen = g;
+            last_sent = Instant::now();
+            let packets = view.status().link.packets;
+            let dt = rate_from.0.elapsed().as_secs_f64();
+            let rate = if dt > 0.0 {
+                packets.saturating_sub(rate_from.1) as f64 / dt
+            } else {
+                0.0
+            };
+            rate_from = (Instant::now(), packets);
+            let status = {
+                let mut s = super::lock(&view.shared.status);
+                s.link.packets_per_s = rate;
+                s.clone()
+            };
+            view.send("status", serde_json::to_string(&status).unwrap_or_default());
+        }
+        if let Some(p) = view.take_preview(&mut preview_seen) {
+            let data = p.map_or_else(|| "null".to_string(), |p| p.to_string());
+            view.send("preview", data);
+        }
+    }
+}
+
+async fn index() -> Response {
+    let (kind, body) = assets::INDEX;
+    ([(header::CONTENT_TYPE, kind)], body).into_response()
+}
+
+async fn asset(Path(path): Path<String>) -> Response {
+    match assets::get(&path) {
+        Some((kind, body)) => (
+            [
+                (header::CONTENT_TYPE, kind),
+                (header::CACHE_CONTROL, "max-age=3600"),
+            ],
+            body,
+        )
+            .into_response(),
+        None => not_found().await,
+    }
+}
+
+async fn glb(State(app): State<App>) -> Response {
+    match app.view.glb() {
+        Some(bytes) => (
+            [
+                (header::CONTENT_TYPE, "model/gltf-binary"),
+                (header::CACHE_CONTROL, "no-store"),
+            ],
+            bytes,
+        )
+            .into_response(),
+        None => (StatusCode::NOT_FOUND, "no network yet\n").into_response(),
+    }
+}
+
+async fn status(State(app): State<App>) -> Response {
+    (
+        [(header::CACHE_CONTROL, "no-store")],
+        axum::Json(app.view.status()),
+    )
+        .into_response()
+}
+
+async fn metrics(State(app): State<App>) -> Response {
+    (
+        [(
+            header::CONTENT_TYPE,
+            "application/openmetrics-text; version=1.0.0; charset=utf-8",
+        )],
+        app.view.metrics().encode(),
+    )
+        .into_response()
+}
+
+async fn not_found() -> Response {
+    (StatusCode::NOT_FOUND, "not found\n").into_response()
+}
+
+/// Counts an open event stream while it lives.
+struct StreamSlot(Arc<AtomicUsize>);
+
+impl Drop for StreamSlot {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::AcqRel);
+    }
+}
+
+async fn events(State(app): State<App>) -> Response {
+    if app.streams.fetch_add(1, Ordering::AcqRel) >= MAX_STREAMS {
+        app.streams.fetch_sub(1, Ordering::AcqRel);
+        return (StatusCode::SERVICE_UNAVAILABLE, "too many event streams\n").into_response();
+    }
+    let slot = StreamSlot(app.streams.clone());
+    let rx = app.view.subscribe();
+    // The first event is the status now, so that a page shows something at once.
+    let first = Event {
+        name: "status",
+        data: serde_json::to_string(&app.view.status())
+            .unwrap_or_default()
+            .into(),
+    };
+    let state = (Some(first), rx, slot, app.stop.clone());
+    let stream = futures_util::stream::unfold(state, |(first, mut rx, slot, stop)| async move {
+        let ev = match first {
+            Some(ev) => ev,
+            None => tokio::select! {
+                r = rx.recv() => match r {
+                    Ok(ev) => ev,
+                    // Too far behind (a stalled client): dropped; a browser reconnects.
+                    Err(_) => return None,
+                },
+                _ = stop.triggered() => return None,
+            },
+        };
+        let sse = axum::response::sse::Event::default()
+            .event(ev.name)
+            .data(&*ev.data);
+        Some((
+            Ok::<_, std::convert::Infallible>(sse),
+            (None, rx, slot, stop),
+        ))
+    });
+    Sse::new(stream)
+        .keep_alive(KeepAlive::default())
+        .into_response()
+}

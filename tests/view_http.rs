@@ -1,0 +1,314 @@
+//! Issue 16, the live view over HTTP: a shipped replay served with `--view` (the real binary,
+//! a real HTTP client): routes and content types, the event sequence (one `curve` and one
+//! `network` event per accepted curve, the warnings of report.json), `/network.glb` identical
+//! to the file, 404 outside the routes, the limit on event streams, a stalled client.
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A free loopback port (bound, then released).
+fn free_port() -> u16 {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    l.local_addr().unwrap().port()
+}
+
+/// A daemon that serves until interrupted; killed if the test fails first.
+struct Served(Child);
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// `sfs replay LOG --out OUT --pace PACE --view 127.0.0.1:PORT`.
+fn serve_replay(log: &str, out: &Path, pace: &str, port: u16) -> Served {
+    Served(
+        Command::new(env!("CARGO_BIN_EXE_sfs"))
+            .args(["--log", "warn", "replay"])
+            .arg(root().join("replay-logs").join(log))
+            .arg("--out")
+            .arg(out)
+            .args(["--pace", pace, "--view", &format!("127.0.0.1:{port}")])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    )
+}
+
+/// SIGINT: the replay that keeps serving stops, with success.
+fn interrupt(served: &mut Served) {
+    let child = &mut served.0;
+    let _ = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status();
+    let t0 = Instant::now();
+    loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            assert!(st.success(), "{st}");
+            return;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(20), "did not stop");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The event stream of `url`, read until `until` says so (or 60 s pass): `(event, data)`.
+async fn read_events(
+    resp: reqwest::Response,
+    mut until: impl FnMut(&str, &serde_json::Value) -> bool,
+) -> Vec<(String, serde_json::Value)> {
+    let mut resp = resp;
+    let mut buf = String::new();
+    let mut out = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while Instant::now() < deadline {
+        let chunk = tokio::time::timeout(Duration::from_secs(5), resp.chunk()).await;
+        let Ok(Ok(Some(bytes))) = chunk else { break };
+        buf.push_str(&String::from_utf8_lossy(&bytes));
+        while let Some(k) = buf.find("\n\n") {
+            let block: String = buf.drain(..k + 2).collect();
+            let mut name = String::new();
+            let mut data = String::new();
+            for line in block.lines() {
+                if let Some(v) = line.strip_prefix("event:") {
+                    name = v.trim().to_string();
+                } else if let Some(v) = line.strip_prefix("data:") {
+                    data.push_str(v.trim_start());
+                }
+            }
+            if name.is_empty() {
+                continue; // a keep-alive comment
+            }
+            let v: serde_json::Value = serde_json::from_str(&data).unwrap_or_default();
+            let stop = until(&name, &v);
+            out.push((name, v));
+            if stop {
+                return out;
+            }
+        }
+    }
+    out
+}
+
+async fn connect(url: &str) -> reqwest::Response {
+    let t0 = Instant::now();
+    loop {
+        if let Ok(r) = reqwest::get(url).await {
+            return r;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(20),
+            "{url} never answered"
+        );
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+}
+
+fn content_type(r: &reqwest::Response) -> String {
+    r.headers()[reqwest::header::CONTENT_TYPE]
+        .to_str()
+        .unwrap()
+        .to_string()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn issue_16_a_replay_is_served_with_its_events_and_routes() {
+    let dir = tmpdir("view-http");
+    let out = dir.join("out");
+    let port = free_port();
+    let mut child = serve_replay("cone-morphorider.bin", &out, "x20", port);
+    let base = format!("http://127.0.0.1:{port}");
+    let events = connect(&format!("{base}/events")).await;
+    assert_eq!(events.status(), 200);
+    assert!(content_type(&events).starts_with("text/event-stream"));
+    let seen = read_events(events, |name, v| name == "status" && v["state"] == "ended").await;
+    // The outputs are written: compare with them.
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let accepted = report["curves"].as_array().unwrap().len();
+    assert!(accepted >= 5, "{accepted} curves");
+    let names = |n: &str| seen.iter().filter(|(e, _)| e == n).count();
+    assert_eq!(seen[0].0, "status", "the first event is the status");
+    assert_eq!(
+        names("curve"),
+        accepted,
+        "one curve event per accepted curve"
+    );
+    assert_eq!(
+        names("network"),
+        accepted,
+        "one network event per accepted curve"
+    );
+    let curves: Vec<u64> = seen
+        .iter()
+        .filter(|(e, _)| e == "curve")
+        .map(|(_, v)| v["index"].as_u64().unwrap())
+        .collect();
+    assert_eq!(curves, (0..accepted as u64).collect::<Vec<_>>());
+    // Each curve's network event follows its curve event.
+    let order: Vec<&str> = seen
+        .iter()
+        .filter(|(e, _)| e == "curve" || e == "network")
+        .map(|(e, _)| e.as_str())
+        .collect();
+    assert!(
+        order.chunks(2).all(|p| p == ["curve", "network"]),
+        "{order:?}"
+    );
+    let mut warned: Vec<String> = seen
+        .iter()
+        .filter(|(e, _)| e == "warning")
+        .map(|(_, v)| v["text"].as_str().unwrap().to_string())
+        .collect();
+    let mut expected: Vec<String> = report["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap().to_string())
+        .collect();
+    warned.sort();
+    expected.sort();
+    assert_eq!(warned, expected, "the warnings of report.json");
+    // Status events at 5 Hz while the replay ran (about 6 s at x20).
+    assert!(names("status") >= 20, "{} status events", names("status"));
+
+    // Routes and content types, while the ended replay is still served.
+    let get = |path: &str| reqwest::get(format!("{base}{path}"));
+    let glb = get("/network.glb").await.unwrap();
+    assert_eq!(content_type(&glb), "model/gltf-binary");
+    assert_eq!(
+        glb.bytes().await.unwrap().as_ref(),
+        std::fs::read(out.join("network.glb")).unwrap().as_slice()
+    );
+    for (path, kind) in [
+        ("/", "text/html"),
+        ("/assets/view.js", "text/javascript"),
+        ("/assets/three/three.module.js", "text/javascript"),
+        ("/assets/three/LICENSE", "text/plain"),
+        ("/status", "application/json"),
+        ("/metrics", "application/openmetrics-text"),
+    ] {
+        let r = get(path).await.unwrap();
+        assert_eq!(r.status(), 200, "{path}");
+        assert!(
+            content_type(&r).starts_with(kind),
+            "{path}: {}",
+            content_type(&r)
+        );
+    }
+    let status: serde_json::Value = get("/status").await.unwrap().json().await.unwrap();
+    assert_eq!(status["state"], "ended");
+    assert_eq!(status["curves_accepted"], accepted);
+    assert_eq!(status["link"]["bytes"], report["link"]["bytes"]);
+    let metrics = get("/metrics").await.unwrap().text().await.unwrap();
+    assert!(
+        metrics.contains(&format!("sfs_curves_accepted_total {accepted}")),
+        "{metrics}"
+    );
+    assert!(metrics.contains(&format!(
+        "sfs_link_received_bytes_total {}",
+        report["link"]["bytes"]
+    )));
+    for path in [
+        "/nope",
+        "/assets/nope.js",
+        "/assets/../Cargo.toml",
+        "/assets/%2e%2e/%2e%2e/Cargo.toml",
+        "/network.glb/x",
+    ] {
+        assert_eq!(get(path).await.unwrap().status(), 404, "{path}");
+    }
+    // The view is read-only.
+    let post = reqwest::Client::new()
+        .post(format!("{base}/status"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(post.status(), 405);
+
+    // At most 32 event streams at once; the next is refused.
+    let mut open = Vec::new();
+    for _ in 0..32 {
+        let r = get("/events").await.unwrap();
+        assert_eq!(r.status(), 200);
+        open.push(r);
+    }
+    assert_eq!(get("/events").await.unwrap().status(), 503);
+    drop(open);
+    let t0 = Instant::now();
+    while get("/events").await.unwrap().status() != 200 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(5),
+            "streams not released"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    interrupt(&mut child);
+}
+
+/// A client that opens the event stream and never reads it changes neither the capture nor
+/// the outputs of a replay.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn issue_16_a_stalled_client_changes_nothing() {
+    let dir = tmpdir("view-stalled");
+    let port = free_port();
+    let mut child = serve_replay("cone-morphorider.bin", &dir.join("viewed"), "x50", port);
+    // A raw connection that asks for the events and never reads a byte.
+    let stalled = {
+        let t0 = Instant::now();
+        loop {
+            if let Ok(mut s) = std::net::TcpStream::connect(("127.0.0.1", port)) {
+                use std::io::Write;
+                s.write_all(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n")
+                    .unwrap();
+                break s;
+            }
+            assert!(t0.elapsed() < Duration::from_secs(20));
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    };
+    let t0 = Instant::now();
+    loop {
+        let s: Option<serde_json::Value> =
+            match reqwest::get(format!("http://127.0.0.1:{port}/status")).await {
+                Ok(r) => r.json().await.ok(),
+                Err(_) => None,
+            };
+        if s.is_some_and(|s| s["state"] == "ended") {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the replay did not end"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    interrupt(&mut child);
+    drop(stalled);
+    let plain = dir.join("plain");
+    let st = Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "off", "replay"])
+        .arg(root().join("replay-logs/cone-morphorider.bin"))
+        .arg("--out")
+        .arg(&plain)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    for f in ["scan.json", "network.glb"] {
+        assert!(
+            std::fs::read(dir.join("viewed").join(f)).unwrap()
+                == std::fs::read(plain.join(f)).unwrap(),
+            "{f} differs"
+        );
+    }
+}
