@@ -192,7 +192,35 @@ struct OpenCurve {
     /// ([`Acquisition::model_generation`]).
     models: Vec<(usize, u64, SensorModel)>,
     segment_lengths: BTreeMap<u16, f64>,
+    /// The curve integrated so far, for the live view.
+    preview: PreviewPath,
 }
+
+/// An open curve's path integrated from its first node (orientations × distances), world
+/// frame, relative to the node.
+#[derive(Debug, Clone)]
+struct PreviewPath {
+    at: Vector3<f64>,
+    points: Vec<Vector3<f64>>,
+    since: f64,
+    spacing: f64,
+}
+
+impl Default for PreviewPath {
+    fn default() -> Self {
+        PreviewPath {
+            at: Vector3::zeros(),
+            points: Vec::new(),
+            since: 0.0,
+            spacing: PREVIEW_SPACING,
+        }
+    }
+}
+
+/// Distance between the points of a preview, m (at first).
+pub const PREVIEW_SPACING: f64 = 0.005;
+/// Points a preview holds at most.
+pub const PREVIEW_POINTS: usize = 2048;
 
 #[derive(Debug, Clone, Default)]
 struct ArraySensor {
@@ -243,6 +271,8 @@ pub struct Acquisition {
     turn_anchor: Option<(f64, UnitQuaternion<f64>)>,
     /// Phone: the filter's latest orientation.
     last_q: Option<UnitQuaternion<f64>>,
+    /// Morphorider: the wheel at the previous sample (the preview's step).
+    preview_wheel: Option<f64>,
 }
 
 /// Phone: the turning of the device is summed over steps of this many seconds: a step is
@@ -296,6 +326,7 @@ impl Acquisition {
             turned: 0.0,
             turn_anchor: None,
             last_q: None,
+            preview_wheel: None,
         };
         if let Some(h) = start.hello() {
             acq.hello(&h);
@@ -311,6 +342,11 @@ impl Acquisition {
     /// Session time of the latest packet, s.
     pub fn session_time(&self) -> f64 {
         self.clock.now()
+    }
+
+    /// Whether a curve is open.
+    pub fn curve_open(&self) -> bool {
+        self.open.is_some()
     }
 
     /// The curve being scanned, if one is open.
@@ -464,6 +500,14 @@ impl Acquisition {
                 if f == 0 && !acc_motion(&acc, &self.cfg.thresholds) {
                     self.field.add(&acc, &mag);
                 }
+                let step = self.wheel_m
+                    - self
+                        .preview_wheel
+                        .replace(self.wheel_m)
+                        .unwrap_or(self.wheel_m);
+                if let Some(q) = triad(&acc, &mag) {
+                    self.preview_step(&q, step);
+                }
                 self.sample(Raw {
                     t,
                     x: [self.wheel_m, 0.0, 0.0, 0.0],
@@ -492,6 +536,14 @@ impl Acquisition {
                     self.field.add(&acc, &mag);
                 }
                 self.turn(t, q);
+                // The preview assumes the nominal speed, but while an index is typed.
+                let typing = self.open.as_ref().is_some_and(|o| o.first_digit.is_some());
+                let step = if typing {
+                    0.0
+                } else {
+                    self.cfg.nominal_speed * dt
+                };
+                self.preview_step(&q, step);
                 self.sample(Raw {
                     t,
                     x: quat_array(&q),
@@ -575,6 +627,40 @@ impl Acquisition {
         self.key_events(events)
     }
 
+    /// Moves the open curve's preview by `step` metres along the direction of travel of `q`
+    /// (the frame's T axis), adding a point every [`PREVIEW_SPACING`] (or more: the spacing
+    /// doubles whenever [`PREVIEW_POINTS`] are reached, so a long curve stays bounded).
+    fn preview_step(&mut self, q: &UnitQuaternion<f64>, step: f64) {
+        let Some(o) = &mut self.open else { return };
+        if o.tags.is_empty() || step == 0.0 {
+            return; // from its first node on
+        }
+        let p = &mut o.preview;
+        p.at += q * Vector3::x() * step;
+        p.since += step.abs();
+        if p.since >= p.spacing {
+            p.since = 0.0;
+            p.points.push(p.at);
+            if p.points.len() >= PREVIEW_POINTS {
+                let kept: Vec<_> = p.points.iter().step_by(2).copied().collect();
+                p.points = kept;
+                p.spacing *= 2.0;
+            }
+        }
+    }
+
+    /// The open curve's preview: its first node and the points integrated from it so far
+    /// (world frame, relative to the node), if a curve is open and tagged.
+    pub fn preview(&self) -> Option<(usize, u32, Vec<Vector3<f64>>)> {
+        let o = self.open.as_ref()?;
+        let first = o.tags.first()?.0;
+        let mut pts = Vec::with_capacity(o.preview.points.len() + 2);
+        pts.push(Vector3::zeros());
+        pts.extend(&o.preview.points);
+        pts.push(o.preview.at);
+        Some((o.index, first, pts))
+    }
+
     /// Phone: adds the turning of the filter's orientation `q` at time `t` to
     /// [`turned`](Self::turned).
     fn turn(&mut self, t: f64, q: UnitQuaternion<f64>) {
@@ -649,6 +735,7 @@ impl Acquisition {
                         raw: RawSamples::default(),
                         models: Vec::new(),
                         segment_lengths: BTreeMap::new(),
+                        preview: PreviewPath::default(),
                     });
                 }
                 KeyEvent::Tagged {

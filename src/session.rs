@@ -307,7 +307,13 @@ struct Flow {
     /// The live view, and the scan's warnings it has been given.
     view: Option<crate::view::View>,
     warnings_shown: usize,
+    /// When the view was last given the preview, and whether it shows one.
+    preview_at: Option<Instant>,
+    preview_shown: bool,
 }
+
+/// The curve being scanned goes to the view at most this often.
+const PREVIEW_PERIOD: std::time::Duration = std::time::Duration::from_millis(100);
 
 impl Flow {
     /// The flow of a session whose clock starts at `clock_start`, with its live worker when
@@ -346,6 +352,8 @@ impl Flow {
             capture_failure: None,
             view,
             warnings_shown: 0,
+            preview_at: None,
+            preview_shown: false,
         })
     }
 
@@ -385,6 +393,18 @@ impl Flow {
         if warnings.len() > self.warnings_shown {
             v.warnings(&warnings[self.warnings_shown..]);
             self.warnings_shown = warnings.len();
+        }
+        // The curve being scanned, 10 times a second at most.
+        let due = self
+            .preview_at
+            .is_none_or(|t| t.elapsed() >= PREVIEW_PERIOD);
+        if due || (self.preview_shown && !self.acq.curve_open()) {
+            let preview = self.acq.preview();
+            if (preview.is_some() && due) || (preview.is_none() && self.preview_shown) {
+                self.preview_shown = preview.is_some();
+                self.preview_at = Some(Instant::now());
+                v.preview(preview);
+            }
         }
     }
 
@@ -517,8 +537,9 @@ impl Flow {
             v.reconstruction_warnings(&[]);
             if fresh {
                 let report = live_report.clone().unwrap_or_default();
-                v.network(products.glb.as_deref(), &report, scan.curves.len());
+                v.network(&products, &report, scan.curves.len());
             }
+            v.preview(None);
             v.ended();
         }
         if let Some(l) = &mut live_report {

@@ -179,6 +179,29 @@ async fn issue_16_a_replay_is_served_with_its_events_and_routes() {
     warned.sort();
     expected.sort();
     assert_eq!(warned, expected, "the warnings of report.json");
+    // The curve being scanned, integrated as it comes: previews of every curve, the first
+    // from the origin (no network yet), each polyline growing.
+    let previews: Vec<&serde_json::Value> = seen
+        .iter()
+        .filter(|(e, v)| e == "preview" && !v.is_null())
+        .map(|(_, v)| v)
+        .collect();
+    let mut previewed: Vec<u64> = previews
+        .iter()
+        .map(|v| v["curve"].as_u64().unwrap())
+        .collect();
+    previewed.dedup();
+    assert_eq!(previewed, (0..accepted as u64).collect::<Vec<_>>());
+    assert_eq!(previews[0]["points"][0], serde_json::json!([0.0, 0.0, 0.0]));
+    let lengths: Vec<usize> = previews
+        .iter()
+        .filter(|v| v["curve"] == 0)
+        .map(|v| v["points"].as_array().unwrap().len())
+        .collect();
+    assert!(
+        lengths.windows(2).all(|w| w[1] >= w[0]) && lengths.last() > Some(&50),
+        "{lengths:?}"
+    );
     // Status events at 5 Hz while the replay ran (about 6 s at x20).
     assert!(names("status") >= 20, "{} status events", names("status"));
 

@@ -150,6 +150,8 @@ struct Shared {
     warned: Mutex<HashSet<String>>,
     preview: Mutex<Option<Arc<str>>>,
     preview_generation: AtomicU64,
+    /// Node positions of the latest network, world frame (where a preview starts).
+    nodes: Mutex<std::collections::BTreeMap<u32, nalgebra::Vector3<f64>>>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -173,6 +175,7 @@ impl View {
                 warned: Mutex::new(HashSet::new()),
                 preview: Mutex::new(None),
                 preview_generation: AtomicU64::new(0),
+                nodes: Mutex::new(Default::default()),
             }),
         }
     }
@@ -277,11 +280,14 @@ impl View {
         self.update(|s| s.reconstruction = list);
     }
 
-    /// A new `network.glb` is in place (`glb`: its bytes), after live update `live.updates`
-    /// over `curves` curves.
-    pub fn network(&self, glb: Option<&[u8]>, live: &LiveReport, curves: usize) {
-        if let Some(b) = glb {
+    /// A new `network.glb` is in place (`products`: its bytes and node positions), after
+    /// live update `live.updates` over `curves` curves.
+    pub fn network(&self, products: &crate::pipeline::Products, live: &LiveReport, curves: usize) {
+        if let Some(b) = &products.glb {
             *lock(&self.shared.glb) = Some(axum::body::Bytes::copy_from_slice(b));
+        }
+        if let Some(n) = &products.network {
+            *lock(&self.shared.nodes) = n.positions.nodes.clone();
         }
         let m = &self.shared.metrics;
         crate::metrics::count_to(&m.updates, live.updates as u64);
@@ -305,8 +311,21 @@ impl View {
         lock(&self.shared.glb).clone()
     }
 
-    /// The preview of the curve being scanned (JSON), or none.
-    pub fn preview(&self, json: Option<String>) {
+    /// The preview of the curve being scanned: curve `index`, integrated from node `start`
+    /// (`points` in the world frame relative to it), placed where the network has the node
+    /// (at the origin before it has one), in the glb's frame; `None`: no curve open.
+    pub fn preview(&self, curve: Option<(usize, u32, Vec<nalgebra::Vector3<f64>>)>) {
+        let json = curve.map(|(index, start, points)| {
+            let origin = lock(&self.shared.nodes)
+                .get(&start)
+                .copied()
+                .unwrap_or_else(nalgebra::Vector3::zeros);
+            let pts: Vec<[f32; 3]> = points
+                .iter()
+                .map(|p| crate::gltf_out::to_gltf(&(origin + p)))
+                .collect();
+            serde_json::json!({ "curve": index, "start_node": start, "points": pts }).to_string()
+        });
         *lock(&self.shared.preview) = json.map(Into::into);
         self.shared
             .preview_generation

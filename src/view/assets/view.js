@@ -208,6 +208,17 @@ function showPreview(p) {
   preview.computeLineDistances();
   scene.add(preview);
   state.previewPoints = p.points.length;
+  setTimeout(draw, 0);
+  if (!framed) {
+    // No network yet (the first curve): keep the curve being scanned in sight.
+    geo.computeBoundingSphere();
+    const s = geo.boundingSphere;
+    const r = Math.max(s.radius, 0.05);
+    controls.target.copy(s.center);
+    camera.position.copy(s.center).add(new THREE.Vector3(1.2, 1.0, 1.4).multiplyScalar(r * 1.5));
+    camera.near = r / 1000; camera.far = r * 1000;
+    camera.updateProjectionMatrix();
+  }
 }
 
 document.getElementById('show-surface').addEventListener('change', (e) => { if (surface) surface.visible = e.target.checked; });
@@ -241,16 +252,20 @@ if (new URLSearchParams(location.search).has('once')) {
   events.addEventListener('warning', (e) => { state.events.warning += 1; addWarning(JSON.parse(e.data)); });
   events.addEventListener('preview', (e) => { state.events.preview += 1; showPreview(JSON.parse(e.data)); });
   events.addEventListener('open', () => loadNetwork());
+  loadNetwork();
   events.onerror = () => {
     const pill = document.getElementById('state');
     if (events.readyState !== EventSource.OPEN) { pill.textContent = 'disconnected'; pill.className = 'pill lost'; }
   };
 }
 
-function frame() {
+function draw() {
   resize();
   controls.update();
   renderer.render(scene, camera);
+}
+function frame() {
+  draw();
   requestAnimationFrame(frame);
 }
 requestAnimationFrame(frame);
