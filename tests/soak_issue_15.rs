@@ -137,20 +137,12 @@ fn issue_15_an_hour_at_full_speed_holds_its_memory_and_matches_replay() {
         // The outputs are those of a replay of the capture.
         assert_eq!(std::fs::read(session.join("capture.bin")).unwrap(), bytes);
         let replayed = dir.join("replay");
-        let st = sfs()
-            .args(["--log", "off", "replay"])
-            .arg(session.join("capture.bin"))
-            .arg("--out")
-            .arg(&replayed)
-            .status()
-            .unwrap();
-        assert!(st.success());
-        for file in ["scan.json", "network.glb"] {
-            assert!(
-                std::fs::read(session.join(file)).unwrap()
-                    == std::fs::read(replayed.join(file)).unwrap(),
-                "{device}: {file} differs from the replay's"
-            );
-        }
+        replay_to(&session.join("capture.bin"), &replayed);
+        assert_same_files(
+            &session,
+            &replayed,
+            &["scan.json", "network.glb"],
+            &format!("{device}: live vs replay"),
+        );
     }
 }

@@ -319,19 +319,11 @@ async fn issue_16_a_stalled_client_changes_nothing() {
     interrupt(&mut child);
     drop(stalled);
     let plain = dir.join("plain");
-    let st = Command::new(env!("CARGO_BIN_EXE_sfs"))
-        .args(["--log", "off", "replay"])
-        .arg(root().join("replay-logs/cone-morphorider.bin"))
-        .arg("--out")
-        .arg(&plain)
-        .status()
-        .unwrap();
-    assert!(st.success());
-    for f in ["scan.json", "network.glb"] {
-        assert!(
-            std::fs::read(dir.join("viewed").join(f)).unwrap()
-                == std::fs::read(plain.join(f)).unwrap(),
-            "{f} differs"
-        );
-    }
+    replay_to(&root().join("replay-logs/cone-morphorider.bin"), &plain);
+    assert_same_files(
+        &dir.join("viewed"),
+        &plain,
+        &["scan.json", "network.glb"],
+        "viewed by a stalled client",
+    );
 }

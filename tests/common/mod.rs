@@ -222,3 +222,27 @@ pub fn assert_link(link: &serde_json::Value, bytes: usize, exp: &Expected) {
         "partial_start_bytes"
     );
 }
+
+/// `sfs --log off replay CAPTURE --out OUT`, which must succeed.
+pub fn replay_to(capture: &std::path::Path, out: &std::path::Path) {
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "off", "replay"])
+        .arg(capture)
+        .arg("--out")
+        .arg(out)
+        .status()
+        .unwrap();
+    assert!(st.success(), "sfs replay {}: {st}", capture.display());
+}
+
+/// Asserts that each of `files` is the same bytes in directories `a` and `b`.
+pub fn assert_same_files(a: &std::path::Path, b: &std::path::Path, files: &[&str], what: &str) {
+    for f in files {
+        assert!(
+            std::fs::read(a.join(f)).unwrap() == std::fs::read(b.join(f)).unwrap(),
+            "{what}: {f} differs between {} and {}",
+            a.display(),
+            b.display()
+        );
+    }
+}
