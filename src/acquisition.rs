@@ -505,8 +505,11 @@ impl Acquisition {
                         .preview_wheel
                         .replace(self.wheel_m)
                         .unwrap_or(self.wheel_m);
-                if let Some(q) = triad(&acc, &mag) {
-                    self.preview_step(&q, step);
+                let tagged = self.open.as_ref().is_some_and(|o| !o.tags.is_empty());
+                if tagged && step != 0.0 {
+                    if let Some(q) = triad(&acc, &mag) {
+                        self.preview_step(&q, step);
+                    }
                 }
                 self.sample(Raw {
                     t,
