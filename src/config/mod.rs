@@ -96,6 +96,9 @@
 //! snapshots = false                  # also keep snapshots/curve-NNN.glb per curve
 //! capture_max_mb = 256.0             # capture.bin rotated past this size (default: never;
 //! capture_keep = 8                   #   256 MB and 8 kept when monitoring) … keeping this many
+//!
+//! [view]                             # the live view (a web page) while the session runs
+//! address = "127.0.0.1:8040"         # where to serve it (no view without it, or --view)
 //! ```
 
 mod acquisition;
@@ -535,6 +538,8 @@ mod tests {
             ("[acquisition]\nmax_curve_samples = 1\n", "acquisition.max_curve_samples", "out of range"),
             ("[acquisition]\nloop_distance = 0\n", "acquisition.loop_distance", "out of range"),
             ("[acquisition]\nloop_turn_deg = 400\n", "acquisition.loop_turn_deg", "out of range"),
+            ("[view]\naddress = \"localhost\"\n", "view.address", "not an address"),
+            ("[view]\nport = 8040\n", "view.port", "unknown field"),
             (
                 "[acquisition.segment_lengths]\nfirst = [0.3]\n",
                 "acquisition.segment_lengths.first",
