@@ -273,6 +273,8 @@ pub struct Acquisition {
     last_q: Option<UnitQuaternion<f64>>,
     /// Morphorider: the wheel at the previous sample (the preview's step).
     preview_wheel: Option<f64>,
+    /// Morphorider: the latest calibrated acceleration and field (its orientation, on demand).
+    last_field: Option<(Vector3<f64>, Vector3<f64>)>,
 }
 
 /// Phone: the turning of the device is summed over steps of this many seconds: a step is
@@ -327,6 +329,7 @@ impl Acquisition {
             turn_anchor: None,
             last_q: None,
             preview_wheel: None,
+            last_field: None,
         };
         if let Some(h) = start.hello() {
             acq.hello(&h);
@@ -342,6 +345,16 @@ impl Acquisition {
     /// Session time of the latest packet, s.
     pub fn session_time(&self) -> f64 {
         self.clock.now()
+    }
+
+    /// The device's latest orientation (frame `[T B N]` → world): TRIAD of the latest
+    /// sample on a Morphorider, the filter's on a phone.
+    pub fn orientation(&self) -> Option<UnitQuaternion<f64>> {
+        match self.kind {
+            Some(DeviceKind::Phone) => self.last_q,
+            Some(DeviceKind::Morphorider) => self.last_field.and_then(|(a, m)| triad(&a, &m)),
+            _ => None,
+        }
     }
 
     /// Whether a curve is open.
@@ -477,6 +490,7 @@ impl Acquisition {
                 let t = self.clock.advance(s.t_us);
                 let model = self.usable(DeviceKind::Morphorider)?;
                 let (acc, mag) = (model.acc(s.acc), model.mag(s.mag));
+                self.last_field = Some((acc, mag));
                 let per_tick = model.scales.wheel_m_per_tick.unwrap_or(0.0);
                 if let Some(last) = self.wheel_last.filter(|_| !self.wheel_reset) {
                     let step = s.wheel.wrapping_sub(last) as f64 * per_tick;

@@ -385,9 +385,14 @@ impl Flow {
             samples: c.samples,
             distance_m: c.distance_m,
         });
+        let orientation = self
+            .acq
+            .orientation()
+            .map(|q| crate::view::Orientation::of(&q));
         v.update(|s| {
             s.curve = curve;
             s.curves_accepted = self.acq.scan().curves.len();
+            s.orientation = orientation;
         });
         let warnings = &self.acq.scan().warnings;
         if warnings.len() > self.warnings_shown {

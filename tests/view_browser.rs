@@ -149,6 +149,7 @@ fn issue_16_the_page_shows_a_replayed_session_in_a_real_browser() {
         state["rendered"]["calls"].as_u64().unwrap() > 0,
         "nothing drawn"
     );
+    assert!(state["orientation"]["t"].is_array(), "no device glyph");
     // A screenshot for a person to look at.
     let shot = root.join("target/view");
     std::fs::create_dir_all(&shot).unwrap();

@@ -233,6 +233,19 @@ async fn issue_16_a_replay_is_served_with_its_events_and_routes() {
     assert_eq!(status["state"], "ended");
     assert_eq!(status["curves_accepted"], accepted);
     assert_eq!(status["link"]["bytes"], report["link"]["bytes"]);
+    // The device's orientation: unit direction of travel and normal, at right angles.
+    let axis = |k: &str| -> Vec<f64> {
+        status["orientation"][k]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let (t, n) = (axis("t"), axis("n"));
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    assert!((dot(&t, &t) - 1.0).abs() < 1e-5 && (dot(&n, &n) - 1.0).abs() < 1e-5);
+    assert!(dot(&t, &n).abs() < 1e-5, "{t:?} {n:?}");
     let metrics = get("/metrics").await.unwrap().text().await.unwrap();
     assert!(
         metrics.contains(&format!("sfs_curves_accepted_total {accepted}")),

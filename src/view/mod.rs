@@ -51,6 +51,9 @@ pub struct Status {
     pub link: LinkStatus,
     /// The device's HELLO and last STATUS.
     pub device: Option<DeviceStatus>,
+    /// The device's orientation now: its direction of travel `t` and outward normal `n`, in
+    /// the glb's frame.
+    pub orientation: Option<Orientation>,
     /// The latest warnings (at most [`STATUS_WARNINGS`]), oldest first.
     pub warnings: Vec<WarningEvent>,
     pub warnings_total: u64,
@@ -95,6 +98,23 @@ pub struct DeviceStatus {
     pub status_flags: Vec<&'static str>,
     /// Samples the device itself dropped since power-up.
     pub dropped: Option<u32>,
+}
+
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct Orientation {
+    pub t: [f32; 3],
+    pub n: [f32; 3],
+}
+
+impl Orientation {
+    /// Of a frame `[T B N]` → world rotation.
+    pub fn of(q: &nalgebra::UnitQuaternion<f64>) -> Orientation {
+        use nalgebra::Vector3;
+        Orientation {
+            t: crate::gltf_out::to_gltf(&(q * Vector3::x())),
+            n: crate::gltf_out::to_gltf(&(q * Vector3::z())),
+        }
+    }
 }
 
 #[derive(Debug, Clone, Default, Serialize)]

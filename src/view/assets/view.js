@@ -31,6 +31,16 @@ const sun = new THREE.DirectionalLight(0xffffff, 1.4);
 sun.position.set(2, 4, 3);
 scene.add(sun);
 
+// The device: its direction of travel (red) and outward normal (green), at the end of the
+// curve being scanned (at the middle of the scene between curves).
+const glyph = new THREE.Group();
+const glyphT = new THREE.ArrowHelper(new THREE.Vector3(1, 0, 0), new THREE.Vector3(), 1, 0xff5252, 0.3, 0.2);
+const glyphN = new THREE.ArrowHelper(new THREE.Vector3(0, 1, 0), new THREE.Vector3(), 0.6, 0x69f0ae, 0.3, 0.2);
+glyph.add(glyphT, glyphN);
+glyph.visible = false;
+scene.add(glyph);
+let sceneSize = 0.5;
+
 const network = new THREE.Group();
 const labels = new THREE.Group();
 let surface = null;
@@ -103,6 +113,7 @@ function show(gltf) {
   let positions = null;
   gltf.scene.traverse((o) => { if (o.userData && o.userData.nodes && !positions) positions = o.userData.nodes; });
   const size = box.isEmpty() ? 1 : box.getSize(new THREE.Vector3()).length();
+  sceneSize = size;
   if (positions) {
     const pts = [];
     for (const [k, p] of Object.entries(positions)) {
@@ -184,6 +195,20 @@ function showStatus(s) {
     li.textContent = w.text;
     return li;
   }));
+  if (s.orientation) {
+    const t = new THREE.Vector3(...s.orientation.t), n = new THREE.Vector3(...s.orientation.n);
+    glyphT.setDirection(t.normalize());
+    glyphN.setDirection(n.normalize());
+    glyph.scale.setScalar(sceneSize * 0.06);
+    if (preview) {
+      const a = preview.geometry.attributes.position;
+      glyph.position.set(a.getX(a.count - 1), a.getY(a.count - 1), a.getZ(a.count - 1));
+    } else {
+      glyph.position.copy(controls.target);
+    }
+    glyph.visible = true;
+    state.orientation = s.orientation;
+  }
   if (s.live && s.live.latency_ms.n > 0) {
     text('latency', `update ${s.live.latency_ms.p50.toFixed(0)} / ${s.live.latency_ms.p95.toFixed(0)} ms`);
   }
