@@ -13,10 +13,15 @@ const state = {
   status: null, previewPoints: 0,
 };
 window.sfsView = state;
-window.addEventListener('error', (e) => state.errors.push(String(e.message)));
-window.addEventListener('unhandledrejection', (e) => state.errors.push(String(e.reason)));
+function pageError(text) {
+  state.errors.push(text);
+  const el = document.getElementById('page-errors');
+  if (el) { const li = document.createElement('li'); li.textContent = text; el.append(li); el.hidden = false; }
+}
+window.addEventListener('error', (e) => pageError(String(e.message)));
+window.addEventListener('unhandledrejection', (e) => pageError(String(e.reason)));
 const consoleError = console.error.bind(console);
-console.error = (...args) => { state.errors.push(args.map(String).join(' ')); consoleError(...args); };
+console.error = (...args) => { pageError(args.map(String).join(' ')); consoleError(...args); };
 
 const canvas = document.getElementById('scene');
 const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
@@ -156,7 +161,7 @@ async function loadNetwork() {
       if (preview) { scene.remove(preview); preview = null; state.previewPoints = 0; }
     }
   } catch (e) {
-    state.errors.push('network.glb: ' + e);
+    pageError('network.glb: ' + e);
   }
   const again = loading.again;
   loading = null;
@@ -171,6 +176,7 @@ function text(id, s, bad) {
 
 function showStatus(s) {
   state.status = s;
+  setTimeout(draw, 0);
   const pill = document.getElementById('state');
   pill.textContent = s.state;
   pill.className = 'pill ' + s.state;
