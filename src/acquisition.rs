@@ -271,8 +271,6 @@ pub struct Acquisition {
     turn_anchor: Option<(f64, UnitQuaternion<f64>)>,
     /// Phone: the filter's latest orientation.
     last_q: Option<UnitQuaternion<f64>>,
-    /// Morphorider: the wheel at the previous sample (the preview's step).
-    preview_wheel: Option<f64>,
     /// Morphorider: the latest calibrated acceleration and field (its orientation, on demand).
     last_field: Option<(Vector3<f64>, Vector3<f64>)>,
 }
@@ -328,7 +326,6 @@ impl Acquisition {
             turned: 0.0,
             turn_anchor: None,
             last_q: None,
-            preview_wheel: None,
             last_field: None,
         };
         if let Some(h) = start.hello() {
@@ -492,6 +489,7 @@ impl Acquisition {
                 let (acc, mag) = (model.acc(s.acc), model.mag(s.mag));
                 self.last_field = Some((acc, mag));
                 let per_tick = model.scales.wheel_m_per_tick.unwrap_or(0.0);
+                let wheel_before = self.wheel_m;
                 if let Some(last) = self.wheel_last.filter(|_| !self.wheel_reset) {
                     let step = s.wheel.wrapping_sub(last) as f64 * per_tick;
                     // Between two samples (a few ms, or a gap) the operator's hand moves well
@@ -514,11 +512,7 @@ impl Acquisition {
                 if f == 0 && !acc_motion(&acc, &self.cfg.thresholds) {
                     self.field.add(&acc, &mag);
                 }
-                let step = self.wheel_m
-                    - self
-                        .preview_wheel
-                        .replace(self.wheel_m)
-                        .unwrap_or(self.wheel_m);
+                let step = self.wheel_m - wheel_before;
                 let tagged = self.open.as_ref().is_some_and(|o| !o.tags.is_empty());
                 if tagged && step != 0.0 {
                     if let Some(q) = triad(&acc, &mag) {

@@ -2,7 +2,8 @@
 //! registered rigidly on the truth (Kabsch on the matching nodes, then ICP on all curve points;
 //! no scaling; a glb without node positions is started from each of the 24 orientations that
 //! map its principal axes onto the truth's, a short ICP from each, the best kept, since from
-//! one start ICP lands in a wrong minimum on symmetric shapes), then every reconstructed curve point is measured to the truth network, and
+//! one start ICP lands in a wrong minimum on symmetric shapes), then every reconstructed curve
+//! point is measured to the truth network, and
 //! every surface vertex to the truth surface; mean and max, in metres and in % of the truth
 //! network's bounding-box diagonal.
 
@@ -158,6 +159,28 @@ pub fn kabsch(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Option<(Rotation3<f64>,
     Some((r, cb - r * ca))
 }
 
+/// The segments of the truth's curves, through every `stride`-th point of each (and its last).
+fn segments(truth: &Truth, stride: usize) -> Vec<(Vector3<f64>, Vector3<f64>)> {
+    let mut segs = Vec::new();
+    for c in &truth.curves {
+        let n = c.points.len();
+        let kept = c
+            .points
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| i % stride == 0 || i + 1 == n)
+            .map(|(_, p)| Vector3::from(*p));
+        let mut last: Option<Vector3<f64>> = None;
+        for p in kept {
+            if let Some(l) = last {
+                segs.push((l, p));
+            }
+            last = Some(p);
+        }
+    }
+    segs
+}
+
 /// ICP of `sample` onto the truth polylines in `grid` from `(r, t)`, at most `max_iter`
 /// iterations (stopping when the RMS distance changes less than 1e-9 of `diag`): the rotation,
 /// translation, the last RMS distance and the iterations done.
@@ -271,12 +294,7 @@ pub fn evaluate(truth: &Truth, rec: &ReadNetwork) -> Result<Evaluation, EvalErro
     if pts.is_empty() {
         return Err(EvalError::NoPoints);
     }
-    let mut segs = Vec::new();
-    for c in &truth.curves {
-        for w in c.points.windows(2) {
-            segs.push((Vector3::from(w[0]), Vector3::from(w[1])));
-        }
-    }
+    let segs = segments(truth, 1);
     if segs.is_empty() {
         return Err(EvalError::NoTruth);
     }
@@ -307,21 +325,7 @@ pub fn evaluate(truth: &Truth, rec: &ReadNetwork) -> Result<Evaluation, EvalErro
             // The starts are compared by a short ICP of ~500 points onto the truth polylines
             // thinned to ~2000 segments, in a coarse grid (a wrong start leaves points far
             // from every curve, where a fine grid's search would be slow).
-            let stride = (truth_pts.len() / 2000).max(1);
-            let mut thin = Vec::new();
-            for c in &truth.curves {
-                let mut last: Option<Vector3<f64>> = None;
-                let n = c.points.len();
-                for (i, p) in c.points.iter().enumerate() {
-                    if i % stride == 0 || i + 1 == n {
-                        let p = Vector3::from(*p);
-                        if let Some(l) = last {
-                            thin.push((l, p));
-                        }
-                        last = Some(p);
-                    }
-                }
-            }
+            let thin = segments(truth, (truth_pts.len() / 2000).max(1));
             let coarse_grid = SegmentGrid::new(thin, diag / 20.0);
             let coarse: Vec<Vector3<f64>> = pts
                 .iter()

@@ -367,7 +367,7 @@ impl Flow {
                 post_curve(&mut self.live, &self.acq, i, &self.stats);
             }
             if let (Some(v), Some(Update::CurveEnded(i))) = (&self.view, update) {
-                v.curve_ended(i, self.acq.scan().curves.len());
+                v.curve_ended(i);
             }
         }
         feed_monitor(&mut self.monitor, &mut self.acq);
@@ -399,17 +399,19 @@ impl Flow {
             v.warnings(&warnings[self.warnings_shown..]);
             self.warnings_shown = warnings.len();
         }
-        // The curve being scanned, 10 times a second at most.
+        // The curve being scanned, 10 times a second at most; cleared once when it ends.
         let due = self
             .preview_at
             .is_none_or(|t| t.elapsed() >= PREVIEW_PERIOD);
-        if due || (self.preview_shown && !self.acq.curve_open()) {
-            let preview = self.acq.preview();
-            if (preview.is_some() && due) || (preview.is_none() && self.preview_shown) {
-                self.preview_shown = preview.is_some();
-                self.preview_at = Some(Instant::now());
-                v.preview(preview);
-            }
+        let preview = match (self.acq.curve_open(), self.preview_shown) {
+            (true, _) if due => self.acq.preview(),
+            (false, true) => None,
+            _ => return,
+        };
+        if preview.is_some() || self.preview_shown {
+            self.preview_shown = preview.is_some();
+            self.preview_at = Some(Instant::now());
+            v.preview(preview);
         }
     }
 

@@ -259,10 +259,9 @@ impl View {
         });
     }
 
-    /// A curve was accepted.
-    pub fn curve_ended(&self, index: usize, accepted: usize) {
+    /// A curve was accepted (the status counts it with the rest of the session's state).
+    pub fn curve_ended(&self, index: usize) {
         self.shared.metrics.curves_accepted.inc();
-        self.update(|s| s.curves_accepted = accepted);
         self.send("curve", serde_json::json!({ "index": index }).to_string());
     }
 

@@ -121,17 +121,13 @@ async fn tick(view: View, stop: Shutdown) {
         if g != seen || last_sent.elapsed() >= HEARTBEAT {
             seen = g;
             last_sent = Instant::now();
-            let packets = view.status().link.packets;
-            let dt = rate_from.0.elapsed().as_secs_f64();
-            let rate = if dt > 0.0 {
-                packets.saturating_sub(rate_from.1) as f64 / dt
-            } else {
-                0.0
-            };
-            rate_from = (Instant::now(), packets);
             let status = {
                 let mut s = super::lock(&view.shared.status);
-                s.link.packets_per_s = rate;
+                let dt = rate_from.0.elapsed().as_secs_f64();
+                if dt > 0.0 {
+                    s.link.packets_per_s = s.link.packets.saturating_sub(rate_from.1) as f64 / dt;
+                }
+                rate_from = (Instant::now(), s.link.packets);
                 s.clone()
             };
             view.send("status", serde_json::to_string(&status).unwrap_or_default());
