@@ -60,6 +60,28 @@ fn issue5_lost_index_digits_do_not_distort_the_network() {
         "{:?}",
         net.warnings
     );
+    // Issue 16: the closure misfit the view shows marks that tag, and only it, for the
+    // operator to check; the loops then close to a few millimetres.
+    let marked: Vec<(usize, usize, u32, bool)> = net
+        .report
+        .closure
+        .iter()
+        .flat_map(|c| {
+            c.tags
+                .iter()
+                .filter(|t| t.marked)
+                .map(|t| (c.curve, t.tag, t.node, t.detached))
+        })
+        .collect();
+    assert_eq!(marked, vec![(7, 4, 9, true)], "{:?}", net.report.closure);
+    assert_eq!(net.report.closure.len(), scan.curves.len());
+    let worst = net
+        .report
+        .closure
+        .iter()
+        .map(|c| c.misfit_m)
+        .fold(0.0, f64::max);
+    assert!(worst < 0.02, "a curve misses its nodes by {worst} m");
     let e =
         sfs::eval::evaluate(&sim.truth, &sfs::gltf_out::as_read_network(&net.positions)).unwrap();
     assert!(

@@ -150,6 +150,34 @@ fn issue_16_the_page_shows_a_replayed_session_in_a_real_browser() {
         "nothing drawn"
     );
     assert!(state["orientation"]["t"].is_array(), "no device glyph");
+    // The closure misfit of every curve, and the marked tags (as report.json marks them).
+    let closure = report["network"]["closure"].as_array().unwrap();
+    assert_eq!(state["closure"].as_array().unwrap().len(), closure.len());
+    let marked = |v: &serde_json::Value| -> Vec<(u64, u64)> {
+        let mut m: Vec<(u64, u64)> = v
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|t| (t["curve"].as_u64().unwrap(), t["node"].as_u64().unwrap()))
+            .collect();
+        m.sort();
+        m
+    };
+    let expected: Vec<serde_json::Value> = closure
+        .iter()
+        .flat_map(|c| {
+            c["tags"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .filter(|t| t["marked"] == true)
+                .map(|t| serde_json::json!({ "curve": c["curve"], "node": t["node"] }))
+        })
+        .collect();
+    assert_eq!(
+        marked(&state["marked"]),
+        marked(&serde_json::Value::Array(expected))
+    );
     // A screenshot for a person to look at.
     let shot = root.join("target/view");
     std::fs::create_dir_all(&shot).unwrap();

@@ -233,6 +233,33 @@ async fn issue_16_a_replay_is_served_with_its_events_and_routes() {
     assert_eq!(status["state"], "ended");
     assert_eq!(status["curves_accepted"], accepted);
     assert_eq!(status["link"]["bytes"], report["link"]["bytes"]);
+    // Per curve the closure misfit of report.json (mm), with its marked tags.
+    let closure = report["network"]["closure"].as_array().unwrap();
+    assert_eq!(closure.len(), accepted, "the cone's network has loops");
+    let shown = status["closure"].as_array().unwrap();
+    assert_eq!(shown.len(), closure.len());
+    for (s, r) in shown.iter().zip(closure) {
+        assert_eq!(s["curve"], r["curve"]);
+        let mm = r["misfit_m"].as_f64().unwrap() * 1e3;
+        assert!(
+            (s["misfit_mm"].as_f64().unwrap() - mm).abs() <= 0.051,
+            "{s} {r}"
+        );
+        let marked: Vec<&serde_json::Value> = r["tags"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|t| t["marked"] == true)
+            .map(|t| &t["node"])
+            .collect();
+        let shown_marked: Vec<&serde_json::Value> = s["marked"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|t| &t["node"])
+            .collect();
+        assert_eq!(shown_marked, marked);
+    }
     // The device's orientation: unit direction of travel and normal, at right angles.
     let axis = |k: &str| -> Vec<f64> {
         status["orientation"][k]

@@ -62,6 +62,52 @@ pub struct Status {
     /// What the latest reconstruction could not do (replaced at every update: a network
     /// still being scanned has open faces; the final ones are `warning` events).
     pub reconstruction: Vec<WarningEvent>,
+    /// How each curve of the latest network closes its loops, with the tags to rescan
+    /// (`report.json` `network.closure` in brief); empty until the network has a loop.
+    pub closure: Vec<ClosureStatus>,
+}
+
+/// One curve's closure misfit as the view shows it.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct ClosureStatus {
+    pub curve: usize,
+    /// The most by which one of its segments misses its nodes, mm.
+    pub misfit_mm: f64,
+    /// Its marked tags ([`sfs_geometry::network::closure::TagMisfit::marked`]).
+    pub marked: Vec<MarkedTag>,
+}
+
+/// A tag the operator should check or rescan.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct MarkedTag {
+    /// Position in the curve's tag list (0 = first).
+    pub tag: usize,
+    pub node: u32,
+    /// How far the curve would have to be pulled at the tag to meet the node, mm.
+    pub offset_mm: f64,
+    /// The reconstruction let go of it (a wrong index, probably).
+    pub detached: bool,
+}
+
+impl From<&sfs_geometry::network::closure::CurveMisfit> for ClosureStatus {
+    fn from(m: &sfs_geometry::network::closure::CurveMisfit) -> Self {
+        let mm = |m: f64| (m * 1e4).round() / 10.0;
+        ClosureStatus {
+            curve: m.curve,
+            misfit_mm: mm(m.misfit_m),
+            marked: m
+                .tags
+                .iter()
+                .filter(|t| t.marked)
+                .map(|t| MarkedTag {
+                    tag: t.tag,
+                    node: t.node,
+                    offset_mm: mm(t.offset_m),
+                    detached: t.detached,
+                })
+                .collect(),
+        }
+    }
 }
 
 /// The curve being scanned.
@@ -308,11 +354,18 @@ impl View {
         if let Some(n) = &products.network {
             *lock(&self.shared.nodes) = n.positions.nodes.clone();
         }
+        let closure: Vec<ClosureStatus> = products
+            .network
+            .iter()
+            .flat_map(|n| &n.report.closure)
+            .map(Into::into)
+            .collect();
         let m = &self.shared.metrics;
         crate::metrics::count_to(&m.updates, live.updates as u64);
         m.latency_p50.set(live.latency_ms.p50 * 1e-3);
         m.latency_p95.set(live.latency_ms.p95 * 1e-3);
         self.update(|s| {
+            s.closure = closure;
             s.live = Some(LiveStatus {
                 updates: live.updates,
                 latency_ms: live.latency_ms.clone(),

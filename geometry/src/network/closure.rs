@@ -42,6 +42,16 @@ pub const MAX_DETACHED: usize = 4;
 /// [`detach_outlier_tags`]).
 pub const LOCATED: f64 = 0.99;
 
+/// A tag is *marked* for the operator (the live view's "rescan here", [`TagMisfit::marked`])
+/// when it explains this share of the network's misfit energy…
+pub const MARK_SHARE: f64 = 0.25;
+/// …and this many times the energy per degree of freedom left in the other loops (milder
+/// than the test for detaching: it only points at where to look)…
+pub const MARK_RATIO: f64 = 10.0;
+/// …and the curve would have to be pulled at least this far at the tag to meet its node, m
+/// (below it, nothing a rescan would improve).
+pub const MARK_OFFSET_M: f64 = 0.005;
+
 /// A tag detached from its node.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Detached {
@@ -93,18 +103,37 @@ struct Candidate {
     offset: f64,
 }
 
-/// The network's misfit energy, its loops' degrees of freedom, and every tag's drop.
+/// The network's misfit energy, its loops' degrees of freedom, every tag's drop, and every
+/// segment's residual.
 struct Drops {
     energy: f64,
     dof: f64,
     tags: Vec<Candidate>,
+    /// Per segment: its curve (position in the slice), `|e_s|` (m) and `c_s |e_s|²`.
+    segments: Vec<(usize, f64, f64)>,
 }
 
 impl Drops {
+    /// Whether `c` explains `share` of the energy and `ratio` times the energy per degree of
+    /// freedom left.
+    fn stands_out(&self, c: &Candidate, share: f64, ratio: f64) -> bool {
+        let per_dof = (self.energy - c.drop).max(0.0) / self.dof;
+        c.drop > share * self.energy && c.drop > ratio * per_dof
+    }
+
     /// Whether `c` passes the test (see the module docs).
     fn refuses(&self, c: &Candidate) -> bool {
-        let per_dof = (self.energy - c.drop).max(0.0) / self.dof;
-        c.drop > SHARE * self.energy && c.drop > RATIO * per_dof
+        self.stands_out(c, SHARE, RATIO)
+    }
+
+    /// Whether no other tag explains the misfit as well as `c`: on a single loop (a closed
+    /// curve alone, early in a live session) every tag does, and the misfit is the loop's
+    /// drift, not any one tag's.
+    fn located(&self, c: &Candidate) -> bool {
+        !self
+            .tags
+            .iter()
+            .any(|o| !std::ptr::eq(o, c) && o.drop >= LOCATED * c.drop)
     }
 }
 
@@ -219,10 +248,18 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
             offset: g.norm() / sigma,
         });
     }
+    let segments = segs
+        .iter()
+        .map(|s| {
+            let e = resid(s).norm();
+            (s.curve, e, s.c * e * e)
+        })
+        .collect();
     Some(Drops {
         energy,
         dof: (3 * loops).saturating_sub(3).max(1) as f64,
         tags,
+        segments,
     })
 }
 
@@ -245,6 +282,90 @@ pub struct ClosureReport {
     /// Tags the loops refuse but with no other sign of a wrong index (kept: the misfit may
     /// be the data's, e.g. a heading disturbed along the whole curve).
     pub refused: Vec<Refused>,
+    /// How each curve closes the network's loops once the tags are detached (empty when the
+    /// network has no loop), in the order of the curves.
+    pub curves: Vec<CurveMisfit>,
+}
+
+/// How one curve closes the network's loops: what the operator needs to know to decide what
+/// to rescan.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct CurveMisfit {
+    /// Scan index of the curve.
+    pub curve: usize,
+    /// The most by which one of its segments (between two consecutive tags), integrated from
+    /// its frames, misses its two nodes where the network's loops put them, m.
+    pub misfit_m: f64,
+    /// Share of the network's misfit energy in its segments.
+    pub share: f64,
+    /// Its tags, in order (a tag on a node no other curve holds frees nothing and is left
+    /// out; a detached tag is listed with the node it was typed as).
+    pub tags: Vec<TagMisfit>,
+}
+
+/// One tag's part in the network's misfit.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct TagMisfit {
+    /// Position in the curve's tag list (0 = first).
+    pub tag: usize,
+    pub node: u32,
+    /// How far the curve would have to be pulled at this tag to meet the node, m.
+    pub offset_m: f64,
+    /// Share of the network's misfit energy that letting go of the tag removes.
+    pub share: f64,
+    /// One of the network's worst tags: it explains [`MARK_SHARE`] of the misfit and
+    /// [`MARK_RATIO`] times the noise of the other loops, pulls its curve at least
+    /// [`MARK_OFFSET_M`], and no other tag does as well; or the test detached it.
+    pub marked: bool,
+    /// The test detached it from its node.
+    pub detached: bool,
+}
+
+/// The misfit of each curve in `curves` under `d`, with the detached tags added.
+fn curve_misfits(curves: &[UniformCurve], d: &Drops, detached: &[Detached]) -> Vec<CurveMisfit> {
+    let mut out: Vec<CurveMisfit> = curves
+        .iter()
+        .map(|c| CurveMisfit {
+            curve: c.index,
+            misfit_m: 0.0,
+            share: 0.0,
+            tags: Vec::new(),
+        })
+        .collect();
+    for &(ci, e, energy) in &d.segments {
+        out[ci].misfit_m = out[ci].misfit_m.max(e);
+        out[ci].share += energy / d.energy;
+    }
+    for t in &d.tags {
+        out[t.curve].tags.push(TagMisfit {
+            tag: t.tag,
+            node: curves[t.curve].nodes[t.tag].1,
+            offset_m: t.offset,
+            share: t.drop / d.energy,
+            marked: d.stands_out(t, MARK_SHARE, MARK_RATIO)
+                && t.offset >= MARK_OFFSET_M
+                && d.located(t),
+            detached: false,
+        });
+    }
+    for x in detached {
+        if let Some(m) = out.iter_mut().find(|m| m.curve == x.curve) {
+            m.tags.push(TagMisfit {
+                tag: x.tag,
+                node: x.node,
+                offset_m: x.offset_m,
+                share: x.share,
+                marked: true,
+                detached: true,
+            });
+        }
+    }
+    for m in &mut out {
+        m.tags.sort_by_key(|t| t.tag);
+    }
+    out
 }
 
 /// A tag the network's loops refuse, kept on its node: nothing else suggests a wrong index.
@@ -285,21 +406,15 @@ pub fn detach_outlier_tags(
     uncertain: impl Fn(usize, usize) -> bool,
 ) -> ClosureReport {
     let mut out = ClosureReport::default();
-    while out.detached.len() < MAX_DETACHED {
-        let Some(d) = drops(curves) else { break };
-        // A refused tag is located only if no other tag explains the misfit as well: on a
-        // single loop (a closed curve alone, early in a live session) every tag does, and
-        // the misfit is the loop's drift, not any one tag's.
-        let located = |c: &&Candidate| {
-            !d.tags
-                .iter()
-                .any(|o| !std::ptr::eq(o, *c) && o.drop >= LOCATED * c.drop)
-        };
+    let last = loop {
+        let Some(d) = drops(curves) else { break None };
+        if out.detached.len() == MAX_DETACHED {
+            break Some(d);
+        }
         let worst = d
             .tags
             .iter()
-            .filter(|c| d.refuses(c))
-            .filter(located)
+            .filter(|c| d.refuses(c) && d.located(c))
             .max_by(|a, b| a.drop.total_cmp(&b.drop));
         let evidenced = d
             .tags
@@ -307,8 +422,7 @@ pub fn detach_outlier_tags(
             .filter(|c| {
                 uncertain(curves[c.curve].index, c.tag) || repeats_in_curve(&curves[c.curve], c.tag)
             })
-            .filter(|c| d.refuses(c))
-            .filter(located)
+            .filter(|c| d.refuses(c) && d.located(c))
             .max_by(|a, b| a.drop.total_cmp(&b.drop));
         if let Some(w) = worst {
             tracing::debug!(
@@ -330,7 +444,7 @@ pub fn detach_outlier_tags(
                     offset_m: w.offset,
                 });
             }
-            break;
+            break Some(d);
         };
         let next = curves
             .iter()
@@ -349,6 +463,9 @@ pub fn detach_outlier_tags(
             offset_m: c.offset,
             share: c.drop / d.energy,
         });
+    };
+    if let Some(d) = last {
+        out.curves = curve_misfits(curves, &d, &out.detached);
     }
     out
 }
@@ -414,7 +531,7 @@ mod tests {
     fn a_single_loop_blames_no_tag() {
         let n = 300;
         let h = 0.01;
-        // A circle whose heading turns 2% too far: it misses its start by ~12 cm.
+        // A circle (radius 0.48 m) whose heading turns 2% too far: it misses its start by ~6 cm.
         let q: Vec<UnitQuaternion<f64>> = (0..=n)
             .map(|j| {
                 let yaw = 1.02 * std::f64::consts::TAU * j as f64 / n as f64;
@@ -432,8 +549,17 @@ mod tests {
             outliers: 0,
         }];
         let r = detach_outlier_tags(&mut curves, |_, _| true);
-        assert_eq!(r, ClosureReport::default());
+        assert!(r.detached.is_empty() && r.refused.is_empty(), "{r:?}");
         assert_eq!(curves[0].nodes[3].1, 0);
+        // The curve carries the whole misfit, its ~12 cm gap shared by its three segments,
+        // and no tag is marked.
+        assert_eq!(r.curves.len(), 1);
+        let m = &r.curves[0];
+        assert!((m.share - 1.0).abs() < 1e-9, "{m:?}");
+        let gap = m.tags[0].offset_m;
+        assert!(gap > 0.05 && gap < 0.07, "{m:?}");
+        assert!((3.0 * m.misfit_m - gap).abs() < 0.05 * gap, "{m:?}");
+        assert!(m.tags.iter().all(|t| !t.marked), "{m:?}");
     }
 
     #[test]
@@ -442,10 +568,19 @@ mod tests {
             for noise in [0.0, 1.0, 3.0] {
                 let mut g = grid(4, noise, seed);
                 let before: Vec<_> = g.iter().map(|c| c.nodes.clone()).collect();
+                let r = detach_outlier_tags(&mut g, |_, _| true);
                 assert!(
-                    detach_outlier_tags(&mut g, |_, _| true) == ClosureReport::default(),
-                    "seed {seed}, {noise}°"
+                    r.detached.is_empty() && r.refused.is_empty(),
+                    "seed {seed}, {noise}°: {r:?}"
                 );
+                // Noise marks no tag for rescanning; every curve has its misfit.
+                assert_eq!(r.curves.len(), g.len());
+                assert!(
+                    r.curves.iter().flat_map(|c| &c.tags).all(|t| !t.marked),
+                    "seed {seed}, {noise}°: {r:?}"
+                );
+                let shares: f64 = r.curves.iter().map(|c| c.share).sum();
+                assert!(noise == 0.0 || (shares - 1.0).abs() < 1e-9, "{shares}");
                 let after: Vec<_> = g.iter().map(|c| c.nodes.clone()).collect();
                 assert_eq!(before, after);
             }
@@ -464,6 +599,24 @@ mod tests {
             let kept = detach_outlier_tags(&mut g.clone(), |_, _| false);
             assert!(kept.detached.is_empty());
             assert_eq!(kept.refused.len(), 1, "{kept:?}");
+            // The view marks that tag, and only it; its curve misses its nodes the most.
+            let marked: Vec<(usize, usize, u32)> = kept
+                .curves
+                .iter()
+                .flat_map(|c| {
+                    c.tags
+                        .iter()
+                        .filter(|t| t.marked)
+                        .map(|t| (c.curve, t.tag, t.node))
+                })
+                .collect();
+            assert_eq!(marked, vec![(2, 2, 5)], "seed {seed}");
+            let worst = kept
+                .curves
+                .iter()
+                .max_by(|a, b| a.misfit_m.total_cmp(&b.misfit_m))
+                .unwrap();
+            assert_eq!(worst.curve, 2, "seed {seed}: {:?}", kept.curves);
             assert_eq!(
                 (
                     kept.refused[0].curve,
@@ -473,8 +626,22 @@ mod tests {
                 (2, 5, 2)
             );
             // Packets lost while it was typed: detached.
-            let d = detach_outlier_tags(&mut g, |c, k| (c, k) == (2, 2)).detached;
+            let r = detach_outlier_tags(&mut g, |c, k| (c, k) == (2, 2));
+            let d = r.detached;
             assert_eq!(d.len(), 1, "seed {seed}: {d:?}");
+            // Once detached the loops close: the tag is still marked (with the node it was
+            // typed as), and no other.
+            let marked: Vec<(usize, usize, u32, bool)> = r
+                .curves
+                .iter()
+                .flat_map(|c| {
+                    c.tags
+                        .iter()
+                        .filter(|t| t.marked)
+                        .map(|t| (c.curve, t.tag, t.node, t.detached))
+                })
+                .collect();
+            assert_eq!(marked, vec![(2, 2, 5, true)], "seed {seed}");
             assert_eq!((d[0].curve, d[0].tag, d[0].node), (2, 2, 5));
             assert!(crate::curve::is_anonymous(d[0].anonymous));
             assert_eq!(g[2].nodes[2].1, d[0].anonymous);

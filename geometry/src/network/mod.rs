@@ -48,6 +48,9 @@ pub struct NetworkReport {
     pub max_node_normal_angle_deg: f64,
     /// The regression's iterations and energies.
     pub regression: RegressionReport,
+    /// How each curve closes the network's loops (the loop-closure test's misfit, before the
+    /// regression), with the tags that explain most of it marked; empty without loops.
+    pub closure: Vec<closure::CurveMisfit>,
     pub timings_ms: Timings,
 }
 
@@ -341,6 +344,7 @@ impl Reconstructor {
             tags_detached: closure.detached.len(),
             max_node_normal_angle_deg: max_node_normal_angle(&positions),
             regression,
+            closure: closure.curves,
             timings_ms: Timings {
                 prefilter: (t1 - t0).as_secs_f64() * 1e3,
                 regression: (t2 - t1).as_secs_f64() * 1e3,

@@ -5,12 +5,12 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 
-const COLOURS = { boundary: 0xff9800, interior: 0x4fc3f7, latest: 0xffee58, preview: 0xe040fb, node: 0xffffff };
+const COLOURS = { boundary: 0xff9800, interior: 0x4fc3f7, latest: 0xffee58, preview: 0xe040fb, node: 0xffffff, mark: '#ff1744' };
 
 const state = {
   ready: false, errors: [], updates: 0, curves: [], nodes: [], surfaceTriangles: 0,
   lastCurve: null, warnings: 0, events: { status: 0, curve: 0, network: 0, warning: 0, preview: 0 },
-  status: null, previewPoints: 0,
+  status: null, previewPoints: 0, closure: [], marked: [],
 };
 window.sfsView = state;
 function pageError(text) {
@@ -48,10 +48,11 @@ let sceneSize = 0.5;
 
 const network = new THREE.Group();
 const labels = new THREE.Group();
+const marks = new THREE.Group();
 let surface = null;
 let preview = null;
 let framed = false;
-scene.add(network, labels);
+scene.add(network, labels, marks);
 
 function resize() {
   const w = canvas.clientWidth, h = canvas.clientHeight;
@@ -77,11 +78,60 @@ function label(text, at, size) {
   return sprite;
 }
 
-function clear(group) {
+// A ring around a node whose tag the network's loops refuse (rescan or check it).
+const ringTexture = (() => {
+  const c = document.createElement('canvas');
+  c.width = c.height = 64;
+  const g = c.getContext('2d');
+  g.strokeStyle = COLOURS.mark;
+  g.lineWidth = 7;
+  g.beginPath(); g.arc(32, 32, 26, 0, 2 * Math.PI); g.stroke();
+  return new THREE.CanvasTexture(c);
+})();
+
+// The closure misfit per curve (worst first) and the marked tags, ringed at their nodes.
+function showClosure(closure) {
+  const key = JSON.stringify(closure);
+  if (key === state.closureKey) return;
+  state.closureKey = key;
+  state.closure = closure;
+  const list = document.getElementById('closure');
+  const worst = [...closure].sort((a, b) => b.misfit_mm - a.misfit_mm);
+  list.replaceChildren(...(worst.length ? worst : [null]).map((c) => {
+    const li = document.createElement('li');
+    if (!c) { li.textContent = 'no loop yet'; return li; }
+    const tags = c.marked.map((t) => `node ${t.node} (tag ${t.tag + 1}, ${t.offset_mm.toFixed(0)} mm${t.detached ? ', let go' : ''})`);
+    li.textContent = `curve ${c.curve}: ${c.misfit_mm.toFixed(1)} mm` + (tags.length ? ' · rescan at ' + tags.join(', ') : '');
+    li.classList.toggle('bad', tags.length > 0);
+    return li;
+  }));
+  drawMarks();
+}
+
+function drawMarks() {
+  clear(marks, false);
+  state.marked = [];
+  const at = state.nodePositions || {};
+  for (const c of state.closure) {
+    for (const t of c.marked) {
+      state.marked.push({ curve: c.curve, node: t.node, tag: t.tag });
+      const p = at[t.node];
+      if (!p) continue;
+      const ring = new THREE.Sprite(new THREE.SpriteMaterial({ map: ringTexture, depthTest: false }));
+      ring.renderOrder = 11;
+      ring.position.set(p[0], p[1], p[2]);
+      ring.scale.setScalar(sceneSize * 0.05);
+      marks.add(ring);
+    }
+  }
+  setTimeout(draw, 0);
+}
+
+function clear(group, textures = true) {
   for (const o of [...group.children]) {
     group.remove(o);
     o.geometry?.dispose();
-    o.material?.map?.dispose();
+    if (textures) o.material?.map?.dispose();
     o.material?.dispose();
   }
 }
@@ -134,6 +184,7 @@ function show(gltf) {
   state.curves = curves;
   state.nodes = nodes;
   state.nodePositions = positions || {};
+  drawMarks();
   state.surfaceTriangles = surface ? (surface.geometry.index ? surface.geometry.index.count / 3 : 0) : 0;
   if (!framed && !box.isEmpty()) {
     const c = box.getCenter(new THREE.Vector3());
@@ -195,6 +246,7 @@ function showStatus(s) {
     const flags = d.status_flags.length ? ' · ' + d.status_flags.join(', ') : '';
     text('device', `${d.kind} #${d.id} · ${d.rate_hz} Hz${batt}${flags}`, (d.battery_mv != null && d.battery_mv < 3400) || d.status_flags.length > 0);
   }
+  showClosure(s.closure || []);
   const rec = document.getElementById('reconstruction');
   rec.replaceChildren(...(s.reconstruction.length ? s.reconstruction : [{ text: 'nothing to say' }]).map((w) => {
     const li = document.createElement('li');
