@@ -213,7 +213,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
             tracing::error!("live update: cannot write {}: {e}", path.display());
         }
         if let Some(v) = &settings.view {
-            v.network(&products, &report, scan.curves.len());
+            v.network(&products, &report, scan.curves.len(), &posted);
             v.reconstruction_warnings(&products.warnings);
         }
         status_lines(&scan, &products, &lat, compute_ms);

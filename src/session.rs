@@ -544,7 +544,7 @@ impl Flow {
             v.reconstruction_warnings(&[]);
             if fresh {
                 let report = live_report.clone().unwrap_or_default();
-                v.network(&products, &report, scan.curves.len());
+                v.network(&products, &report, scan.curves.len(), &[]);
             }
             v.preview(None);
             v.ended();

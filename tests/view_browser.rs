@@ -1,169 +1,41 @@
 //! Issue 16, the live view in a real browser: Debian's chromium, headless (WebGL through
-//! SwiftShader), loads the page of a replayed session: no error on the console, the scene holds
-//! the session's curves, nodes and surface, and a screenshot is written to
-//! `target/view/cone.png` for a person to look at. Skipped when chromium is not installed,
-//! unless `SFS_REQUIRE_BROWSER` is set (`.ci/run` installs it and sets it).
+//! SwiftShader), driven through chromedriver (W3C WebDriver), reading the page's
+//! `window.sfsView`:
+//! - the page of a replayed session: no error on the console, the scene holds the session's
+//!   curves, nodes, surface and closure marks (`target/view/cone.png` for a person to look at);
+//! - a session watched while it runs: the curve being scanned drawn dashed and growing, every
+//!   curve's network drawn after its `E`, the preview replaced by it
+//!   (`target/view/live.png`, taken mid-curve).
+//!
+//! Skipped when chromium or chromedriver is not installed, unless `SFS_REQUIRE_BROWSER` is set
+//! (`.ci/run` installs both and sets it).
 
 mod common;
+use common::view::{ended_report, free_port, serve_replay};
+use common::webdriver::{available, Browser};
 use common::*;
 use std::path::PathBuf;
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-fn chromium() -> Option<PathBuf> {
-    ["/usr/bin/chromium", "/usr/bin/chromium-browser"]
-        .iter()
-        .map(PathBuf::from)
-        .find(|p| p.exists())
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// Headless chromium on `url` with `args` (virtual time for the page's scripts), its stdout.
-fn headless(browser: &PathBuf, profile: &std::path::Path, args: &[&str], url: &str) -> String {
-    let out = Command::new(browser)
-        .args([
-            "--headless=new",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--use-gl=swiftshader",
-            "--enable-unsafe-swiftshader",
-            "--disable-quic",
-            "--no-first-run",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
-            "--window-size=1280,800",
-            "--virtual-time-budget=15000",
-        ])
-        .arg(format!("--user-data-dir={}", profile.display()))
-        .args(args)
-        .arg(url)
-        .stderr(Stdio::null())
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "chromium failed: {}", out.status);
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-struct Served(std::process::Child);
-
-impl Drop for Served {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-#[test]
-fn issue_16_the_page_shows_a_replayed_session_in_a_real_browser() {
-    let Some(browser) = chromium() else {
-        assert!(
-            std::env::var_os("SFS_REQUIRE_BROWSER").is_none(),
-            "chromium is not installed (SFS_REQUIRE_BROWSER is set)"
-        );
-        eprintln!("skipping: chromium is not installed");
-        return;
-    };
-    let dir = tmpdir("view-browser");
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let out = dir.join("out");
-    let _served = Served(
-        Command::new(env!("CARGO_BIN_EXE_sfs"))
-            .args(["--log", "off", "replay"])
-            .arg(root.join("replay-logs/cone-morphorider.bin"))
-            .arg("--out")
-            .arg(&out)
-            .args(["--view", &format!("127.0.0.1:{port}")])
-            .stdout(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    // The replay ends (and keeps serving).
-    wait_for("the replay's end", Duration::from_secs(60), || {
-        std::fs::read(out.join("report.json"))
-            .ok()
-            .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-            .is_some_and(|r| r["ended"] == "end_of_input")
-    });
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
-    let url = format!("http://127.0.0.1:{port}/?once");
-    let t0 = Instant::now();
-    let dom = headless(&browser, &dir.join("profile-dom"), &["--dump-dom"], &url);
-    eprintln!("page loaded in {:.1} s", t0.elapsed().as_secs_f64());
-    let start = dom
-        .find("<pre id=\"sfs-state\"")
-        .unwrap_or_else(|| panic!("no state in the page: {dom}"));
-    let json = &dom[start..];
-    let json = &json[json.find('>').unwrap() + 1..json.find("</pre>").unwrap()];
-    let json = json
-        .replace("&quot;", "\"")
-        .replace("&lt;", "<")
-        .replace("&gt;", ">")
-        .replace("&amp;", "&");
-    let state: serde_json::Value = serde_json::from_str(&json).unwrap();
-    assert_eq!(state["errors"], serde_json::json!([]), "console errors");
-    assert_eq!(state["ready"], true);
-    let curves = state["curves"].as_array().unwrap();
-    assert_eq!(curves.len(), report["curves"].as_array().unwrap().len());
+/// The curves of `report.json`, their boundary flags and nodes; the marked tags of its
+/// closure misfit as (curve, node), sorted.
+fn expected(report: &serde_json::Value) -> (usize, usize, Vec<u64>, Vec<(u64, u64)>) {
+    let curves = report["curves"].as_array().unwrap();
     let boundary = curves.iter().filter(|c| c["boundary"] == true).count();
-    let expected_boundary = report["curves"]
-        .as_array()
-        .unwrap()
+    let mut nodes: Vec<u64> = curves
         .iter()
-        .filter(|c| c["boundary"] == true)
-        .count();
-    assert_eq!(boundary, expected_boundary);
-    let mut nodes: Vec<u64> = report["curves"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .flat_map(|c| {
-            c["nodes"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|n| n.as_u64().unwrap())
-        })
+        .flat_map(|c| c["nodes"].as_array().unwrap())
+        .map(|n| n.as_u64().unwrap())
         .collect();
     nodes.sort();
     nodes.dedup();
-    let mut shown: Vec<u64> = state["nodes"]
+    let mut marked: Vec<(u64, u64)> = report["network"]["closure"]
         .as_array()
         .unwrap()
-        .iter()
-        .map(|n| n.as_u64().unwrap())
-        .collect();
-    shown.sort();
-    assert_eq!(shown, nodes);
-    assert_eq!(
-        state["surfaceTriangles"], report["surface"]["triangles"],
-        "{}",
-        report["surface"]
-    );
-    assert!(
-        state["rendered"]["calls"].as_u64().unwrap() > 0,
-        "nothing drawn"
-    );
-    assert!(state["orientation"]["t"].is_array(), "no device glyph");
-    // The closure misfit of every curve, and the marked tags (as report.json marks them).
-    let closure = report["network"]["closure"].as_array().unwrap();
-    assert_eq!(state["closure"].as_array().unwrap().len(), closure.len());
-    let marked = |v: &serde_json::Value| -> Vec<(u64, u64)> {
-        let mut m: Vec<(u64, u64)> = v
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|t| (t["curve"].as_u64().unwrap(), t["node"].as_u64().unwrap()))
-            .collect();
-        m.sort();
-        m
-    };
-    let expected: Vec<serde_json::Value> = closure
         .iter()
         .flat_map(|c| {
             c["tags"]
@@ -171,28 +43,172 @@ fn issue_16_the_page_shows_a_replayed_session_in_a_real_browser() {
                 .unwrap()
                 .iter()
                 .filter(|t| t["marked"] == true)
-                .map(|t| serde_json::json!({ "curve": c["curve"], "node": t["node"] }))
+                .map(|t| (c["curve"].as_u64().unwrap(), t["node"].as_u64().unwrap()))
         })
         .collect();
+    marked.sort();
+    (curves.len(), boundary, nodes, marked)
+}
+
+/// What the page drew, in the same terms.
+fn drawn(state: &serde_json::Value) -> (usize, usize, Vec<u64>, Vec<(u64, u64)>) {
+    let curves = state["curves"].as_array().unwrap();
+    let boundary = curves.iter().filter(|c| c["boundary"] == true).count();
+    let mut nodes: Vec<u64> = state["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_u64().unwrap())
+        .collect();
+    nodes.sort();
+    let mut marked: Vec<(u64, u64)> = state["marked"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| (t["curve"].as_u64().unwrap(), t["node"].as_u64().unwrap()))
+        .collect();
+    marked.sort();
+    (curves.len(), boundary, nodes, marked)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn issue_16_the_page_shows_a_replayed_session_in_a_real_browser() {
+    if !available() {
+        return;
+    }
+    let dir = tmpdir("view-browser");
+    let port = free_port();
+    let out = dir.join("out");
+    let _served = serve_replay(
+        &root().join("replay-logs/cone-morphorider.bin"),
+        &out,
+        None,
+        port,
+        &[],
+    );
+    // The replay ends (and keeps serving).
+    let report = ended_report(&out, Duration::from_secs(60));
+    let browser = Browser::start(&dir.join("profile")).await;
+    browser.goto(&format!("http://127.0.0.1:{port}/")).await;
+    let seen = browser
+        .watch(Duration::from_secs(30), |s| {
+            s["updates"].as_u64() >= Some(1) && s["events"]["status"].as_u64() >= Some(1)
+        })
+        .await;
+    let state = seen.last().unwrap();
+    assert_eq!(state["errors"], serde_json::json!([]), "console errors");
+    assert_eq!(state["ready"], true);
+    assert_eq!(drawn(state), expected(&report));
     assert_eq!(
-        marked(&state["marked"]),
-        marked(&serde_json::Value::Array(expected))
+        state["closure"].as_array().unwrap().len(),
+        report["network"]["closure"].as_array().unwrap().len()
     );
-    // A screenshot for a person to look at.
-    let shot = root.join("target/view");
-    std::fs::create_dir_all(&shot).unwrap();
-    let png = shot.join("cone.png");
-    let _ = std::fs::remove_file(&png);
-    headless(
-        &browser,
-        &dir.join("profile-shot"),
-        &[&format!("--screenshot={}", png.display())],
-        &url,
+    assert_eq!(
+        state["surfaceTriangles"], report["surface"]["triangles"],
+        "{}",
+        report["surface"]
     );
+    assert!(state["orientation"]["t"].is_array(), "no device glyph");
+    // Opened after the end, the page lists the latest warnings of the session.
+    let warnings = report["warnings"].as_array().unwrap().len().min(20);
+    assert_eq!(state["warnings"].as_u64(), Some(warnings as u64));
+    let png = root().join("target/view/cone.png");
+    browser.screenshot(&png).await;
     let bytes = std::fs::read(&png).unwrap();
     assert!(
         bytes.starts_with(b"\x89PNG") && bytes.len() > 10_000,
         "{} bytes",
         bytes.len()
     );
+    browser.close().await;
+}
+
+/// The page watched while the session runs (the cone replayed at ×5, about 30 s): the dashed
+/// preview grows while a curve is scanned; after each `E` the page fetches and draws the new
+/// network (one per curve it saw end), and the preview gives way to it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn issue_16_a_running_session_is_drawn_as_it_is_scanned() {
+    if !available() {
+        return;
+    }
+    let dir = tmpdir("view-browser-live");
+    let browser = Browser::start(&dir.join("profile")).await;
+    let port = free_port();
+    let out = dir.join("out");
+    let _served = serve_replay(
+        &root().join("replay-logs/cone-morphorider.bin"),
+        &out,
+        Some("x5"),
+        port,
+        &[],
+    );
+    let status = format!("http://127.0.0.1:{port}/status");
+    let t0 = std::time::Instant::now();
+    while reqwest::get(&status).await.is_err() {
+        assert!(t0.elapsed() < Duration::from_secs(20), "no view served");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    browser.goto(&format!("http://127.0.0.1:{port}/")).await;
+    let png = root().join("target/view/live.png");
+    let mut shot = false;
+    let mut longest_preview = 0;
+    let mut preview_grew = false;
+    let mut last_preview = 0;
+    let mut states = Vec::new();
+    let t0 = std::time::Instant::now();
+    loop {
+        let s = browser.view_state().await;
+        let points = s["previewPoints"].as_u64().unwrap_or(0);
+        preview_grew |= points > last_preview && last_preview > 0;
+        last_preview = points;
+        longest_preview = longest_preview.max(points);
+        if !shot && points > 100 && s["updates"].as_u64() >= Some(2) {
+            // Mid-curve, with a network drawn: for a person to look at.
+            browser.screenshot(&png).await;
+            shot = true;
+        }
+        let ended = std::fs::read(out.join("report.json"))
+            .ok()
+            .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+            .is_some_and(|r| r["ended"] == "end_of_input");
+        states.push(s);
+        if ended {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "{}",
+            states.last().unwrap()
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    // The last network: give the page the time to fetch it.
+    let report = ended_report(&out, Duration::from_secs(5));
+    let accepted = report["curves"].as_array().unwrap().len() as u64;
+    let last = browser
+        .watch(Duration::from_secs(20), |s| {
+            s["curves"].as_array().map(Vec::len) == Some(accepted as usize)
+                && s["events"]["network"].as_u64() == s["events"]["curve"].as_u64()
+        })
+        .await
+        .pop()
+        .unwrap();
+    assert_eq!(last["errors"], serde_json::json!([]), "console errors");
+    // The page connected during the first curve: it saw (nearly) every curve end.
+    let seen = last["events"]["curve"].as_u64().unwrap();
+    assert!(seen + 1 >= accepted, "saw {seen} of {accepted} curves end");
+    // Each curve it saw end was drawn, with the time from its E to the page.
+    let latencies = last["latencies"].as_array().unwrap();
+    assert_eq!(latencies.len() as u64, seen, "{last}");
+    for l in latencies {
+        let ms = l["ms"].as_f64().unwrap();
+        assert!(ms > 0.0 && ms < 30_000.0, "{l}");
+    }
+    assert_eq!(drawn(&last), expected(&report));
+    // The curve being scanned was drawn, growing, and replaced by the network at the end.
+    assert!(longest_preview > 100, "{longest_preview} preview points");
+    assert!(preview_grew, "the preview never grew");
+    assert_eq!(last["previewPoints"], 0);
+    assert!(shot, "no moment with a preview and a network to photograph");
+    browser.close().await;
 }

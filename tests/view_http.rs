@@ -4,9 +4,9 @@
 //! to the file, 404 outside the routes, the limit on event streams, a stalled client.
 
 mod common;
+use common::view::{free_port, interrupt, Served};
 use common::*;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 fn root() -> PathBuf {
@@ -14,52 +14,15 @@ fn root() -> PathBuf {
 }
 
 /// A free loopback port (bound, then released).
-fn free_port() -> u16 {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    l.local_addr().unwrap().port()
-}
-
-/// A daemon that serves until interrupted; killed if the test fails first.
-struct Served(Child);
-
-impl Drop for Served {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-/// `sfs replay LOG --out OUT --pace PACE --view 127.0.0.1:PORT`.
+/// `sfs replay replay-logs/LOG` served with its view.
 fn serve_replay(log: &str, out: &Path, pace: &str, port: u16) -> Served {
-    Served(
-        Command::new(env!("CARGO_BIN_EXE_sfs"))
-            .args(["--log", "warn", "replay"])
-            .arg(root().join("replay-logs").join(log))
-            .arg("--out")
-            .arg(out)
-            .args(["--pace", pace, "--view", &format!("127.0.0.1:{port}")])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
+    common::view::serve_replay(
+        &root().join("replay-logs").join(log),
+        out,
+        Some(pace),
+        port,
+        &[],
     )
-}
-
-/// SIGINT: the replay that keeps serving stops, with success.
-fn interrupt(served: &mut Served) {
-    let child = &mut served.0;
-    let _ = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status();
-    let t0 = Instant::now();
-    loop {
-        if let Some(st) = child.try_wait().unwrap() {
-            assert!(st.success(), "{st}");
-            return;
-        }
-        assert!(t0.elapsed() < Duration::from_secs(20), "did not stop");
-        std::thread::sleep(Duration::from_millis(20));
-    }
 }
 
 /// The event stream of `url`, read until `until` says so (or 60 s pass): `(event, data)`.

@@ -8,7 +8,8 @@
 //! - `GET /metrics` Prometheus text ([`crate::metrics`]);
 //! - `GET /events` server-sent events: `status` (5 Hz while data flows, 1 Hz otherwise),
 //!   `curve` (a curve ended: `{"index"}`), `network` (a new `network.glb` is in place:
-//!   `{"update", "curves"}`), `warning` (each warning of `report.json` as it is raised:
+//!   `{"update", "curves", "ended": [{"curve", "e_unix_ms"}]}`: the curves it brings in and
+//!   when their `E` packet was read, wall clock), `warning` (each warning of `report.json` as it is raised:
 //!   `{"text", "code", "curve", "node"}`; acquisition's at once, the reconstruction's when
 //!   the session ends, since they change with every curve until then: meanwhile the latest
 //!   are in the status), `preview` (the curve being scanned, integrated so far).
@@ -346,8 +347,15 @@ impl View {
     }
 
     /// A new `network.glb` is in place (`products`: its bytes and node positions), after
-    /// live update `live.updates` over `curves` curves.
-    pub fn network(&self, products: &crate::pipeline::Products, live: &LiveReport, curves: usize) {
+    /// live update `live.updates` over `curves` curves, bringing in the curves `posted` (index,
+    /// when its `E` packet was read).
+    pub fn network(
+        &self,
+        products: &crate::pipeline::Products,
+        live: &LiveReport,
+        curves: usize,
+        posted: &[(usize, std::time::Instant)],
+    ) {
         if let Some(b) = &products.glb {
             *lock(&self.shared.glb) = Some(axum::body::Bytes::copy_from_slice(b));
         }
@@ -372,9 +380,23 @@ impl View {
                 update_ms: live.update_ms.clone(),
             })
         });
+        // The E packets on the wall clock, for a page on this machine to measure the time
+        // to its own screen.
+        let (now, wall) = (std::time::Instant::now(), std::time::SystemTime::now());
+        let ended: Vec<serde_json::Value> = posted
+            .iter()
+            .map(|(curve, at)| {
+                let unix = wall
+                    .checked_sub(now.saturating_duration_since(*at))
+                    .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                    .map_or(0.0, |d| d.as_secs_f64() * 1e3);
+                serde_json::json!({ "curve": curve, "e_unix_ms": unix })
+            })
+            .collect();
         self.send(
             "network",
-            serde_json::json!({ "update": live.updates, "curves": curves }).to_string(),
+            serde_json::json!({ "update": live.updates, "curves": curves, "ended": ended })
+                .to_string(),
         );
     }
 

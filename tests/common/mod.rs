@@ -6,6 +6,8 @@ use device_protocol::*;
 use std::path::PathBuf;
 
 pub mod pty;
+pub mod view;
+pub mod webdriver;
 
 /// What a correct decoder must count on a [`fault_stream`].
 #[derive(Debug, Default, Clone, PartialEq)]

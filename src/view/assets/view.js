@@ -11,6 +11,9 @@ const state = {
   ready: false, errors: [], updates: 0, curves: [], nodes: [], surfaceTriangles: 0,
   lastCurve: null, warnings: 0, events: { status: 0, curve: 0, network: 0, warning: 0, preview: 0 },
   status: null, previewPoints: 0, closure: [], marked: [],
+  // Per curve brought in by a `network` event: from its E packet to the new network drawn
+  // here, ms (the server's wall clock and this page's are the same machine's).
+  latencies: [],
 };
 window.sfsView = state;
 function pageError(text) {
@@ -101,7 +104,7 @@ function showClosure(closure) {
     const li = document.createElement('li');
     if (!c) { li.textContent = 'no loop yet'; return li; }
     const tags = c.marked.map((t) => `node ${t.node} (tag ${t.tag + 1}, ${t.offset_mm.toFixed(0)} mm${t.detached ? ', let go' : ''})`);
-    li.textContent = `curve ${c.curve}: ${c.misfit_mm.toFixed(1)} mm` + (tags.length ? ' · rescan at ' + tags.join(', ') : '');
+    li.textContent = `curve ${c.curve}: ${c.misfit_mm.toFixed(1)} mm` + (tags.length ? ' · worst: ' + tags.join(', ') : '');
     li.classList.toggle('bad', tags.length > 0);
     return li;
   }));
@@ -198,9 +201,12 @@ function show(gltf) {
 
 const loader = new GLTFLoader();
 let loading = null;
+// Curves announced by `network` events whose network is not drawn yet.
+const pendingEnded = [];
 async function loadNetwork() {
   if (loading) { loading.again = true; return; }
   loading = { again: false };
+  const ended = pendingEnded.splice(0);
   try {
     const r = await fetch('/network.glb', { cache: 'no-store' });
     if (r.ok) {
@@ -208,9 +214,11 @@ async function loadNetwork() {
       const gltf = await loader.parseAsync(buf, '');
       show(gltf);
       state.updates += 1;
-      state.networkAt = performance.now();
       if (preview) { scene.remove(preview); preview = null; state.previewPoints = 0; }
-    }
+      draw();
+      const now = performance.timeOrigin + performance.now();
+      for (const e of ended) state.latencies.push({ curve: e.curve, ms: now - e.e_unix_ms });
+      }
   } catch (e) {
     pageError('network.glb: ' + e);
   }
@@ -225,8 +233,14 @@ function text(id, s, bad) {
   el.classList.toggle('bad', !!bad);
 }
 
+let warningsShown = false;
 function showStatus(s) {
   state.status = s;
+  if (!warningsShown) {
+    // A page opened mid-session: the latest warnings, before the events bring the next.
+    warningsShown = true;
+    for (const w of s.warnings) addWarning(w);
+  }
   setTimeout(draw, 0);
   const pill = document.getElementById('state');
   pill.textContent = s.state;
@@ -307,40 +321,24 @@ function showPreview(p) {
 document.getElementById('show-surface').addEventListener('change', (e) => { if (surface) surface.visible = e.target.checked; });
 document.getElementById('show-labels').addEventListener('change', (e) => { labels.visible = e.target.checked; });
 
-// `?once`: no event stream; the status, warnings and network as they are now, then the
-// state in #sfs-state (for a headless browser's --dump-dom, whose virtual time cannot pass
-// with a stream open).
-if (new URLSearchParams(location.search).has('once')) {
-  (async () => {
-    try {
-      const s = await (await fetch('/status', { cache: 'no-store' })).json();
-      showStatus(s);
-      for (const w of s.warnings) addWarning(w);
-      await loadNetwork();
-    } catch (e) {
-      state.errors.push(String(e));
-    }
-    renderer.render(scene, camera);
-    const dump = document.createElement('pre');
-    dump.id = 'sfs-state';
-    dump.hidden = true;
-    dump.textContent = JSON.stringify({ ...state, status: undefined, rendered: renderer.info.render });
-    document.body.append(dump);
-  })();
-} else {
-  const events = new EventSource('/events');
-  events.addEventListener('status', (e) => { state.events.status += 1; showStatus(JSON.parse(e.data)); });
-  events.addEventListener('curve', (e) => { state.events.curve += 1; state.lastCurve = JSON.parse(e.data).index; });
-  events.addEventListener('network', () => { state.events.network += 1; loadNetwork(); });
-  events.addEventListener('warning', (e) => { state.events.warning += 1; addWarning(JSON.parse(e.data)); });
-  events.addEventListener('preview', (e) => { state.events.preview += 1; showPreview(JSON.parse(e.data)); });
-  events.addEventListener('open', () => loadNetwork());
-  loadNetwork();
-  events.onerror = () => {
-    const pill = document.getElementById('state');
-    if (events.readyState !== EventSource.OPEN) { pill.textContent = 'disconnected'; pill.className = 'pill lost'; }
-  };
-}
+// Kept current by the server's events; the whole network fetched at once and again at every
+// `network` event and every reconnection.
+const events = new EventSource('/events');
+const on = (name, f) => events.addEventListener(name, (e) => {
+  state.events[name] += 1;
+  f(JSON.parse(e.data));
+});
+on('status', showStatus);
+on('curve', (c) => { state.lastCurve = c.index; });
+on('network', (n) => { pendingEnded.push(...(n.ended || [])); loadNetwork(); });
+on('warning', addWarning);
+on('preview', showPreview);
+events.addEventListener('open', () => loadNetwork());
+loadNetwork();
+events.onerror = () => {
+  const pill = document.getElementById('state');
+  if (events.readyState !== EventSource.OPEN) { pill.textContent = 'disconnected'; pill.className = 'pill lost'; }
+};
 
 function draw() {
   resize();

@@ -1,0 +1,81 @@
+//! A daemon serving the live view (`sfs replay … --view`), for the view's tests and its
+//! latency benchmark.
+
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A free loopback port (the listener is closed again at once).
+pub fn free_port() -> u16 {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    l.local_addr().unwrap().port()
+}
+
+/// A daemon that serves until interrupted; killed if the test fails first.
+pub struct Served(pub Child);
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// `sfs replay CAPTURE --out OUT --pace PACE --view 127.0.0.1:PORT` (`pace` `None`: as fast
+/// as it goes), with `extra` arguments.
+pub fn serve_replay(
+    capture: &Path,
+    out: &Path,
+    pace: Option<&str>,
+    port: u16,
+    extra: &[&str],
+) -> Served {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_sfs"));
+    c.args(["--log", "warn", "replay"])
+        .arg(capture)
+        .arg("--out")
+        .arg(out)
+        .args(["--view", &format!("127.0.0.1:{port}")])
+        .args(extra);
+    if let Some(p) = pace {
+        c.args(["--pace", p]);
+    }
+    Served(
+        c.stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    )
+}
+
+/// SIGINT: the replay that keeps serving stops, with success.
+pub fn interrupt(served: &mut Served) {
+    let child = &mut served.0;
+    let _ = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status();
+    let t0 = Instant::now();
+    loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            assert!(st.success(), "{st}");
+            return;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(20), "did not stop");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// `OUT/report.json` once the replay has ended (waits up to `limit`).
+pub fn ended_report(out: &Path, limit: Duration) -> serde_json::Value {
+    let t0 = Instant::now();
+    loop {
+        let r = std::fs::read(out.join("report.json"))
+            .ok()
+            .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok());
+        if let Some(r) = r.filter(|r| r["ended"] == "end_of_input") {
+            return r;
+        }
+        assert!(t0.elapsed() < limit, "the replay did not end in {limit:?}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}

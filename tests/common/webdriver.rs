@@ -1,0 +1,187 @@
+//! Debian's chromium, headless (WebGL through SwiftShader), driven through Debian's
+//! chromedriver over the W3C WebDriver protocol (plain HTTP and JSON): what the live view's
+//! browser tests and its latency benchmark need, no more.
+
+use base64::Engine;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const CHROMIUM: &str = "/usr/bin/chromium";
+const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
+
+/// Whether chromium and chromedriver are installed; when not, the caller skips, unless
+/// `SFS_REQUIRE_BROWSER` is set (`.ci/run` installs both and sets it): then it panics.
+pub fn available() -> bool {
+    let there = Path::new(CHROMIUM).exists() && Path::new(CHROMEDRIVER).exists();
+    assert!(
+        there || std::env::var_os("SFS_REQUIRE_BROWSER").is_none(),
+        "chromium or chromedriver is not installed (SFS_REQUIRE_BROWSER is set)"
+    );
+    if !there {
+        eprintln!("skipping: chromium or chromedriver is not installed");
+    }
+    there
+}
+
+/// One headless browser (a chromedriver and its session); both end when dropped.
+pub struct Browser {
+    driver: Child,
+    http: reqwest::Client,
+    session: String,
+    base: String,
+}
+
+impl Browser {
+    /// Starts chromedriver and a headless chromium with its profile in `profile`.
+    pub async fn start(profile: &Path) -> Browser {
+        let port = super::view::free_port();
+        let driver = Command::new(CHROMEDRIVER)
+            .arg(format!("--port={port}"))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("chromedriver");
+        let http = reqwest::Client::new();
+        let base = format!("http://127.0.0.1:{port}");
+        let t0 = Instant::now();
+        loop {
+            let ready = match http.get(format!("{base}/status")).send().await {
+                Ok(r) => r.json::<serde_json::Value>().await.ok(),
+                Err(_) => None,
+            };
+            if ready.is_some_and(|v| v["value"]["ready"] == true) {
+                break;
+            }
+            assert!(
+                t0.elapsed() < Duration::from_secs(20),
+                "chromedriver not ready"
+            );
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        let args = [
+            "--headless=new",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--use-gl=swiftshader",
+            "--enable-unsafe-swiftshader",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--window-size=1280,800",
+        ]
+        .iter()
+        .map(|a| a.to_string())
+        .chain([format!("--user-data-dir={}", profile.display())])
+        .collect::<Vec<_>>();
+        let caps = serde_json::json!({ "capabilities": { "alwaysMatch": {
+            "browserName": "chrome",
+            "goog:chromeOptions": { "binary": CHROMIUM, "args": args },
+        }}});
+        let mut b = Browser {
+            driver,
+            http,
+            session: String::new(),
+            base,
+        };
+        let v = b.call(reqwest::Method::POST, "/session", Some(caps)).await;
+        b.session = v["sessionId"].as_str().expect("a session id").to_owned();
+        b
+    }
+
+    async fn call(
+        &self,
+        method: reqwest::Method,
+        path: &str,
+        body: Option<serde_json::Value>,
+    ) -> serde_json::Value {
+        let mut r = self.http.request(method, format!("{}{}", self.base, path));
+        if let Some(b) = body {
+            r = r.json(&b);
+        }
+        let v: serde_json::Value = r.send().await.unwrap().json().await.unwrap();
+        assert!(
+            v["value"]["error"].is_null(),
+            "WebDriver {path}: {}",
+            v["value"]
+        );
+        v["value"].clone()
+    }
+
+    fn at(&self, what: &str) -> String {
+        format!("/session/{}/{what}", self.session)
+    }
+
+    /// Loads `url` (returns once the page has loaded).
+    pub async fn goto(&self, url: &str) {
+        let body = serde_json::json!({ "url": url });
+        self.call(reqwest::Method::POST, &self.at("url"), Some(body))
+            .await;
+    }
+
+    /// `JSON.stringify(window.sfsView)`, parsed (null before the page's script has run).
+    pub async fn view_state(&self) -> serde_json::Value {
+        let body = serde_json::json!({
+            "script": "return JSON.stringify(window.sfsView ? { ...window.sfsView, status: undefined } : null)",
+            "args": [],
+        });
+        let v = self
+            .call(reqwest::Method::POST, &self.at("execute/sync"), Some(body))
+            .await;
+        serde_json::from_str(v.as_str().unwrap_or("null")).unwrap()
+    }
+
+    /// Polls [`view_state`](Self::view_state) every 50 ms until `done` says so (panics after
+    /// `limit`); returns every state seen.
+    pub async fn watch(
+        &self,
+        limit: Duration,
+        mut done: impl FnMut(&serde_json::Value) -> bool,
+    ) -> Vec<serde_json::Value> {
+        let t0 = Instant::now();
+        let mut seen = Vec::new();
+        loop {
+            let s = self.view_state().await;
+            let stop = done(&s);
+            seen.push(s);
+            if stop {
+                return seen;
+            }
+            assert!(t0.elapsed() < limit, "the page: {}", seen.last().unwrap());
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    }
+
+    /// A PNG of the window, written to `path`.
+    pub async fn screenshot(&self, path: &PathBuf) {
+        let v = self
+            .call(reqwest::Method::GET, &self.at("screenshot"), None)
+            .await;
+        let png = base64::engine::general_purpose::STANDARD
+            .decode(v.as_str().unwrap())
+            .unwrap();
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(path, png).unwrap();
+    }
+}
+
+impl Browser {
+    /// Ends the browser's session (chromium exits), then chromedriver.
+    pub async fn close(self) {
+        let _ = self
+            .http
+            .delete(format!("{}/session/{}", self.base, self.session))
+            .send()
+            .await;
+    }
+}
+
+impl Drop for Browser {
+    fn drop(&mut self) {
+        // chromedriver ends its browser when it ends.
+        let _ = self.driver.kill();
+        let _ = self.driver.wait();
+    }
+}
