@@ -74,6 +74,9 @@ pub struct AcquisitionConfig {
     /// Phone: the angle (rad) the device turned through between two tags of the same node
     /// that makes them a loop. Default π (a loop turns through 2π at least).
     pub loop_turn: f64,
+    /// Integrate the curve being scanned for the live view ([`Acquisition::preview`]); off
+    /// (no cost) unless a view is served. Not a configuration key: `--view` sets it.
+    pub preview: bool,
 }
 
 impl Default for AcquisitionConfig {
@@ -93,6 +96,7 @@ impl Default for AcquisitionConfig {
             max_curve_samples: 2_000_000,
             loop_distance: 0.05,
             loop_turn: std::f64::consts::PI,
+            preview: false,
         }
     }
 }
@@ -514,7 +518,7 @@ impl Acquisition {
                 }
                 let step = self.wheel_m - wheel_before;
                 let tagged = self.open.as_ref().is_some_and(|o| !o.tags.is_empty());
-                if tagged && step != 0.0 {
+                if self.cfg.preview && tagged && step != 0.0 {
                     if let Some(q) = triad(&acc, &mag) {
                         self.preview_step(&q, step);
                     }
@@ -547,14 +551,16 @@ impl Acquisition {
                     self.field.add(&acc, &mag);
                 }
                 self.turn(t, q);
-                // The preview assumes the nominal speed, but while an index is typed.
-                let typing = self.open.as_ref().is_some_and(|o| o.first_digit.is_some());
-                let step = if typing {
-                    0.0
-                } else {
-                    self.cfg.nominal_speed * dt
-                };
-                self.preview_step(&q, step);
+                if self.cfg.preview {
+                    // The preview assumes the nominal speed, but while an index is typed.
+                    let typing = self.open.as_ref().is_some_and(|o| o.first_digit.is_some());
+                    let step = if typing {
+                        0.0
+                    } else {
+                        self.cfg.nominal_speed * dt
+                    };
+                    self.preview_step(&q, step);
+                }
                 self.sample(Raw {
                     t,
                     x: quat_array(&q),

@@ -3,7 +3,7 @@
 //! `bytes → source thread (capture first) → channel → decoder → link statistics → report.json`.
 //! Later stages (acquisition, reconstruction) hang off the decoder's packets here.
 
-use crate::acquisition::{Acquisition, Update};
+use crate::acquisition::{Acquisition, AcquisitionConfig, Update};
 use crate::atomic::OutputError;
 use crate::capture::CaptureWriter;
 use crate::link::LinkStats;
@@ -346,7 +346,13 @@ impl Flow {
         Ok(Flow {
             decoder: Decoder::new(),
             stats: LinkStats::default(),
-            acq: Acquisition::starting_at(settings.acquisition.clone(), clock_start),
+            acq: Acquisition::starting_at(
+                AcquisitionConfig {
+                    preview: view.is_some(),
+                    ..settings.acquisition.clone()
+                },
+                clock_start,
+            ),
             monitor,
             live,
             capture_failure: None,

@@ -13,7 +13,7 @@ const state = {
   status: null, previewPoints: 0, closure: [], marked: [],
   // Per curve brought in by a `network` event: from its E packet to the new network drawn
   // here, ms (the server's wall clock and this page's are the same machine's).
-  latencies: [],
+  latencies: [], frames: 0,
 };
 window.sfsView = state;
 function pageError(text) {
@@ -127,7 +127,7 @@ function drawMarks() {
       marks.add(ring);
     }
   }
-  setTimeout(draw, 0);
+  redraw();
 }
 
 function clear(group, textures = true) {
@@ -195,6 +195,7 @@ function show(gltf) {
     camera.position.copy(c).add(new THREE.Vector3(0.8, 0.6, 0.9).multiplyScalar(size));
     camera.near = size / 1000; camera.far = size * 100;
     camera.updateProjectionMatrix();
+    controls.update();
     framed = true;
   }
 }
@@ -241,7 +242,7 @@ function showStatus(s) {
     warningsShown = true;
     for (const w of s.warnings) addWarning(w);
   }
-  setTimeout(draw, 0);
+  redraw();
   const pill = document.getElementById('state');
   pill.textContent = s.state;
   pill.className = 'pill ' + s.state;
@@ -305,7 +306,7 @@ function showPreview(p) {
   preview.computeLineDistances();
   scene.add(preview);
   state.previewPoints = p.points.length;
-  setTimeout(draw, 0);
+  redraw();
   if (!framed) {
     // No network yet (the first curve): keep the curve being scanned in sight.
     geo.computeBoundingSphere();
@@ -315,6 +316,7 @@ function showPreview(p) {
     camera.position.copy(s.center).add(new THREE.Vector3(1.2, 1.0, 1.4).multiplyScalar(r * 1.5));
     camera.near = r / 1000; camera.far = r * 1000;
     camera.updateProjectionMatrix();
+    controls.update();
   }
 }
 
@@ -342,12 +344,18 @@ events.onerror = () => {
 
 function draw() {
   resize();
-  controls.update();
   renderer.render(scene, camera);
+  state.frames += 1;
 }
-function frame() {
-  draw();
-  requestAnimationFrame(frame);
+// Drawn on demand (an event changed the scene, the view was turned, the window resized), once
+// for any number of requests in between: a page left open costs nothing between events.
+let drawPending = false;
+function redraw() {
+  if (drawPending) return;
+  drawPending = true;
+  setTimeout(() => { drawPending = false; draw(); }, 0);
 }
-requestAnimationFrame(frame);
+controls.addEventListener('change', redraw);
+window.addEventListener('resize', redraw);
+redraw();
 state.ready = true;
