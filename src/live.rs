@@ -186,6 +186,11 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
         report.latencies.extend(lat.iter().map(|l| l.1));
         report.latency_ms = Percentiles::of(&report.latencies);
         report.update_ms = Percentiles::of(&update_ms);
+        // The view first: a page fetches the new network while the rest is written.
+        if let Some(v) = &settings.view {
+            v.network(&products, &report, scan.curves.len(), &posted);
+            v.reconstruction_warnings(&products.warnings);
+        }
         crate::memory::release_free_memory();
         (report.rss_mb, report.peak_rss_mb) = crate::memory::rss_mb();
         if settings.snapshots {
@@ -211,10 +216,6 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
         let path = settings.out_dir.join(REPORT_FILE);
         if let Err(e) = live_report.write(&path) {
             tracing::error!("live update: cannot write {}: {e}", path.display());
-        }
-        if let Some(v) = &settings.view {
-            v.network(&products, &report, scan.curves.len(), &posted);
-            v.reconstruction_warnings(&products.warnings);
         }
         status_lines(&scan, &products, &lat, compute_ms);
         last = Some(products);

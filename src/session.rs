@@ -545,16 +545,6 @@ impl Flow {
             ),
         };
         products.write_glb(out_dir)?;
-        if let Some(v) = &self.view {
-            v.warnings(scan.warnings.iter().chain(&products.warnings));
-            v.reconstruction_warnings(&[]);
-            if fresh {
-                let report = live_report.clone().unwrap_or_default();
-                v.network(&products, &report, scan.curves.len(), &[]);
-            }
-            v.preview(None);
-            v.ended();
-        }
         if let Some(l) = &mut live_report {
             crate::memory::release_free_memory();
             (l.rss_mb, l.peak_rss_mb) = crate::memory::rss_mb();
@@ -571,12 +561,23 @@ impl Flow {
             },
             &products,
         );
-        report.live = live_report;
         report.monitor = monitor_report;
         let report_path = out_dir.join(REPORT_FILE);
+        report.live = live_report;
         report
             .write(&report_path)
             .map_err(OutputError::at(&report_path))?;
+        // The view says `ended` once every output is in place.
+        if let Some(v) = &self.view {
+            v.warnings(scan.warnings.iter().chain(&products.warnings));
+            v.reconstruction_warnings(&[]);
+            if fresh {
+                let live = report.live.clone().unwrap_or_default();
+                v.network(&products, &live, scan.curves.len(), &[]);
+            }
+            v.preview(None);
+            v.ended();
+        }
         Ok((report, report_path))
     }
 }

@@ -12,7 +12,8 @@ const state = {
   lastCurve: null, warnings: 0, events: { status: 0, curve: 0, network: 0, warning: 0, preview: 0 },
   status: null, previewPoints: 0, closure: [], marked: [],
   // Per curve brought in by a `network` event: from its E packet to the new network drawn
-  // here, ms (the server's wall clock and this page's are the same machine's).
+  // here, ms (the server's wall clock and this page's are the same machine's), and the part
+  // of it from the event's arrival (`page_ms`: fetch, parse, draw).
   latencies: [], frames: 0,
 };
 window.sfsView = state;
@@ -66,15 +67,20 @@ function resize() {
   }
 }
 
+// Label textures by text, made once (a network is redrawn at every update).
+const labelTextures = new Map();
 function label(text, at, size) {
-  const c = document.createElement('canvas');
-  c.width = 128; c.height = 64;
-  const g = c.getContext('2d');
-  g.font = 'bold 40px sans-serif';
-  g.fillStyle = '#ffffff';
-  g.textAlign = 'center';
-  g.fillText(text, 64, 44);
-  const sprite = new THREE.Sprite(new THREE.SpriteMaterial({ map: new THREE.CanvasTexture(c), depthTest: false }));
+  if (!labelTextures.has(text)) {
+    const c = document.createElement('canvas');
+    c.width = 128; c.height = 64;
+    const g = c.getContext('2d');
+    g.font = 'bold 40px sans-serif';
+    g.fillStyle = '#ffffff';
+    g.textAlign = 'center';
+    g.fillText(text, 64, 44);
+    labelTextures.set(text, new THREE.CanvasTexture(c));
+  }
+  const sprite = new THREE.Sprite(new THREE.SpriteMaterial({ map: labelTextures.get(text), depthTest: false }));
   sprite.renderOrder = 10;
   sprite.position.copy(at);
   sprite.scale.set(size, size / 2, 1);
@@ -112,7 +118,7 @@ function showClosure(closure) {
 }
 
 function drawMarks() {
-  clear(marks, false);
+  clear(marks);
   state.marked = [];
   const at = state.nodePositions || {};
   for (const c of state.closure) {
@@ -130,12 +136,26 @@ function drawMarks() {
   redraw();
 }
 
-function clear(group, textures = true) {
+// Materials shared by every update (never disposed); textures are cached (labels, rings).
+const MATERIALS = {
+  boundary: new THREE.LineBasicMaterial({ color: COLOURS.boundary }),
+  interior: new THREE.LineBasicMaterial({ color: COLOURS.interior }),
+  latest: new THREE.LineBasicMaterial({ color: COLOURS.latest }),
+  node: new THREE.PointsMaterial({ color: COLOURS.node, size: 6, sizeAttenuation: false }),
+  preview: new THREE.LineDashedMaterial({ color: COLOURS.preview, dashSize: 0.01, gapSize: 0.006 }),
+  surface: new THREE.MeshStandardMaterial({
+    color: 0xb0bec5, roughness: 0.7, metalness: 0.0, side: THREE.DoubleSide,
+    polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1,
+  }),
+};
+const shared = new Set(Object.values(MATERIALS));
+
+// Empties a group, giving back its geometries and own materials.
+function clear(group) {
   for (const o of [...group.children]) {
     group.remove(o);
     o.geometry?.dispose();
-    if (textures) o.material?.map?.dispose();
-    o.material?.dispose();
+    if (!shared.has(o.material)) o.material?.dispose();
   }
 }
 
@@ -144,7 +164,7 @@ function clear(group, textures = true) {
 // an optional `surface` node).
 function show(gltf) {
   clear(network); clear(labels);
-  if (surface) { scene.remove(surface); surface = null; }
+  if (surface) { scene.remove(surface); surface.geometry.dispose(); surface = null; }
   const curves = [], nodes = [];
   const box = new THREE.Box3();
   gltf.scene.traverse((o) => {
@@ -152,18 +172,16 @@ function show(gltf) {
       const x = o.geometry.userData || {};
       curves.push({ index: x.curve, boundary: !!x.boundary, nodes: x.nodes || [] });
       const latest = x.curve === state.lastCurve;
-      const colour = latest ? COLOURS.latest : (x.boundary ? COLOURS.boundary : COLOURS.interior);
-      const line = new THREE.Line(o.geometry.clone(), new THREE.LineBasicMaterial({ color: colour }));
+      const material = latest ? MATERIALS.latest : (x.boundary ? MATERIALS.boundary : MATERIALS.interior);
+      // The loaded geometry itself: the parsed glb is dropped after this.
+      const line = new THREE.Line(o.geometry, material);
       line.userData = { curve: x.curve, boundary: !!x.boundary };
       network.add(line);
       o.geometry.computeBoundingBox();
       box.union(o.geometry.boundingBox);
     }
     if (o.isMesh && (o.name === 'surface' || o.parent?.name === 'surface')) {
-      surface = new THREE.Mesh(o.geometry.clone(), new THREE.MeshStandardMaterial({
-        color: 0xb0bec5, roughness: 0.7, metalness: 0.0, side: THREE.DoubleSide,
-        polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1,
-      }));
+      surface = new THREE.Mesh(o.geometry, MATERIALS.surface);
       surface.visible = document.getElementById('show-surface').checked;
       scene.add(surface);
     }
@@ -181,7 +199,7 @@ function show(gltf) {
       if (Number(k) < 1000000) labels.add(label(k, v, size * 0.08));
     }
     const geo = new THREE.BufferGeometry().setFromPoints(pts);
-    network.add(new THREE.Points(geo, new THREE.PointsMaterial({ color: COLOURS.node, size: 6, sizeAttenuation: false })));
+    network.add(new THREE.Points(geo, MATERIALS.node));
   }
   labels.visible = document.getElementById('show-labels').checked;
   state.curves = curves;
@@ -215,10 +233,12 @@ async function loadNetwork() {
       const gltf = await loader.parseAsync(buf, '');
       show(gltf);
       state.updates += 1;
-      if (preview) { scene.remove(preview); preview = null; state.previewPoints = 0; }
+      dropPreview();
       draw();
-      const now = performance.timeOrigin + performance.now();
-      for (const e of ended) state.latencies.push({ curve: e.curve, ms: now - e.e_unix_ms });
+      const now = performance.now();
+      for (const e of ended) {
+        state.latencies.push({ curve: e.curve, ms: performance.timeOrigin + now - e.e_unix_ms, page_ms: now - e.received });
+      }
       }
   } catch (e) {
     pageError('network.glb: ' + e);
@@ -298,11 +318,19 @@ function addWarning(w) {
   document.getElementById('warning-count').textContent = `(${state.warnings})`;
 }
 
+function dropPreview() {
+  if (!preview) return;
+  scene.remove(preview);
+  preview.geometry.dispose();
+  preview = null;
+  state.previewPoints = 0;
+}
+
 function showPreview(p) {
-  if (preview) { scene.remove(preview); preview.geometry.dispose(); preview = null; }
-  if (!p || !p.points || p.points.length < 2) { state.previewPoints = 0; return; }
+  dropPreview();
+  if (!p || !p.points || p.points.length < 2) return;
   const geo = new THREE.BufferGeometry().setFromPoints(p.points.map((q) => new THREE.Vector3(q[0], q[1], q[2])));
-  preview = new THREE.Line(geo, new THREE.LineDashedMaterial({ color: COLOURS.preview, dashSize: 0.01, gapSize: 0.006 }));
+  preview = new THREE.Line(geo, MATERIALS.preview);
   preview.computeLineDistances();
   scene.add(preview);
   state.previewPoints = p.points.length;
@@ -332,7 +360,11 @@ const on = (name, f) => events.addEventListener(name, (e) => {
 });
 on('status', showStatus);
 on('curve', (c) => { state.lastCurve = c.index; });
-on('network', (n) => { pendingEnded.push(...(n.ended || [])); loadNetwork(); });
+on('network', (n) => {
+  const received = performance.now();
+  pendingEnded.push(...(n.ended || []).map((e) => ({ ...e, received })));
+  loadNetwork();
+});
 on('warning', addWarning);
 on('preview', showPreview);
 events.addEventListener('open', () => loadNetwork());
