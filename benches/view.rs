@@ -1,6 +1,6 @@
 //! The live view's costs (issue 16 point 6), measured end to end.
 //!
-//! `cargo bench --bench view` runs both parts; `-- preview` or `-- latency` one of them
+//! `cargo bench --bench view` runs every part; `-- preview`, `-- latency` or `-- stalled` one
 //! (`SFS_BENCH_SEEDS=1,2,3` picks the seeds of the second; default 1,2,3).
 //!
 //! - **preview**: what the preview of the curve being scanned costs the pipeline on the phone
@@ -14,6 +14,9 @@
 //!   through chromedriver; the page measures each curve from the wall-clock time of its `E`
 //!   (in the `network` event) to its network drawn. Beside it, the daemon's own figure (E to
 //!   `network.glb` in place, `report.json` `live.latency_ms`). Needs chromium and chromedriver.
+//! - **stalled**: the daemon's own latency on the same replay (seed 1) with nobody looking,
+//!   and with 200 clients that ask for the event stream and never read a byte (32 are
+//!   served, the rest refused), alternately, three runs each.
 
 #[path = "../tests/common/view.rs"]
 #[allow(dead_code)]
@@ -89,9 +92,8 @@ fn preview() {
     );
 }
 
-/// The page's latencies per curve, ms (E to drawn, and the event's arrival to drawn), and the
-/// daemon's summary (`live.latency_ms`).
-async fn latency_of(seed: u64, dir: &Path) -> (Vec<(f64, f64)>, serde_json::Value) {
+/// Simulates the LILIUM scene (Morphorider) with `seed` into `dir`; the capture's path.
+fn lilium(seed: u64, dir: &Path) -> PathBuf {
     std::fs::create_dir_all(dir).unwrap();
     let prefix = dir.join("lilium");
     let st = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
@@ -100,15 +102,15 @@ async fn latency_of(seed: u64, dir: &Path) -> (Vec<(f64, f64)>, serde_json::Valu
         .arg("--out")
         .arg(&prefix)
         .current_dir(root())
+        .stdout(std::process::Stdio::null())
         .status()
         .unwrap();
     assert!(st.success());
-    let browser = webdriver::Browser::start(&dir.join("profile")).await;
-    let port = view::free_port();
-    let out = dir.join("out");
-    let _ = std::fs::remove_dir_all(&out);
-    let mut served =
-        view::serve_replay(&prefix.with_extension("bin"), &out, Some("x10"), port, &[]);
+    prefix.with_extension("bin")
+}
+
+/// Waits until the view at `port` answers.
+async fn served(port: u16) {
     let t0 = Instant::now();
     while reqwest::get(format!("http://127.0.0.1:{port}/status"))
         .await
@@ -117,16 +119,82 @@ async fn latency_of(seed: u64, dir: &Path) -> (Vec<(f64, f64)>, serde_json::Valu
         assert!(t0.elapsed() < Duration::from_secs(20), "no view served");
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
-    browser.goto(&format!("http://127.0.0.1:{port}/")).await;
-    let report = loop {
+}
+
+/// `OUT/report.json` once the replay has ended.
+async fn ended(out: &Path) -> serde_json::Value {
+    loop {
         let r = std::fs::read(out.join("report.json"))
             .ok()
             .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok());
         if let Some(r) = r.filter(|r| r["ended"] == "end_of_input") {
-            break r;
+            return r;
         }
         tokio::time::sleep(Duration::from_millis(500)).await;
-    };
+    }
+}
+
+/// The daemon's `live.latency_ms` on `capture` at ×10 with `clients` stalled event streams.
+async fn daemon_latency(capture: &Path, out: &Path, clients: usize) -> serde_json::Value {
+    let _ = std::fs::remove_dir_all(out);
+    let port = view::free_port();
+    let mut daemon = view::serve_replay(capture, out, Some("x10"), port, &[]);
+    served(port).await;
+    let mut stalled = Vec::new();
+    for _ in 0..clients {
+        use std::io::Write;
+        if let Ok(mut s) = std::net::TcpStream::connect(("127.0.0.1", port)) {
+            let _ = s.write_all(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n");
+            stalled.push(s);
+        }
+    }
+    let report = ended(out).await;
+    view::interrupt(&mut daemon);
+    drop(stalled);
+    report["live"]["latency_ms"].clone()
+}
+
+fn stalled() {
+    let dir = root().join("target/bench-view/stalled");
+    let capture = lilium(1, &dir);
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    println!("stalled clients, LILIUM seed 1 at x10 with surfacing: the daemon's E to network.glb");
+    for run in 1..=3 {
+        for clients in [0, 200] {
+            let l = rt.block_on(daemon_latency(&capture, &dir.join("out"), clients));
+            println!(
+                "  run {run}, {clients:>3} stalled clients: p50 {:.0} / p95 {:.0} ms",
+                l["p50"].as_f64().unwrap_or(f64::NAN),
+                l["p95"].as_f64().unwrap_or(f64::NAN)
+            );
+        }
+    }
+}
+
+/// What one replay measured.
+struct Measured {
+    /// Per curve: E to drawn in the page, and the `network` event's arrival to drawn, ms.
+    page: Vec<(f64, f64)>,
+    /// `report.json` `live.latency_ms`.
+    daemon: serde_json::Value,
+    /// `preview` events the page received per second of wall time a curve was open.
+    preview_hz: f64,
+}
+
+async fn latency_of(seed: u64, dir: &Path) -> Measured {
+    let capture = lilium(seed, dir);
+    let browser = webdriver::Browser::start(&dir.join("profile")).await;
+    let port = view::free_port();
+    let out = dir.join("out");
+    let _ = std::fs::remove_dir_all(&out);
+    let mut daemon = view::serve_replay(&capture, &out, Some("x10"), port, &[]);
+    served(port).await;
+    browser.goto(&format!("http://127.0.0.1:{port}/")).await;
+    let report = ended(&out).await;
     let state = browser
         .watch(Duration::from_secs(30), |s| {
             s["events"]["network"].as_u64() == s["events"]["curve"].as_u64()
@@ -138,14 +206,26 @@ async fn latency_of(seed: u64, dir: &Path) -> (Vec<(f64, f64)>, serde_json::Valu
         .unwrap();
     assert_eq!(state["errors"], serde_json::json!([]), "console errors");
     browser.close().await;
-    view::interrupt(&mut served);
+    view::interrupt(&mut daemon);
     let page: Vec<(f64, f64)> = state["latencies"]
         .as_array()
         .unwrap()
         .iter()
         .map(|l| (l["ms"].as_f64().unwrap(), l["page_ms"].as_f64().unwrap()))
         .collect();
-    (page, report["live"]["latency_ms"].clone())
+    // Curves were open for their samples at the device's rate, replayed 10 times faster.
+    let rate = report["link"]["hello"]["rate_hz"].as_f64().unwrap_or(100.0);
+    let open_s: f64 = report["curves"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["samples"].as_f64().unwrap() / rate / 10.0)
+        .sum();
+    Measured {
+        page,
+        daemon: report["live"]["latency_ms"].clone(),
+        preview_hz: state["events"]["preview"].as_f64().unwrap() / open_s,
+    }
 }
 
 fn latency() {
@@ -169,7 +249,11 @@ fn latency() {
     println!("latency, LILIUM Morphorider at x10 with surfacing, E to the network drawn in the page (target p95 <= 150 ms)");
     for seed in seeds {
         let dir = root().join(format!("target/bench-view/seed-{seed}"));
-        let (page, daemon) = rt.block_on(latency_of(seed, &dir));
+        let Measured {
+            page,
+            daemon,
+            preview_hz,
+        } = rt.block_on(latency_of(seed, &dir));
         let total: Vec<f64> = page.iter().map(|l| l.0).collect();
         let own: Vec<f64> = page.iter().map(|l| l.1).collect();
         let (p, o) = (Percentiles::of(&total), Percentiles::of(&own));
@@ -179,6 +263,9 @@ fn latency() {
             p.n, p.p50, p.p95, p.max, o.p50, o.p95, ms("p50"), ms("p95")
         );
         println!("    E to drawn per curve, ms: {total:.0?}");
+        println!(
+            "    preview events while a curve was open: {preview_hz:.1} per second (target >= 5)"
+        );
     }
 }
 
@@ -193,5 +280,8 @@ fn main() {
     }
     if wants("latency") {
         latency();
+    }
+    if wants("stalled") {
+        stalled();
     }
 }

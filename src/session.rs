@@ -312,9 +312,6 @@ struct Flow {
     preview_shown: bool,
 }
 
-/// The curve being scanned goes to the view at most this often.
-const PREVIEW_PERIOD: std::time::Duration = std::time::Duration::from_millis(100);
-
 impl Flow {
     /// The flow of a session whose clock starts at `clock_start`, with its live worker when
     /// the settings ask for live updates.
@@ -405,10 +402,10 @@ impl Flow {
             v.warnings(&warnings[self.warnings_shown..]);
             self.warnings_shown = warnings.len();
         }
-        // The curve being scanned, 10 times a second at most; cleared once when it ends.
+        // The curve being scanned, every `view::PREVIEW_PERIOD` at most; cleared once when it ends.
         let due = self
             .preview_at
-            .is_none_or(|t| t.elapsed() >= PREVIEW_PERIOD);
+            .is_none_or(|t| t.elapsed() >= crate::view::PREVIEW_PERIOD);
         let preview = match (self.acq.curve_open(), self.preview_shown) {
             (true, _) if due => self.acq.preview(),
             (false, true) => None,

@@ -6,13 +6,14 @@
 //! - `GET /network.glb` the latest reconstruction (the bytes of `SESSION/network.glb`);
 //! - `GET /status` one JSON object ([`Status`]);
 //! - `GET /metrics` Prometheus text ([`crate::metrics`]);
-//! - `GET /events` server-sent events: `status` (5 Hz while data flows, 1 Hz otherwise),
-//!   `curve` (a curve ended: `{"index"}`), `network` (a new `network.glb` is in place:
-//!   `{"update", "curves", "ended": [{"curve", "e_unix_ms"}]}`: the curves it brings in and
-//!   when their `E` packet was read, wall clock), `warning` (each warning of `report.json` as it is raised:
-//!   `{"text", "code", "curve", "node"}`; acquisition's at once, the reconstruction's when
-//!   the session ends, since they change with every curve until then: meanwhile the latest
-//!   are in the status), `preview` (the curve being scanned, integrated so far).
+//! - `GET /events` server-sent events: `status` (5 Hz while data flows, 1 Hz otherwise);
+//!   `curve` (a curve ended: `{"index"}`); `network` (a new `network.glb` is in place:
+//!   `{"update", "curves", "ended": [{"curve", "e_unix_ms"}]}`, the curves it brings in and
+//!   when their `E` packet was read, wall clock); `warning` (each warning of `report.json` as
+//!   it is raised: `{"text", "code", "curve", "node"}`; acquisition's at once, the
+//!   reconstruction's when the session ends, since they change with every curve until then:
+//!   meanwhile the latest are in the status); `preview` (the curve being scanned, integrated
+//!   so far, 10 Hz while it is scanned: `{"curve", "start_node", "points"}`, or `null`).
 //!
 //! The session and the live worker publish into a [`View`] (a lock and an assignment, never a
 //! wait); the server reads it. Nothing the server does can hold them up: events go through a
@@ -22,7 +23,7 @@
 pub mod assets;
 mod server;
 
-pub use server::{bind, serve, DEFAULT_ADDRESS};
+pub use server::{bind, serve, DEFAULT_ADDRESS, PREVIEW_PERIOD};
 
 use crate::link::LinkStats;
 use crate::metrics::SessionMetrics;

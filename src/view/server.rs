@@ -26,6 +26,8 @@ pub const MAX_IN_FLIGHT: usize = 64;
 const REQUEST_TIMEOUT: Duration = Duration::from_secs(10);
 /// `status` events while data flows.
 const STATUS_PERIOD: Duration = Duration::from_millis(200);
+/// `preview` events while a curve is scanned (the session integrates it as often).
+pub const PREVIEW_PERIOD: Duration = Duration::from_millis(100);
 /// `status` events when nothing changes.
 const HEARTBEAT: Duration = Duration::from_secs(1);
 
@@ -105,9 +107,9 @@ pub fn serve(
 }
 
 /// Sends `status` (at [`STATUS_PERIOD`] while it changes, every [`HEARTBEAT`] otherwise) and
-/// `preview` (when it changes), and keeps the packet rate.
+/// `preview` (at [`PREVIEW_PERIOD`] while it changes), and keeps the packet rate.
 async fn tick(view: View, stop: Shutdown) {
-    let mut interval = tokio::time::interval(STATUS_PERIOD);
+    let mut interval = tokio::time::interval(PREVIEW_PERIOD);
     interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let (mut seen, mut preview_seen) = (u64::MAX, 0);
     let mut last_sent = Instant::now();
@@ -118,7 +120,9 @@ async fn tick(view: View, stop: Shutdown) {
             _ = stop.triggered() => return,
         }
         let g = view.status_generation();
-        if g != seen || last_sent.elapsed() >= HEARTBEAT {
+        let since = last_sent.elapsed();
+        // (Half a tick of slack: ticks jitter, and a status every third tick would be 3 Hz.)
+        if (g != seen && since + PREVIEW_PERIOD / 2 >= STATUS_PERIOD) || since >= HEARTBEAT {
             seen = g;
             last_sent = Instant::now();
             let status = {
