@@ -263,6 +263,7 @@ fn latency() {
             p.n, p.p50, p.p95, p.max, o.p50, o.p95, ms("p50"), ms("p95")
         );
         println!("    E to drawn per curve, ms: {total:.0?}");
+        println!("    of which the page, ms: {own:.0?}");
         println!(
             "    preview events while a curve was open: {preview_hz:.1} per second (target >= 5)"
         );

@@ -150,6 +150,22 @@ const MATERIALS = {
 };
 const shared = new Set(Object.values(MATERIALS));
 
+// Compiles the shaders of every shared material at load (a first surface otherwise waits
+// tens of milliseconds for them, in software WebGL more).
+{
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', new THREE.Float32BufferAttribute([0, 0, 0, 1, 0, 0, 0, 1, 0], 3));
+  g.setAttribute('normal', new THREE.Float32BufferAttribute([0, 0, 1, 0, 0, 1, 0, 0, 1], 3));
+  g.setIndex([0, 1, 2]);
+  const warm = new THREE.Group();
+  warm.add(new THREE.Mesh(g, MATERIALS.surface), new THREE.Points(g, MATERIALS.node));
+  for (const k of ['boundary', 'interior', 'latest', 'preview']) warm.add(new THREE.Line(g, MATERIALS[k]));
+  scene.add(warm);
+  renderer.compile(scene, camera);
+  scene.remove(warm);
+  g.dispose();
+}
+
 // Empties a group, giving back its geometries and own materials.
 function clear(group) {
   for (const o of [...group.children]) {
@@ -377,15 +393,20 @@ events.onerror = () => {
 function draw() {
   resize();
   renderer.render(scene, camera);
+  drawnAt = performance.now();
   state.frames += 1;
 }
-// Drawn on demand (an event changed the scene, the view was turned, the window resized), once
-// for any number of requests in between: a page left open costs nothing between events.
-let drawPending = false;
+// Drawn on demand (an event changed the scene, the view was turned, the window resized), at
+// most every DRAW_PERIOD ms, once for any number of requests in between: a page left open
+// costs nothing between events, and the 15 status and preview events a second cost 10
+// frames (a new network is drawn at once: `draw`).
+const DRAW_PERIOD = 100;
+let drawPending = false, drawnAt = -Infinity;
 function redraw() {
   if (drawPending) return;
   drawPending = true;
-  setTimeout(() => { drawPending = false; draw(); }, 0);
+  const wait = Math.max(0, drawnAt + DRAW_PERIOD - performance.now());
+  setTimeout(() => { drawPending = false; draw(); }, wait);
 }
 controls.addEventListener('change', redraw);
 window.addEventListener('resize', redraw);
