@@ -122,16 +122,8 @@ async fn served(port: u16) {
 }
 
 /// `OUT/report.json` once the replay has ended.
-async fn ended(out: &Path) -> serde_json::Value {
-    loop {
-        let r = std::fs::read(out.join("report.json"))
-            .ok()
-            .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok());
-        if let Some(r) = r.filter(|r| r["ended"] == "end_of_input") {
-            return r;
-        }
-        tokio::time::sleep(Duration::from_millis(500)).await;
-    }
+fn ended(out: &Path) -> serde_json::Value {
+    tokio::task::block_in_place(|| view::ended_report(out, Duration::from_secs(600)))
 }
 
 /// The daemon's `live.latency_ms` on `capture` at ×10 with `clients` stalled event streams.
@@ -148,7 +140,7 @@ async fn daemon_latency(capture: &Path, out: &Path, clients: usize) -> serde_jso
             stalled.push(s);
         }
     }
-    let report = ended(out).await;
+    let report = ended(out);
     view::interrupt(&mut daemon);
     drop(stalled);
     report["live"]["latency_ms"].clone()
@@ -194,7 +186,7 @@ async fn latency_of(seed: u64, dir: &Path) -> Measured {
     let mut daemon = view::serve_replay(&capture, &out, Some("x10"), port, &[]);
     served(port).await;
     browser.goto(&format!("http://127.0.0.1:{port}/")).await;
-    let report = ended(&out).await;
+    let report = ended(&out);
     let state = browser
         .watch(Duration::from_secs(30), |s| {
             s["events"]["network"].as_u64() == s["events"]["curve"].as_u64()

@@ -62,17 +62,11 @@ fn issue5_lost_index_digits_do_not_distort_the_network() {
     );
     // Issue 16: the closure misfit the view shows marks that tag, and only it, for the
     // operator to check; the loops then close to a few millimetres.
-    let marked: Vec<(usize, usize, u32, bool)> = net
-        .report
-        .closure
-        .iter()
-        .flat_map(|c| {
-            c.tags
-                .iter()
-                .filter(|t| t.marked)
-                .map(|t| (c.curve, t.tag, t.node, t.detached))
-        })
-        .collect();
+    let marked: Vec<(usize, usize, u32, bool)> =
+        sfs_geometry::network::closure::marked(&net.report.closure)
+            .iter()
+            .map(|(c, t)| (*c, t.tag, t.node, t.detached))
+            .collect();
     assert_eq!(marked, vec![(7, 4, 9, true)], "{:?}", net.report.closure);
     assert_eq!(net.report.closure.len(), scan.curves.len());
     let worst = net

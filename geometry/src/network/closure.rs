@@ -323,6 +323,19 @@ pub struct TagMisfit {
     pub detached: bool,
 }
 
+/// The marked tags of `misfits` (a network's [`ClosureReport::curves`]), as (curve, tag).
+pub fn marked(misfits: &[CurveMisfit]) -> Vec<(usize, &TagMisfit)> {
+    misfits
+        .iter()
+        .flat_map(|c| {
+            c.tags
+                .iter()
+                .filter(|t| t.marked)
+                .map(move |t| (c.curve, t))
+        })
+        .collect()
+}
+
 /// The misfit of each curve in `curves` under `d`, with the detached tags added.
 fn curve_misfits(curves: &[UniformCurve], d: &Drops, detached: &[Detached]) -> Vec<CurveMisfit> {
     let mut out: Vec<CurveMisfit> = curves
@@ -575,10 +588,7 @@ mod tests {
                 );
                 // Noise marks no tag for rescanning; every curve has its misfit.
                 assert_eq!(r.curves.len(), g.len());
-                assert!(
-                    r.curves.iter().flat_map(|c| &c.tags).all(|t| !t.marked),
-                    "seed {seed}, {noise}°: {r:?}"
-                );
+                assert!(marked(&r.curves).is_empty(), "seed {seed}, {noise}°: {r:?}");
                 let shares: f64 = r.curves.iter().map(|c| c.share).sum();
                 assert!(noise == 0.0 || (shares - 1.0).abs() < 1e-9, "{shares}");
                 let after: Vec<_> = g.iter().map(|c| c.nodes.clone()).collect();
@@ -600,17 +610,11 @@ mod tests {
             assert!(kept.detached.is_empty());
             assert_eq!(kept.refused.len(), 1, "{kept:?}");
             // The view marks that tag, and only it; its curve misses its nodes the most.
-            let marked: Vec<(usize, usize, u32)> = kept
-                .curves
+            let shown: Vec<(usize, usize, u32)> = marked(&kept.curves)
                 .iter()
-                .flat_map(|c| {
-                    c.tags
-                        .iter()
-                        .filter(|t| t.marked)
-                        .map(|t| (c.curve, t.tag, t.node))
-                })
+                .map(|(c, t)| (*c, t.tag, t.node))
                 .collect();
-            assert_eq!(marked, vec![(2, 2, 5)], "seed {seed}");
+            assert_eq!(shown, vec![(2, 2, 5)], "seed {seed}");
             let worst = kept
                 .curves
                 .iter()
@@ -631,17 +635,11 @@ mod tests {
             assert_eq!(d.len(), 1, "seed {seed}: {d:?}");
             // Once detached the loops close: the tag is still marked (with the node it was
             // typed as), and no other.
-            let marked: Vec<(usize, usize, u32, bool)> = r
-                .curves
+            let shown: Vec<(usize, usize, u32, bool)> = marked(&r.curves)
                 .iter()
-                .flat_map(|c| {
-                    c.tags
-                        .iter()
-                        .filter(|t| t.marked)
-                        .map(|t| (c.curve, t.tag, t.node, t.detached))
-                })
+                .map(|(c, t)| (*c, t.tag, t.node, t.detached))
                 .collect();
-            assert_eq!(marked, vec![(2, 2, 5, true)], "seed {seed}");
+            assert_eq!(shown, vec![(2, 2, 5, true)], "seed {seed}");
             assert_eq!((d[0].curve, d[0].tag, d[0].node), (2, 2, 5));
             assert!(crate::curve::is_anonymous(d[0].anonymous));
             assert_eq!(g[2].nodes[2].1, d[0].anonymous);
