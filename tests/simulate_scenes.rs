@@ -141,6 +141,35 @@ fn simulated_bytes_decode_with_the_faults_put_in() {
             t.packets_corrupted > 0 && t.packets_lost > 0,
             "the profile puts link faults in"
         );
+        // Issue 17: one 0.3 s stall in the middle of a move (30 samples at 100 Hz).
+        let dropped = t.samples_dropped as i64;
+        assert!(
+            if field { (29..=31).contains(&dropped) } else { dropped == 0 },
+            "{profile:?}: {dropped} samples dropped"
+        );
+        let gap = t
+            .t
+            .windows(2)
+            .zip(&t.curve)
+            .filter(|(_, c)| c.is_some())
+            .map(|(w, _)| w[1] - w[0])
+            .fold(0.0, f64::max);
+        assert_eq!(gap > 0.29, field, "{profile:?}: longest gap on a curve {gap} s");
+        // Issue 17: the hand tilts the standing device by 3-5° while an index is typed.
+        let mut tilt: f64 = 0.0;
+        let mut since = None;
+        for (i, (&standing, c)) in t.standing.iter().zip(&t.curve).enumerate() {
+            if standing && c.is_some() {
+                let first = *since.get_or_insert(i);
+                tilt = tilt.max(t.q[first].angle_to(&t.q[i]).to_degrees());
+            } else {
+                since = None;
+            }
+        }
+        assert!(
+            if field { (2.2..6.3).contains(&tilt) } else { tilt < 1.0 },
+            "{profile:?}: the resting device turned by up to {tilt:.2}°"
+        );
     }
 }
 
@@ -226,4 +255,35 @@ fn deforming_riser_streams_orientations_that_acquisition_recovers() {
         .filter_map(|e| e.tip_displacement)
         .fold(0.0, f64::max);
     assert!(max_tip > 1.5, "{max_tip}");
+}
+
+/// Issue 17: the field phone's gyroscope is an uncalibrated consumer one: at rest before the
+/// first curve it reads about 1.7°/s per axis (and the default profile's well under 1°/s).
+#[test]
+fn issue_17_the_field_phone_has_an_uncalibrated_gyroscope() {
+    let s = scene::load(&scene::find("cone", &scenes_dir())).unwrap();
+    for (profile, range) in [(Profile::Default, 0.0..1.0), (Profile::Field, 1.2..2.3)] {
+        let sim = simulate::run(&s, DeviceKind::Phone, profile, 4);
+        let mut dec = Decoder::new();
+        // (The field capture starts mid-packet: its first HELLO may be lost.)
+        let lsb = simulate::device::DeviceParams::phone().gyro_lsb;
+        let mut rest = Vec::new();
+        for e in dec.feed(&sim.bytes) {
+            if let device_protocol::Event::Packet {
+                packet: device_protocol::Packet::PhoneSample(p),
+                ..
+            } = e
+            {
+                if rest.len() < 150 {
+                    rest.push(p.gyro.map(|g| g as f64 * lsb));
+                }
+            }
+        }
+        // The first 0.75 s: the device lies still before the first curve starts.
+        for axis in 0..3 {
+            let mean = rest.iter().map(|g| g[axis]).sum::<f64>() / rest.len() as f64;
+            let deg = mean.abs().to_degrees();
+            assert!(range.contains(&deg), "{profile:?}, axis {axis}: {deg:.2}°/s");
+        }
+    }
 }

@@ -79,6 +79,11 @@ pub struct DeviceParams {
     pub gyro_sigma: f64,
     /// Gyroscope constant bias per axis, standard deviation, rad/s (phone). Default 0.005.
     pub gyro_bias_sigma: f64,
+    /// Gyroscope bias per axis of about this size instead (rad/s, ±20 %, random sign), as
+    /// an uncalibrated consumer gyroscope has; 0: drawn from `gyro_bias_sigma`. Default 0.
+    pub gyro_bias_axis: f64,
+    /// Random walk of the gyroscope bias, rad/s per √s per axis. Default 0.
+    pub gyro_bias_walk: f64,
     /// LSB sizes announced in HELLO.
     pub acc_lsb: f64,
     pub mag_lsb: f64,
@@ -99,9 +104,14 @@ pub struct DeviceParams {
     /// Device clock at the session's start, µs (to put a clock wrap mid-session).
     pub clock_start_us: u32,
     pub device_id: u32,
-    /// The device restarts at this session time: it is silent for half a second, then sends a
-    /// HELLO with its sequence, clock and wheel counter restarted.
+    /// The device restarts at this session time: it is silent for `reboot_silence` seconds,
+    /// then sends a HELLO with its sequence, clock and wheel counter restarted.
     pub reboot_at: Option<f64>,
+    /// How long a reboot keeps the device silent, s. Default 0.5.
+    pub reboot_silence: f64,
+    /// Stalls of the sample stream `(start s, duration s)`: the device drops the samples
+    /// (counted in STATUS `dropped`) while the operator goes on moving.
+    pub stalls: Vec<(f64, f64)>,
     /// Wheel skids `(start s, duration s, factor)`: the wheel turns only `factor` of the motion.
     pub skids: Vec<(f64, f64, f64)>,
 }
@@ -116,6 +126,8 @@ impl DeviceParams {
             mag_sigma: 0.3,
             gyro_sigma: 0.0,
             gyro_bias_sigma: 0.0,
+            gyro_bias_axis: 0.0,
+            gyro_bias_walk: 0.0,
             acc_lsb: 16.0 * G / 65536.0,
             mag_lsb: 0.15,
             gyro_lsb: 0.0,
@@ -130,6 +142,8 @@ impl DeviceParams {
             clock_start_us: 1_000_000,
             device_id: 0x5F5_0001,
             reboot_at: None,
+            reboot_silence: 0.5,
+            stalls: Vec::new(),
             skids: Vec::new(),
         }
     }
@@ -143,6 +157,8 @@ impl DeviceParams {
             mag_sigma: 0.4,
             gyro_sigma: 0.003,
             gyro_bias_sigma: 0.005,
+            gyro_bias_axis: 0.0,
+            gyro_bias_walk: 0.0,
             acc_lsb: 16.0 * G / 65536.0,
             mag_lsb: 0.15,
             gyro_lsb: 2000f64.to_radians() / 32768.0,
@@ -157,6 +173,8 @@ impl DeviceParams {
             clock_start_us: 2_000_000,
             device_id: 0x5F5_0002,
             reboot_at: None,
+            reboot_silence: 0.5,
+            stalls: Vec::new(),
             skids: Vec::new(),
         }
     }
@@ -194,6 +212,8 @@ pub struct SampleTruth {
     pub packets_sent: u64,
     pub packets_corrupted: u64,
     pub packets_lost: u64,
+    /// Samples the device dropped in a stall (not sent, not in the vectors above).
+    pub samples_dropped: u64,
 }
 
 /// Writes packets with sequence numbers, periodic HELLO and STATUS, and link faults.
@@ -211,6 +231,8 @@ struct Emitter {
     sent: u64,
     corrupted: u64,
     lost: u64,
+    /// Samples dropped since power-up (STATUS `dropped`).
+    dropped: u32,
 }
 
 impl Emitter {
@@ -228,6 +250,7 @@ impl Emitter {
         self.clock_base_t = t;
         self.next_hello = t;
         self.next_status = t;
+        self.dropped = 0;
     }
 
     fn emit(&mut self, t: f64, p: Packet) {
@@ -242,7 +265,7 @@ impl Emitter {
                 t_us,
                 battery_mv: 3900u16.saturating_sub((t / 60.0) as u16),
                 flags: 0,
-                dropped: 0,
+                dropped: self.dropped,
             }));
         }
         self.raw(p);
@@ -287,6 +310,7 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
         sent: 0,
         corrupted: 0,
         lost: 0,
+        dropped: 0,
     };
     let mut rebooted = false;
     let mut truth = SampleTruth::default();
@@ -294,7 +318,15 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
     let g = Vector3::new(0.0, 0.0, G);
     // Sensor axes → frame axes: frame = mounting · axes · sensor.
     let frame_from_sensor = p.mounting.matrix() * Calibration::default_for(p.kind).axes.m;
-    let gyro_bias = rng.vec3(p.gyro_bias_sigma);
+    let mut gyro_bias = if p.gyro_bias_axis > 0.0 {
+        Vector3::from_fn(|_, _| {
+            let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
+            sign * p.gyro_bias_axis * rng.range(0.8, 1.2)
+        })
+    } else {
+        rng.vec3(p.gyro_bias_sigma)
+    };
+    let mut bias_t = 0.0;
     let m_per_tick = if p.ticks_per_rev > 0 {
         p.wheel_circumference_um as f64 * 1e-6 / p.ticks_per_rev as f64
     } else {
@@ -322,11 +354,11 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
         if let Some(tr) = p.reboot_at {
             if st.t >= tr && !rebooted {
                 rebooted = true;
-                // The wheel counter restarts with the firmware; the boot takes half a second.
+                // The wheel counter restarts with the firmware.
                 wheel_dev = 0.0;
-                em.reboot(tr + 0.5);
+                em.reboot(tr + p.reboot_silence);
             }
-            if st.t >= tr && st.t < tr + 0.5 {
+            if st.t >= tr && st.t < tr + p.reboot_silence {
                 last_wheel = st.wheel;
                 continue;
             }
@@ -362,6 +394,16 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
         }
         wheel_dev += (st.wheel - last_wheel) * slip;
         last_wheel = st.wheel;
+        if p.gyro_bias_walk > 0.0 {
+            gyro_bias += rng.vec3(p.gyro_bias_walk * (st.t - bias_t).max(0.0).sqrt());
+            bias_t = st.t;
+        }
+        if p.stalls.iter().any(|&(a, d)| st.t >= a && st.t < a + d) {
+            // Dropped inside the device: the wheel goes on counting.
+            em.dropped = em.dropped.saturating_add(1);
+            truth.samples_dropped += 1;
+            continue;
+        }
         let sample = sensor_sample(
             st,
             p,

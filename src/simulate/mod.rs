@@ -38,9 +38,12 @@ use truth::{um, Truth, TruthCurve, TruthSensor};
 pub enum Profile {
     /// Documented default noise, link faults at 0.05 % of packets each (corrupted, lost).
     Default,
-    /// What real sessions bring: 3× the noise, a 2° mounting offset, a ferromagnetic object
-    /// near part of the surface, wheel skids, a wrong node index undone with U, a curve
-    /// cancelled with C and rescanned, a device reboot between curves, the clock wrapping
+    /// What real sessions bring: 3× the noise, a 2° mounting offset, an uncalibrated phone
+    /// gyroscope (about 1.7°/s of bias per axis, wandering 0.03°/s per √s), the hand tilting
+    /// the resting device by 3–5° while an index is typed, a ferromagnetic object near part of
+    /// the surface, wheel skids, a 0.3 s stall of the sample stream in the middle of a move, a
+    /// wrong node index undone with U, a curve cancelled with C and rescanned, a device reboot
+    /// (2 s of silence) while it is carried and turned between curves, the clock wrapping
     /// mid-session, twice the link faults, and a capture that starts mid-packet.
     Field,
 }
@@ -97,7 +100,16 @@ pub fn run_with(
         p.acc_sigma *= 3.0;
         p.mag_sigma *= 3.0;
         p.gyro_sigma *= 3.0;
-        p.gyro_bias_sigma *= 3.0;
+        if device == DeviceKind::Phone {
+            p.gyro_bias_axis = 1.7f64.to_radians();
+            p.gyro_bias_walk = 0.03f64.to_radians();
+            events.push(
+                "uncalibrated gyroscope: about 1.7°/s of bias per axis, wandering 0.03°/s per √s"
+                    .into(),
+            );
+        }
+        op.typing_tilt_deg = 4.0;
+        events.push("the hand tilts the device by 3-5° while typing each index".into());
         p.mounting = Rotation3::from_axis_angle(
             &nalgebra::Unit::new_normalize(Vector3::new(0.2, 0.3, 1.0)),
             2f64.to_radians(),
@@ -152,10 +164,11 @@ pub fn run_with(
                 .iter()
                 .rposition(|s| s.curve.is_some())
                 .map_or(0.5, |i| (script.states[i].t + script.states[start].t) / 2.0);
-            p.reboot_at = Some(carry_mid - 0.5);
+            p.reboot_silence = 2.0;
+            p.reboot_at = Some(carry_mid - 1.0);
             events.push(format!(
-                "device reboots at t = {:.1} s, before curve {target}",
-                carry_mid - 0.5
+                "device reboots at t = {:.1} s, silent for 2 s while carried and turned to curve {target}",
+                carry_mid - 1.0
             ));
         }
         // The clock wraps mid-way (before the reboot, which restarts it).
@@ -174,6 +187,13 @@ pub fn run_with(
                 p.skids.push((t, 0.3, 0.3));
                 events.push(format!("wheel skid at t = {t:.1} s (0.3 s at 30 %)"));
             }
+        }
+        // The sample stream stalls once in the middle of a move.
+        if let Some(&t) = rolling.get(rolling.len() * 2 / 5) {
+            p.stalls.push((t, 0.3));
+            events.push(format!(
+                "the sample stream stalls at t = {t:.1} s for 0.3 s (samples dropped, the device moving)"
+            ));
         }
     }
     let (mut bytes, samples) = render(&script, &p, &mut rng);

@@ -36,6 +36,10 @@ pub struct OperatorParams {
     pub carry_time: f64,
     /// Amplitude of the hand's back-and-forth along the curve while standing, m. Default 0.3 mm.
     pub stand_wobble: f64,
+    /// The hand tilts the standing device by about this much while typing an index, degrees
+    /// (±25 %, about a random axis in the surface's tangent plane, in and out smoothly).
+    /// Default 0.
+    pub typing_tilt_deg: f64,
     /// Operator mistakes to act out (none by default).
     pub mistakes: Mistakes,
 }
@@ -63,6 +67,7 @@ impl Default for OperatorParams {
             pause_after_enter: 0.4,
             carry_time: 3.0,
             stand_wobble: 0.0003,
+            typing_tilt_deg: 0.0,
             mistakes: Mistakes::default(),
         }
     }
@@ -179,6 +184,24 @@ struct Timeline<'r> {
     jitter: f64,
     wheel: f64,
     rng: &'r mut Rng,
+    /// The hand's tilt while an index is typed.
+    tilt: Option<Tilt>,
+}
+
+/// A tilt of the standing device: `amp · sin²(π (t − start) / duration)` radians about `axis`
+/// (frame axes).
+struct Tilt {
+    start: f64,
+    duration: f64,
+    axis: nalgebra::Unit<Vector3<f64>>,
+    amp: f64,
+}
+
+impl Tilt {
+    fn at(&self, t: f64) -> UnitQuaternion<f64> {
+        let u = ((t - self.start) / self.duration).clamp(0.0, 1.0);
+        UnitQuaternion::from_axis_angle(&self.axis, self.amp * (std::f64::consts::PI * u).sin().powi(2))
+    }
 }
 
 impl Timeline<'_> {
@@ -225,7 +248,11 @@ impl Timeline<'_> {
                 * (std::f64::consts::PI * u).sin();
             let sw = (s + w).clamp(0.0, p.length());
             self.wheel = base_wheel + (sw - s);
-            self.push(p.frame(sw), p.pos(sw), c, sw, true);
+            let tilt = self
+                .tilt
+                .as_ref()
+                .map_or_else(UnitQuaternion::identity, |k| k.at(self.t + self.dt));
+            self.push(p.frame(sw) * tilt, p.pos(sw), c, sw, true);
         }
         self.wheel = base_wheel;
     }
@@ -259,8 +286,21 @@ impl Timeline<'_> {
         s
     }
 
-    /// Stands at the node, types its index and Enter, stands a moment.
+    /// Stands at the node, types its index and Enter, stands a moment (the hand tilting the
+    /// device meanwhile, if `op` says so).
     fn type_index(&mut self, p: &Param, c: Option<usize>, s: f64, node: u32, op: &OperatorParams) {
+        let digits = node.to_string().len() as f64;
+        if op.typing_tilt_deg > 0.0 {
+            let phi = self.rng.range(0.0, std::f64::consts::TAU);
+            self.tilt = Some(Tilt {
+                start: self.t,
+                duration: op.pause_before_typing
+                    + digits * op.key_interval
+                    + op.pause_after_enter,
+                axis: nalgebra::Unit::new_normalize(Vector3::new(phi.cos(), phi.sin(), 0.0)),
+                amp: op.typing_tilt_deg.to_radians() * self.rng.range(0.75, 1.25),
+            });
+        }
         self.stand(p, c, s, op.pause_before_typing, op.stand_wobble);
         for d in node.to_string().bytes() {
             self.key(d);
@@ -268,6 +308,7 @@ impl Timeline<'_> {
         }
         self.key(b'\n');
         self.stand(p, c, s, op.pause_after_enter, op.stand_wobble);
+        self.tilt = None;
     }
 }
 
@@ -287,6 +328,7 @@ pub fn perform(
         jitter,
         wheel: 0.0,
         rng,
+        tilt: None,
     };
     let mut prev_end: Option<UnitQuaternion<f64>> = None;
     for (ci, spec) in curves.iter().enumerate() {
