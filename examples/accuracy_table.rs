@@ -4,14 +4,21 @@
 //! after rigid registration, % of the bounding-box diagonal).
 //!
 //! `cargo run --release --example accuracy_table -- [--seeds 1,2,3] [--devices morphorider,phone]
-//! [--profiles default,field] [--scenes a,b]`
+//! [--profiles default,field] [--scenes a,b] [--study]`
 //!
 //! Each cell runs the library as `sfs simulate` + `sfs replay` + `sfs eval` do (in process,
 //! two cells at a time).
+//!
+//! `--study`: what each fault costs and where the error comes from. Per device and profile,
+//! the mean error over the seeds with every fault of the field profile, then with each fault
+//! turned off in turn, then with the true orientations (estimated distances), the true
+//! distances (estimated orientations) and both, put into the acquired curves sample by sample
+//! from the simulator's truth.
 
 use device_protocol::DeviceKind;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
-use sfs::simulate::{self, scene, Profile};
+use sfs::simulate::{self, device::SampleTruth, scene, Fault, Mistakes, Profile};
+use sfs_geometry::curve::Curve;
 use sfs_geometry::network::{NetworkParams, Reconstructor};
 use std::path::PathBuf;
 
@@ -35,12 +42,105 @@ fn list(args: &[String], flag: &str, default: &str) -> Vec<String> {
         .collect()
 }
 
+/// A variant of a cell: faults of the field profile turned off, true orientations or
+/// distances put in.
+#[derive(Debug, Clone, Default)]
+struct Variant {
+    without: Vec<Fault>,
+    true_q: bool,
+    true_d: bool,
+}
+
+impl Variant {
+    fn name(&self) -> String {
+        let mut parts: Vec<String> = self
+            .without
+            .iter()
+            .map(|f| format!("no {}", f.name()))
+            .collect();
+        if self.true_q {
+            parts.push("true q".into());
+        }
+        if self.true_d {
+            parts.push("true d".into());
+        }
+        if parts.is_empty() {
+            "as simulated".into()
+        } else {
+            parts.join(", ")
+        }
+    }
+}
+
+/// Puts the simulator's true orientations (`q`) and distances (`d`) into the acquired curves,
+/// sample by sample (matched by session time; samples without a match keep their estimate).
+/// Returns how many samples found no match.
+fn put_truth(curves: &mut [Curve], truth: &SampleTruth, q: bool, d: bool) -> usize {
+    let near = |t: f64| -> Option<usize> {
+        let ts = &truth.session_t;
+        let i = ts.partition_point(|&x| x < t);
+        [i.wrapping_sub(1), i]
+            .into_iter()
+            .filter(|&j| j < ts.len())
+            .min_by(|&a, &b| (ts[a] - t).abs().total_cmp(&(ts[b] - t).abs()))
+            .filter(|&j| (ts[j] - t).abs() < 1e-4)
+    };
+    let mut missed = 0;
+    for c in curves {
+        let s0 = c
+            .tags
+            .first()
+            .and_then(|tag| near(tag.t))
+            .map(|j| truth.s[j]);
+        for i in 0..c.samples.len() {
+            let Some(j) = near(c.samples.t[i]) else {
+                missed += 1;
+                continue;
+            };
+            if q {
+                let tq = truth.q[j];
+                c.samples.q[i] = [tq.w, tq.i, tq.j, tq.k];
+            }
+            if let (true, Some(s0)) = (d, s0) {
+                c.samples.d[i] = truth.s[j] - s0;
+            }
+        }
+        if let (true, Some(s0)) = (d, s0) {
+            for tag in &mut c.tags {
+                if let Some(j) = near(tag.t) {
+                    tag.d = truth.s[j] - s0;
+                }
+            }
+        }
+    }
+    missed
+}
+
 /// Mean and max error in % of the diagonal, or why there is none.
 fn cell(name: &str, device: DeviceKind, profile: Profile, seed: u64) -> Result<(f64, f64), String> {
+    variant(name, device, profile, seed, &Variant::default())
+}
+
+fn variant(
+    name: &str,
+    device: DeviceKind,
+    profile: Profile,
+    seed: u64,
+    v: &Variant,
+) -> Result<(f64, f64), String> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
     let s = scene::load(&scene::find(name, &dir)).map_err(|e| e.to_string())?;
-    let sim = simulate::run(&s, device, profile, seed);
-    let scan = Acquisition::scan_bytes(&sim.bytes, AcquisitionConfig::default());
+    let sim = simulate::run_without(&s, device, profile, seed, &Mistakes::default(), &v.without);
+    let mut scan = Acquisition::scan_bytes(&sim.bytes, AcquisitionConfig::default());
+    if v.true_q || v.true_d {
+        let missed = put_truth(&mut scan.curves, &sim.samples, v.true_q, v.true_d);
+        if missed > 0 {
+            eprintln!(
+                "{name} {} seed {seed}: {missed} samples without truth",
+                device.name()
+            );
+        }
+    }
     let net = Reconstructor::new()
         .run(&scan.curves, &NetworkParams::default())
         .map_err(|e| format!("{:?}", e.warnings))?;
@@ -72,6 +172,9 @@ fn main() {
         })
         .collect();
     let scenes = list(&args, "--scenes", &SCENES.join(","));
+    if args.iter().any(|a| a == "--study") {
+        return study(&scenes, &devices, &profiles, &seeds);
+    }
     let mut columns = Vec::new();
     for &d in &devices {
         for &p in &profiles {
@@ -82,7 +185,11 @@ fn main() {
     }
     let jobs: Vec<(String, DeviceKind, Profile, u64)> = scenes
         .iter()
-        .flat_map(|s| columns.iter().map(move |&(d, p, seed)| (s.clone(), d, p, seed)))
+        .flat_map(|s| {
+            columns
+                .iter()
+                .map(move |&(d, p, seed)| (s.clone(), d, p, seed))
+        })
         .collect();
     let next = std::sync::atomic::AtomicUsize::new(0);
     let results = std::sync::Mutex::new(vec![None; jobs.len()]);
@@ -115,5 +222,107 @@ fn main() {
             }
         }
         println!();
+    }
+}
+
+/// Runs `f` over `jobs` on two threads.
+fn parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec<R> {
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let results = std::sync::Mutex::new((0..jobs.len()).map(|_| None).collect::<Vec<_>>());
+    std::thread::scope(|sc| {
+        for _ in 0..2 {
+            sc.spawn(|| loop {
+                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let Some(j) = jobs.get(i) else {
+                    return;
+                };
+                let r = f(j);
+                results.lock().unwrap()[i] = Some(r);
+            });
+        }
+    });
+    results
+        .into_inner()
+        .unwrap()
+        .into_iter()
+        .map(|r| r.expect("every job ran"))
+        .collect()
+}
+
+/// The fault study (`--study`): one table per device and profile, a column per variant, the
+/// mean error over the seeds per scene and the mean over the scenes.
+fn study(scenes: &[String], devices: &[DeviceKind], profiles: &[Profile], seeds: &[u64]) {
+    for &device in devices {
+        for &profile in profiles {
+            let mut variants = vec![Variant::default()];
+            if profile == Profile::Field {
+                for f in Fault::ALL {
+                    let relevant = match f {
+                        Fault::GyroBias => device == DeviceKind::Phone,
+                        Fault::Skids => device == DeviceKind::Morphorider,
+                        _ => true,
+                    };
+                    if relevant {
+                        variants.push(Variant {
+                            without: vec![f],
+                            ..Variant::default()
+                        });
+                    }
+                }
+            }
+            for (q, d) in [(true, false), (false, true), (true, true)] {
+                variants.push(Variant {
+                    true_q: q,
+                    true_d: d,
+                    ..Variant::default()
+                });
+            }
+            let jobs: Vec<(usize, usize, u64)> = (0..scenes.len())
+                .flat_map(|s| {
+                    (0..variants.len()).flat_map(move |v| seeds.iter().map(move |&x| (s, v, x)))
+                })
+                .collect();
+            let results = parallel(&jobs, |&(s, v, seed)| {
+                variant(&scenes[s], device, profile, seed, &variants[v])
+            });
+            println!(
+                "\n{} {}, mean error % of the diagonal, mean over seeds {:?}\n",
+                device.name(),
+                profile.name(),
+                seeds
+            );
+            print!("| scene |");
+            for v in &variants {
+                print!(" {} |", v.name());
+            }
+            println!();
+            println!("|---|{}", "---|".repeat(variants.len()));
+            let mut sums = vec![0.0; variants.len()];
+            for (si, s) in scenes.iter().enumerate() {
+                print!("| {s} |");
+                for (vi, sum) in sums.iter_mut().enumerate() {
+                    let vals: Vec<f64> = jobs
+                        .iter()
+                        .zip(&results)
+                        .filter(|((a, b, _), _)| *a == si && *b == vi)
+                        .filter_map(|(_, r)| r.as_ref().ok().map(|x| x.0))
+                        .collect();
+                    if vals.len() == seeds.len() {
+                        let m = vals.iter().sum::<f64>() / vals.len() as f64;
+                        *sum += m / scenes.len() as f64;
+                        print!(" {m:.3} |");
+                    } else {
+                        *sum = f64::NAN;
+                        print!(" failed |");
+                    }
+                }
+                println!();
+            }
+            print!("| **mean** |");
+            for m in sums {
+                print!(" **{m:.3}** |");
+            }
+            println!();
+        }
     }
 }

@@ -45,10 +45,10 @@ fn main() {
     for c in &scan.curves {
         let (mut tot, mut tilt, mut head) = (vec![], vec![], vec![]);
         for (i, q) in c.samples.q.iter().enumerate() {
-            let t_abs = c.samples.t[i] + truth.t[0];
-            let k = truth.t.partition_point(|&x| x < t_abs - 2e-6);
+            let t = c.samples.t[i];
+            let k = truth.session_t.partition_point(|&x| x < t - 2e-6);
             if k >= truth.t.len()
-                || (truth.t[k] - t_abs).abs() > 2e-6
+                || (truth.session_t[k] - t).abs() > 2e-6
                 || (truth.standing[k] && std::env::var("SFS_SHOW_WORST").is_err())
             {
                 continue;

@@ -277,7 +277,16 @@ pub struct Acquisition {
     last_q: Option<UnitQuaternion<f64>>,
     /// Morphorider: the latest calibrated acceleration and field (its orientation, on demand).
     last_field: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// Events received before the first HELLO, held until it comes (then interpreted with its
+    /// scales, in order) — `None` once a HELLO was seen.
+    held: Option<Vec<Event>>,
 }
+
+/// Most events held before the first HELLO. A device sends one every 5 s, so a receiver that
+/// joins mid-stream holds about 5 s (10 s if that HELLO is lost on the link) of a 200 Hz
+/// stream; past this many, the oldest are interpreted without scales (counted as
+/// `before_hello`, their keys kept).
+const MAX_HELD: usize = 20_000;
 
 /// Phone: the turning of the device is summed over steps of this many seconds: a step is
 /// long enough that the filter's jitter at rest adds little, short enough that a turn and
@@ -331,9 +340,11 @@ impl Acquisition {
             turn_anchor: None,
             last_q: None,
             last_field: None,
+            held: Some(Vec::new()),
         };
         if let Some(h) = start.hello() {
             acq.hello(&h);
+            acq.held = None;
         }
         acq
     }
@@ -426,13 +437,61 @@ impl Acquisition {
         }
     }
 
-    /// Processes one decoder event.
-    pub fn event(&mut self, ev: &Event) -> Option<Update> {
+    /// Processes one decoder event; returns the curves it ended or changed (several when
+    /// events held before the first HELLO are interpreted at once).
+    ///
+    /// Before the first HELLO the scales are unknown: packets are held, in order, and
+    /// interpreted when it comes, so that a receiver that joins a stream mid-way (or whose
+    /// first HELLO is lost) loses no samples of the curve under way.
+    pub fn event(&mut self, ev: &Event) -> Vec<Update> {
+        let Some(held) = &mut self.held else {
+            return self.interpret(ev).into_iter().collect();
+        };
+        match ev {
+            Event::Packet {
+                packet: Packet::Hello(_),
+                ..
+            } => {
+                let held = self.held.take().unwrap_or_default();
+                let mut out: Vec<Update> = self.interpret(ev).into_iter().collect();
+                out.extend(held.iter().filter_map(|e| self.interpret(e)));
+                out
+            }
+            Event::DeviceReboot => {
+                // What came before belongs to another power cycle, whose HELLO never came.
+                let mut out = self.release_held();
+                self.held = Some(Vec::new());
+                out.extend(self.interpret(ev));
+                out
+            }
+            _ => {
+                held.push(*ev);
+                if held.len() >= MAX_HELD {
+                    let out = self.release_held();
+                    self.held = Some(Vec::new());
+                    return out;
+                }
+                Vec::new()
+            }
+        }
+    }
+
+    /// Interprets the held events without scales (their samples count as `before_hello`).
+    fn release_held(&mut self) -> Vec<Update> {
+        let held = self.held.take().unwrap_or_default();
+        held.iter().filter_map(|e| self.interpret(e)).collect()
+    }
+
+    fn interpret(&mut self, ev: &Event) -> Option<Update> {
         match ev {
             Event::Packet { packet, .. } => self.packet(packet),
             Event::DeviceReboot => {
                 self.clock.restart();
                 self.wheel_reset = true;
+                // The device may have been turned while silent: the filter starts again from
+                // the next sample's accelerometer and magnetometer (keeping the gyroscope bias).
+                self.ahrs.restart();
+                self.last_sample_t = None;
                 let t = self.clock.now();
                 if let Some(o) = &self.open {
                     let w = AcquisitionWarning::RebootInCurve { curve: o.index, t };
@@ -1149,6 +1208,7 @@ impl Acquisition {
 
     /// Ends acquisition: an open curve is reported and dropped (it was never ended).
     pub fn finish(mut self) -> Scan {
+        self.release_held();
         if let Some(o) = self.open.take() {
             let nodes: Vec<u32> = o.tags.iter().map(|t| t.0).collect();
             self.warn(AcquisitionWarning::NeverEnded {

@@ -365,12 +365,13 @@ impl Flow {
     fn feed(&mut self, bytes: &[u8], post: bool) {
         for e in self.decoder.feed(bytes) {
             self.stats.observe(&e);
-            let update = self.acq.event(&e);
-            if let (true, Some(Update::CurveEnded(i) | Update::CurveUpdated(i))) = (post, update) {
-                post_curve(&mut self.live, &self.acq, i, &self.stats);
-            }
-            if let (Some(v), Some(Update::CurveEnded(i))) = (&self.view, update) {
-                v.curve_ended(i);
+            for update in self.acq.event(&e) {
+                if let (true, Update::CurveEnded(i) | Update::CurveUpdated(i)) = (post, update) {
+                    post_curve(&mut self.live, &self.acq, i, &self.stats);
+                }
+                if let (Some(v), Update::CurveEnded(i)) = (&self.view, update) {
+                    v.curve_ended(i);
+                }
             }
         }
         feed_monitor(&mut self.monitor, &mut self.acq);

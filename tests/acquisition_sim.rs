@@ -430,3 +430,50 @@ fn sensor_array_orientations_are_averaged_per_window() {
         );
     }
 }
+
+/// Issue 17: a receiver that joins the stream after the first HELLO (the capture starts
+/// mid-packet) holds the packets until the next HELLO and interprets them then: the first
+/// curve keeps all its samples (they were counted as `before_hello` and dropped, which cost
+/// the field profile 0.8 % of the diagonal). A stream that never sends a HELLO still counts
+/// its samples as `before_hello` and keeps its keys.
+#[test]
+fn issue_17_samples_before_the_first_hello_are_held_not_lost() {
+    use sfs::simulate::{self, scene, Profile};
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
+    let s = scene::load(&scene::find("cone", &dir)).unwrap();
+    let sim = simulate::run(
+        &s,
+        device_protocol::DeviceKind::Morphorider,
+        Profile::Default,
+        3,
+    );
+    let whole = Acquisition::scan_bytes(&sim.bytes, AcquisitionConfig::default());
+    // Cut the capture in the middle of the first packet (the HELLO).
+    let first = sim.bytes.iter().position(|&b| b == 0).unwrap();
+    let cut = Acquisition::scan_bytes(&sim.bytes[first / 2..], AcquisitionConfig::default());
+    assert_eq!(whole.counts.before_hello, 0);
+    assert_eq!(
+        cut.counts.before_hello, 0,
+        "samples before the second HELLO were dropped"
+    );
+    assert_eq!(cut.curves.len(), whole.curves.len());
+    for (a, b) in whole.curves.iter().zip(&cut.curves) {
+        assert_eq!(a.samples.len(), b.samples.len(), "curve {}", a.index);
+        assert_eq!(a.tags, b.tags, "curve {}", a.index);
+    }
+    // Without any HELLO: nothing can be interpreted, nothing panics, the samples are counted.
+    let mut dec = device_protocol::Decoder::new();
+    let mut no_hello = Vec::new();
+    let mut seq = 0u8;
+    for e in dec.feed(&sim.bytes) {
+        if let device_protocol::Event::Packet { packet, .. } = e {
+            if !matches!(packet, device_protocol::Packet::Hello(_)) {
+                packet.encode(seq, &mut no_hello);
+                seq = seq.wrapping_add(1);
+            }
+        }
+    }
+    let none = Acquisition::scan_bytes(&no_hello, AcquisitionConfig::default());
+    assert_eq!(none.counts.before_hello, whole.counts.samples);
+    assert!(none.curves.is_empty() || none.curves.iter().all(|c| c.samples.is_empty()));
+}

@@ -144,17 +144,24 @@ fn simulated_bytes_decode_with_the_faults_put_in() {
         // Issue 17: one 0.3 s stall in the middle of a move (30 samples at 100 Hz).
         let dropped = t.samples_dropped as i64;
         assert!(
-            if field { (29..=31).contains(&dropped) } else { dropped == 0 },
+            if field {
+                (29..=31).contains(&dropped)
+            } else {
+                dropped == 0
+            },
             "{profile:?}: {dropped} samples dropped"
         );
-        let gap = t
-            .t
-            .windows(2)
-            .zip(&t.curve)
-            .filter(|(_, c)| c.is_some())
-            .map(|(w, _)| w[1] - w[0])
-            .fold(0.0, f64::max);
-        assert_eq!(gap > 0.29, field, "{profile:?}: longest gap on a curve {gap} s");
+        let gap =
+            t.t.windows(2)
+                .zip(&t.curve)
+                .filter(|(_, c)| c.is_some())
+                .map(|(w, _)| w[1] - w[0])
+                .fold(0.0, f64::max);
+        assert_eq!(
+            gap > 0.29,
+            field,
+            "{profile:?}: longest gap on a curve {gap} s"
+        );
         // Issue 17: the hand tilts the standing device by 3-5° while an index is typed.
         let mut tilt: f64 = 0.0;
         let mut since = None;
@@ -167,7 +174,11 @@ fn simulated_bytes_decode_with_the_faults_put_in() {
             }
         }
         assert!(
-            if field { (2.2..6.3).contains(&tilt) } else { tilt < 1.0 },
+            if field {
+                (2.2..6.3).contains(&tilt)
+            } else {
+                tilt < 1.0
+            },
             "{profile:?}: the resting device turned by up to {tilt:.2}°"
         );
     }
@@ -283,7 +294,10 @@ fn issue_17_the_field_phone_has_an_uncalibrated_gyroscope() {
         for axis in 0..3 {
             let mean = rest.iter().map(|g| g[axis]).sum::<f64>() / rest.len() as f64;
             let deg = mean.abs().to_degrees();
-            assert!(range.contains(&deg), "{profile:?}, axis {axis}: {deg:.2}°/s");
+            assert!(
+                range.contains(&deg),
+                "{profile:?}, axis {axis}: {deg:.2}°/s"
+            );
         }
     }
 }

@@ -53,7 +53,8 @@ pub struct AhrsParams {
     pub rest_min: f64,
     /// Time constant of the bias estimate at rest, s. Default 3 s.
     pub tau_bias: f64,
-    /// Largest bias the estimator accepts, rad/s. Default 2°/s.
+    /// Largest bias the estimator accepts, rad/s. Default 5°/s (uncalibrated consumer
+    /// gyroscopes reach 3°/s).
     pub max_bias: f64,
     /// Bias learning in motion from the heading correction (the integral term of a PI loop
     /// whose proportional term is `1/tau_mag`): the part of the bias about the vertical is
@@ -71,6 +72,11 @@ pub struct AhrsParams {
     pub tau_tilt_bias: f64,
     /// Longest interval that is integrated, s. Default 0.5 s.
     pub max_dt: f64,
+    /// An interval longer than this many typical sample intervals is a gap (samples dropped
+    /// in a stall): the rotation across it is integrated from the rates on both sides, but
+    /// the tilt and heading corrections weigh the sample after it as one sample, not as the
+    /// whole gap (one sample's acceleration would otherwise swing the tilt). Default 4.
+    pub gap_intervals: f64,
 }
 
 impl Default for AhrsParams {
@@ -85,10 +91,11 @@ impl Default for AhrsParams {
             rest_acc: 0.5,
             rest_min: 1.0,
             tau_bias: 3.0,
-            max_bias: 2f64.to_radians(),
+            max_bias: 5f64.to_radians(),
             tau_heading_bias: 0.0,
             tau_tilt_bias: 0.0,
             max_dt: 0.5,
+            gap_intervals: 4.0,
         }
     }
 }
@@ -118,6 +125,10 @@ pub struct Ahrs {
     acc_mean: Vector3<f64>,
     rest_t: f64,
     last: UnitQuaternion<f64>,
+    /// Typical sample interval (a running mean of the intervals that are not gaps), s.
+    interval: Option<f64>,
+    /// The previous gyroscope sample (bridging a gap).
+    last_gyro: Option<Vector3<f64>>,
     /// Whether the last magnetometer sample was rejected as disturbed.
     pub mag_rejected: bool,
 }
@@ -233,8 +244,18 @@ impl Ahrs {
             acc_mean: Vector3::zeros(),
             rest_t: 0.0,
             last: UnitQuaternion::identity(),
+            interval: None,
+            last_gyro: None,
             mag_rejected: false,
         }
+    }
+
+    /// Starts again from the next sample's accelerometer and magnetometer, keeping the
+    /// gyroscope bias (a property of the sensor): after a device reboot, during which the
+    /// device may have been turned.
+    pub fn restart(&mut self) {
+        self.init = false;
+        self.last_gyro = None;
     }
 
     /// Current gyroscope bias estimate (frame axes, rad/s).
@@ -306,13 +327,31 @@ impl Ahrs {
             return self.last;
         }
         let dt = if dt_ok { dt } else { 0.0 };
+        // A gap (a stall dropped samples): integrate across it from the rates on both
+        // sides; correct as after one typical interval.
+        let gap = self
+            .interval
+            .filter(|&i| dt > self.p.gap_intervals * i)
+            .is_some();
+        if dt > 0.0 && !gap {
+            let i = self.interval.get_or_insert(dt);
+            *i += (dt - *i) * 0.01;
+        }
+        let dt_corr = if gap { self.interval.unwrap_or(dt) } else { dt };
 
         // 1. Strapdown integration of the bias-corrected gyroscope.
         if gyro_ok && dt > 0.0 {
-            let w = gyro - self.bias;
-            self.q_gyr *= UnitQuaternion::from_scaled_axis(w * dt);
-            self.rest(dt, gyro, acc_ok.then_some(acc));
+            let rate = match (gap, self.last_gyro) {
+                (true, Some(g0)) => (g0 + gyro) * 0.5,
+                _ => *gyro,
+            };
+            self.q_gyr *= UnitQuaternion::from_scaled_axis((rate - self.bias) * dt);
+            if !gap {
+                self.rest(dt, gyro, acc_ok.then_some(acc));
+            }
         }
+        self.last_gyro = gyro_ok.then_some(*gyro);
+        let dt = dt_corr;
 
         // 2. Tilt: low-pass the accelerometer in I, rotate E6 so that it points up.
         if acc_ok && dt > 0.0 {

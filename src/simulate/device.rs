@@ -199,8 +199,11 @@ impl DeviceParams {
 /// What the simulated device really measured, per sample packet sent (in order).
 #[derive(Debug, Clone, Default)]
 pub struct SampleTruth {
-    /// Session time, s (as acquisition computes it from the timestamps, up to 1 µs).
+    /// The script's time of the sample, s.
     pub t: Vec<f64>,
+    /// Session time of the sample as acquisition computes it from the timestamps (0 at the
+    /// first packet; a reboot's silence not counted), s, up to 1 µs.
+    pub session_t: Vec<f64>,
     /// True frame → world.
     pub q: Vec<UnitQuaternion<f64>>,
     pub curve: Vec<Option<usize>>,
@@ -233,6 +236,10 @@ struct Emitter {
     lost: u64,
     /// Samples dropped since power-up (STATUS `dropped`).
     dropped: u32,
+    /// The script time and session time of the last packet emitted.
+    session: Option<(f64, f64)>,
+    /// The next packet is the first after a reboot (the receiver's clock adds nothing).
+    restarted: bool,
 }
 
 impl Emitter {
@@ -251,9 +258,23 @@ impl Emitter {
         self.next_hello = t;
         self.next_status = t;
         self.dropped = 0;
+        self.restarted = true;
+    }
+
+    /// Session time (as the receiver counts it) of a packet emitted at script time `t`.
+    fn session_t(&mut self, t: f64) -> f64 {
+        let s = match self.session {
+            None => 0.0,
+            Some((_, ls)) if self.restarted => ls,
+            Some((lt, ls)) => ls + (t - lt),
+        };
+        self.restarted = false;
+        self.session = Some((t, s));
+        s
     }
 
     fn emit(&mut self, t: f64, p: Packet) {
+        self.session_t(t);
         if t >= self.next_hello {
             self.next_hello = t + 5.0;
             self.raw(Packet::Hello(self.hello));
@@ -311,6 +332,8 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
         corrupted: 0,
         lost: 0,
         dropped: 0,
+        session: None,
+        restarted: false,
     };
     let mut rebooted = false;
     let mut truth = SampleTruth::default();
@@ -432,6 +455,7 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
         };
         em.emit(st.t, packet);
         truth.t.push(st.t);
+        truth.session_t.push(em.session.map_or(0.0, |s| s.1));
         truth.q.push(st.q);
         truth.curve.push(st.curve);
         truth.s.push(st.s);

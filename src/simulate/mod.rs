@@ -72,6 +72,75 @@ pub fn run(scene: &Scene, device: DeviceKind, profile: Profile, seed: u64) -> Si
     run_with(scene, device, profile, seed, &Mistakes::default())
 }
 
+/// One fault of the field profile (each can be turned off to measure what it costs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fault {
+    /// 3× the sensor noise.
+    Noise,
+    /// The 2° mounting offset.
+    Mounting,
+    /// The phone's uncalibrated, wandering gyroscope bias.
+    GyroBias,
+    /// The hand tilting the resting device while typing.
+    Tilt,
+    /// The ferromagnetic object near part of the surface.
+    Magnet,
+    /// A wrong index undone with U.
+    WrongIndex,
+    /// A curve cancelled with C and rescanned.
+    Cancel,
+    /// The reboot while carried and turned.
+    Reboot,
+    /// The device clock wrapping.
+    ClockWrap,
+    /// Wheel skids.
+    Skids,
+    /// The stall of the sample stream mid-move.
+    Stall,
+    /// Twice the link faults (corrupted and lost packets).
+    Link,
+    /// The capture starting mid-packet.
+    MidPacket,
+}
+
+impl Fault {
+    /// Every fault of the field profile.
+    pub const ALL: [Fault; 13] = [
+        Fault::Noise,
+        Fault::Mounting,
+        Fault::GyroBias,
+        Fault::Tilt,
+        Fault::Magnet,
+        Fault::WrongIndex,
+        Fault::Cancel,
+        Fault::Reboot,
+        Fault::ClockWrap,
+        Fault::Skids,
+        Fault::Stall,
+        Fault::Link,
+        Fault::MidPacket,
+    ];
+
+    /// A short name (`gyro-bias`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            Fault::Noise => "noise",
+            Fault::Mounting => "mounting",
+            Fault::GyroBias => "gyro-bias",
+            Fault::Tilt => "tilt",
+            Fault::Magnet => "magnet",
+            Fault::WrongIndex => "wrong-index",
+            Fault::Cancel => "cancel",
+            Fault::Reboot => "reboot",
+            Fault::ClockWrap => "clock-wrap",
+            Fault::Skids => "skids",
+            Fault::Stall => "stall",
+            Fault::Link => "link",
+            Fault::MidPacket => "mid-packet",
+        }
+    }
+}
+
 /// [`run`], with the operator also making the mistakes set in `more` (on top of the
 /// profile's).
 pub fn run_with(
@@ -81,6 +150,20 @@ pub fn run_with(
     seed: u64,
     more: &Mistakes,
 ) -> Simulation {
+    run_without(scene, device, profile, seed, more, &[])
+}
+
+/// [`run_with`], the field profile without the faults in `without` (the study of what each
+/// fault costs; the default profile has none of them).
+pub fn run_without(
+    scene: &Scene,
+    device: DeviceKind,
+    profile: Profile,
+    seed: u64,
+    more: &Mistakes,
+    without: &[Fault],
+) -> Simulation {
+    let on = |f: Fault| profile == Profile::Field && !without.contains(&f);
     let mut rng = Rng::new(seed);
     let mut p = match device {
         DeviceKind::Phone => DeviceParams::phone(),
@@ -97,48 +180,69 @@ pub fn run_with(
         return run_array(scene, profile, seed, &mut rng);
     }
     if profile == Profile::Field {
-        p.acc_sigma *= 3.0;
-        p.mag_sigma *= 3.0;
-        p.gyro_sigma *= 3.0;
+        // A fault turned off for the study keeps the random draws it makes where it can (a
+        // negligible size instead of none), so that the other faults see the same noise.
+        if on(Fault::Noise) {
+            p.acc_sigma *= 3.0;
+            p.mag_sigma *= 3.0;
+            p.gyro_sigma *= 3.0;
+        }
         if device == DeviceKind::Phone {
-            p.gyro_bias_axis = 1.7f64.to_radians();
-            p.gyro_bias_walk = 0.03f64.to_radians();
-            events.push(
-                "uncalibrated gyroscope: about 1.7°/s of bias per axis, wandering 0.03°/s per √s"
-                    .into(),
+            if on(Fault::GyroBias) {
+                p.gyro_bias_axis = 1.7f64.to_radians();
+                p.gyro_bias_walk = 0.03f64.to_radians();
+                events.push(
+                    "uncalibrated gyroscope: about 1.7°/s of bias per axis, wandering 0.03°/s per √s"
+                        .into(),
+                );
+            } else {
+                p.gyro_bias_axis = 1e-12;
+                p.gyro_bias_walk = 1e-12;
+            }
+        }
+        if on(Fault::Tilt) {
+            op.typing_tilt_deg = 4.0;
+            events.push("the hand tilts the device by 3-5° while typing each index".into());
+        } else {
+            op.typing_tilt_deg = 1e-12;
+        }
+        if on(Fault::Mounting) {
+            p.mounting = Rotation3::from_axis_angle(
+                &nalgebra::Unit::new_normalize(Vector3::new(0.2, 0.3, 1.0)),
+                2f64.to_radians(),
             );
         }
-        op.typing_tilt_deg = 4.0;
-        events.push("the hand tilts the device by 3-5° while typing each index".into());
-        p.mounting = Rotation3::from_axis_angle(
-            &nalgebra::Unit::new_normalize(Vector3::new(0.2, 0.3, 1.0)),
-            2f64.to_radians(),
-        );
-        p.faults = LinkFaults {
-            corrupt: 0.001,
-            lose: 0.001,
-        };
+        if on(Fault::Link) {
+            p.faults = LinkFaults {
+                corrupt: 0.001,
+                lose: 0.001,
+            };
+        }
         let c = &scene.curves[n.min(2) - 1];
         let center = c.points[c.points.len() / 2];
         let radius = 0.05 * scene.bbox_diagonal();
-        p.disturbance = Some(Disturbance {
-            center,
-            radius,
-            field_ut: Vector3::new(15.0, 0.0, 5.0),
-        });
-        events.push(format!(
-            "magnetic disturbance of 15.8 µT within {radius:.3} m of ({:.3}, {:.3}, {:.3})",
-            center.x, center.y, center.z
-        ));
-        if scene.curves[0].tags.len() > 2 {
+        if on(Fault::Magnet) {
+            p.disturbance = Some(Disturbance {
+                center,
+                radius,
+                field_ut: Vector3::new(15.0, 0.0, 5.0),
+            });
+            events.push(format!(
+                "magnetic disturbance of 15.8 µT within {radius:.3} m of ({:.3}, {:.3}, {:.3})",
+                center.x, center.y, center.z
+            ));
+        }
+        if scene.curves[0].tags.len() > 2 && on(Fault::WrongIndex) {
             op.mistakes.wrong_index = Some((0, 1));
             events.push("curve 0: a wrong index typed at its second node, undone with U".into());
         }
         let cancel = n.min(2) - 1;
-        op.mistakes.cancel_and_rescan = Some(cancel);
-        events.push(format!(
-            "curve {cancel}: started, cancelled with C, rescanned"
-        ));
+        if on(Fault::Cancel) {
+            op.mistakes.cancel_and_rescan = Some(cancel);
+            events.push(format!(
+                "curve {cancel}: started, cancelled with C, rescanned"
+            ));
+        }
     }
     let m = &mut op.mistakes;
     m.wrong_index = more.wrong_index.or(m.wrong_index);
@@ -153,7 +257,7 @@ pub fn run_with(
     let duration = script.states.last().map_or(0.0, |s| s.t);
     if profile == Profile::Field {
         // Reboot while carrying the device to the middle curve.
-        if n >= 2 {
+        if n >= 2 && on(Fault::Reboot) {
             let target = n / 2;
             let start = script
                 .states
@@ -172,9 +276,11 @@ pub fn run_with(
             ));
         }
         // The clock wraps mid-way (before the reboot, which restarts it).
-        let t_wrap = p.reboot_at.map_or(duration / 2.0, |r| r / 2.0);
-        p.clock_start_us = u32::MAX - (t_wrap * 1e6) as u32;
-        events.push(format!("device clock wraps at t = {t_wrap:.1} s"));
+        if on(Fault::ClockWrap) {
+            let t_wrap = p.reboot_at.map_or(duration / 2.0, |r| r / 2.0);
+            p.clock_start_us = u32::MAX - (t_wrap * 1e6) as u32;
+            events.push(format!("device clock wraps at t = {t_wrap:.1} s"));
+        }
         // Three wheel skids while rolling.
         let rolling: Vec<f64> = script
             .states
@@ -182,14 +288,17 @@ pub fn run_with(
             .filter(|s| s.curve.is_some() && !s.standing)
             .map(|s| s.t)
             .collect();
-        for k in 0..3 {
+        for k in 0..if on(Fault::Skids) { 3 } else { 0 } {
             if let Some(&t) = rolling.get(rolling.len() * (2 * k + 1) / 6) {
                 p.skids.push((t, 0.3, 0.3));
                 events.push(format!("wheel skid at t = {t:.1} s (0.3 s at 30 %)"));
             }
         }
         // The sample stream stalls once in the middle of a move.
-        if let Some(&t) = rolling.get(rolling.len() * 2 / 5) {
+        if let Some(&t) = rolling
+            .get(rolling.len() * 2 / 5)
+            .filter(|_| on(Fault::Stall))
+        {
             p.stalls.push((t, 0.3));
             events.push(format!(
                 "the sample stream stalls at t = {t:.1} s for 0.3 s (samples dropped, the device moving)"
@@ -197,7 +306,7 @@ pub fn run_with(
         }
     }
     let (mut bytes, samples) = render(&script, &p, &mut rng);
-    if profile == Profile::Field {
+    if on(Fault::MidPacket) {
         // The capture starts in the middle of the first packet.
         let first = bytes.iter().position(|&b| b == 0).unwrap_or(0);
         bytes.drain(..first / 2 + 1);

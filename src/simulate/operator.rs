@@ -200,7 +200,10 @@ struct Tilt {
 impl Tilt {
     fn at(&self, t: f64) -> UnitQuaternion<f64> {
         let u = ((t - self.start) / self.duration).clamp(0.0, 1.0);
-        UnitQuaternion::from_axis_angle(&self.axis, self.amp * (std::f64::consts::PI * u).sin().powi(2))
+        UnitQuaternion::from_axis_angle(
+            &self.axis,
+            self.amp * (std::f64::consts::PI * u).sin().powi(2),
+        )
     }
 }
 
@@ -294,9 +297,7 @@ impl Timeline<'_> {
             let phi = self.rng.range(0.0, std::f64::consts::TAU);
             self.tilt = Some(Tilt {
                 start: self.t,
-                duration: op.pause_before_typing
-                    + digits * op.key_interval
-                    + op.pause_after_enter,
+                duration: op.pause_before_typing + digits * op.key_interval + op.pause_after_enter,
                 axis: nalgebra::Unit::new_normalize(Vector3::new(phi.cos(), phi.sin(), 0.0)),
                 amp: op.typing_tilt_deg.to_radians() * self.rng.range(0.75, 1.25),
             });
