@@ -28,6 +28,8 @@ use crate::keypad::{KeyEvent, Keypad};
 use crate::orientation::ahrs::{Ahrs, AhrsParams};
 use crate::orientation::disturbance::{acc_motion, mag_disturbed, FieldReference, Thresholds};
 use crate::orientation::flags;
+use crate::orientation::rest;
+use crate::orientation::smoother::{self, SmootherParams};
 use crate::orientation::triad::triad;
 use crate::scan::{ArrayEpoch, Curve, DeviceInfo, Samples, Scan, Tag};
 use crate::sensor::{saturated, CalibrationSpec, Scales, SensorModel};
@@ -61,6 +63,10 @@ pub struct AcquisitionConfig {
     /// Phone: measured segment lengths per curve index (m), from the configuration.
     pub segment_lengths: BTreeMap<usize, Vec<f64>>,
     pub ahrs: AhrsParams,
+    /// Phone: smooth each finished curve's orientations forward and backward ([`smoother`]);
+    /// off, a curve keeps the causal filter's. Default on.
+    pub smooth: bool,
+    pub smoother: SmootherParams,
     /// Sensor arrays: averaging window, s. Default 1.
     pub array_window: f64,
     /// Largest node index the keypad accepts; a larger one is not tagged. Default 999 999.
@@ -91,6 +97,8 @@ impl Default for AcquisitionConfig {
             nominal_speed: 0.05,
             segment_lengths: BTreeMap::new(),
             ahrs: AhrsParams::default(),
+            smooth: true,
+            smoother: SmootherParams::default(),
             array_window: 1.0,
             max_node: crate::keypad::MAX_NODE,
             max_curve_samples: 2_000_000,
@@ -280,7 +288,27 @@ pub struct Acquisition {
     /// Events received before the first HELLO, held until it comes (then interpreted with its
     /// scales, in order) — `None` once a HELLO was seen.
     held: Option<Vec<Event>>,
+    /// Phone: the session's noise floors (window spreads of the gyroscope, accelerometer and
+    /// magnetometer at rest), the least over the curves so far.
+    noise: Option<NoiseFloors>,
 }
+
+/// The noise of a phone's sensors measured in the session: the spread of their quietest
+/// windows ([`rest::noise_floor`]), all three axes together.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct NoiseFloors {
+    gyro: f64,
+    acc: f64,
+    mag: f64,
+}
+
+/// Half-width of the windows whose statistics decide rest (phone), s.
+const REST_HALF_WINDOW: f64 = 0.2;
+/// A window whose spread is within this factor of the session's noise floor is at rest.
+const REST_SPREAD_FACTOR: f64 = 2.0;
+/// Curves longer than this are not smoothed (the smoother keeps 350 bytes per sample): they
+/// keep the causal filter's orientations.
+const MAX_SMOOTHED_SAMPLES: usize = 1_000_000;
 
 /// Most events held before the first HELLO. A device sends one every 5 s, so a receiver that
 /// joins mid-stream holds about 5 s (10 s if that HELLO is lost on the link) of a 200 Hz
@@ -341,6 +369,7 @@ impl Acquisition {
             last_q: None,
             last_field: None,
             held: Some(Vec::new()),
+            noise: None,
         };
         if let Some(h) = start.hello() {
             acq.hello(&h);
@@ -849,6 +878,86 @@ impl Acquisition {
         update
     }
 
+    /// Phone: replaces the causal orientations of a finished curve (`s.q`) by the smoother's
+    /// ([`smoother`]), with rests from window statistics against the session's noise; returns
+    /// the smoothed gyroscope bias per sample (the causal filter's `bias` where not smoothed).
+    fn smooth_phone(
+        &mut self,
+        s: &mut Samples,
+        gyro: &[Vector3<f64>],
+        acc: &[Vector3<f64>],
+        mag: &[Vector3<f64>],
+        field: Option<(f64, f64)>,
+        bias: Vector3<f64>,
+    ) -> Vec<Vector3<f64>> {
+        let n = s.t.len();
+        if !(2..=MAX_SMOOTHED_SAMPLES).contains(&n) || !self.cfg.smooth {
+            return vec![bias; n];
+        }
+        let wg = rest::window_stats(&s.t, gyro, REST_HALF_WINDOW);
+        let wa = rest::window_stats(&s.t, acc, REST_HALF_WINDOW);
+        let wm = rest::window_stats(&s.t, mag, REST_HALF_WINDOW);
+        let here = NoiseFloors {
+            gyro: rest::noise_floor(&wg.spread),
+            acc: rest::noise_floor(&wa.spread),
+            mag: rest::noise_floor(&wm.spread),
+        };
+        let floors = match self.noise {
+            Some(f) => NoiseFloors {
+                gyro: f.gyro.min(here.gyro),
+                acc: f.acc.min(here.acc),
+                mag: f.mag.min(here.mag),
+            },
+            None => here,
+        };
+        self.noise = Some(floors);
+        let rest: Vec<bool> = (0..n)
+            .map(|i| {
+                wg.spread[i] <= REST_SPREAD_FACTOR * floors.gyro
+                    && wa.spread[i] <= REST_SPREAD_FACTOR * floors.acc
+            })
+            .collect();
+        let axis = 3f64.sqrt();
+        let m = smoother::Measurements {
+            t: &s.t,
+            gyro,
+            acc,
+            mag,
+            rest: &rest,
+            field,
+            gyro_noise: floors.gyro / axis,
+            acc_noise: floors.acc / axis,
+            mag_noise: floors.mag / axis,
+        };
+        // Start from the first sample's gravity and field where they give an orientation (the
+        // causal filter may not have settled yet), else from the causal filter.
+        let q0 = acc
+            .first()
+            .zip(mag.first())
+            .and_then(|(a, m)| triad(a, m))
+            .or_else(|| {
+                s.q.first().map(|q| {
+                    UnitQuaternion::new_normalize(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
+                })
+            })
+            .unwrap_or_else(UnitQuaternion::identity);
+        let out = smoother::smooth(&m, q0, bias, &self.cfg.smoother);
+        tracing::debug!(
+            samples = n,
+            rests = rest.iter().filter(|&&r| r).count(),
+            refused_gravity = out.refused_gravity,
+            refused_heading = out.refused_heading,
+            gyro_floor = floors.gyro,
+            acc_floor = floors.acc,
+            mag_floor = floors.mag,
+            "curve smoothed"
+        );
+        for (dst, q) in s.q.iter_mut().zip(&out.q) {
+            *dst = quat_array(q);
+        }
+        out.bias
+    }
+
     fn segment_length(&mut self, t: f64, segment: u16, len: f64) -> Option<Update> {
         if !(len.is_finite() && len > 0.0) {
             self.warn(AcquisitionWarning::BadSegmentLength {
@@ -910,9 +1019,14 @@ impl Acquisition {
         let bias = self.ahrs.bias();
         let mut last_q: Option<UnitQuaternion<f64>> = None;
         let mut missing_before_first = 0;
-        // Morphorider: the wheel; phone: whether the gyroscope is still.
+        // Morphorider: the wheel; phone: the calibrated sensors.
         let mut wheel: Vec<f64> = Vec::with_capacity(if phone { 0 } else { n });
-        let mut gyro_still: Vec<bool> = Vec::with_capacity(if phone { n } else { 0 });
+        let cap = if phone { n } else { 0 };
+        let (mut gyros, mut accs, mut mags) = (
+            Vec::with_capacity(cap),
+            Vec::with_capacity(cap),
+            Vec::with_capacity(cap),
+        );
         let models = std::mem::take(&mut o.models);
         let mut model = 0;
         let raw = std::mem::take(&mut o.raw).chunks.into_iter().flatten();
@@ -931,8 +1045,9 @@ impl Acquisition {
                 s.flags[i] |= flags::MAG_DISTURBED;
             }
             let q = if phone {
-                let gyro = m.gyro(r.gyro);
-                gyro_still.push((gyro - bias).norm() < self.cfg.stationary_gyro);
+                gyros.push(m.gyro(r.gyro));
+                accs.push(acc);
+                mags.push(mag);
                 let [w, i, j, k] = r.x;
                 Some(UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(
                     w, i, j, k,
@@ -969,6 +1084,13 @@ impl Acquisition {
         // Stationary.
         let w = self.cfg.stationary_window;
         if phone {
+            let bias_s = self.smooth_phone(&mut s, &gyros, &accs, &mags, field_ref, bias);
+            let still_rate = self.cfg.stationary_gyro;
+            let gyro_still: Vec<bool> = gyros
+                .iter()
+                .zip(&bias_s)
+                .map(|(g, b)| (g - b).norm() < still_rate)
+                .collect();
             let mut still = stationary_mask(&s.t, w, |a, b| gyro_still[a..=b].iter().all(|&x| x));
             // A phone moving straight on a flat part does not rotate either: only still runs
             // that contain the typing of a node index count (the operator stands to type).

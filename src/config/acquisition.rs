@@ -64,6 +64,7 @@ pub struct AcquisitionToml {
     pub stand_margin_s: Option<f64>,
     pub heading_bias_tau_s: Option<f64>,
     pub tilt_bias_tau_s: Option<f64>,
+    pub smooth: Option<bool>,
     pub nominal_speed: Option<f64>,
     pub array_window_s: Option<f64>,
     pub max_node: Option<u32>,
@@ -194,6 +195,9 @@ impl ConfigFile {
         }
         if let Some(x) = off_or_positive("acquisition.tilt_bias_tau_s", a.tilt_bias_tau_s)? {
             out.ahrs.tau_tilt_bias = x;
+        }
+        if let Some(x) = a.smooth {
+            out.smooth = x;
         }
         if let Some(x) = positive("acquisition.nominal_speed", a.nominal_speed, 10.0)? {
             out.nominal_speed = x;

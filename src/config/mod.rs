@@ -35,6 +35,8 @@
 //! stand_margin_s = 2.0               # phone: standing only this close to typing an index
 //! heading_bias_tau_s = 0.0           # phone: learn the gyro bias in motion from the heading
 //! tilt_bias_tau_s = 0.0              #   and tilt corrections (time constants; 0 = off)
+//! smooth = true                      # phone: each finished curve's orientations smoothed
+//!                                    #   forward and backward, the gyro bias a state
 //! nominal_speed = 0.05               # phone: m/s where no segment length is known
 //! array_window_s = 1.0               # sensor arrays: averaging window
 //! max_node = 999999                  # largest node index typed; a larger one is not tagged

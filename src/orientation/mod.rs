@@ -3,7 +3,11 @@
 //!
 //! - [`triad`]: absolute orientation from gravity and the magnetic field (Morphorider, arrays),
 //!   gravity trusted fully for tilt, the field only for heading.
-//! - [`ahrs`]: gyroscope fusion for the phone, driven by measured sample intervals.
+//! - [`ahrs`]: gyroscope fusion for the phone, driven by measured sample intervals (causal:
+//!   the live view, and the start of each curve's smoother).
+//! - [`smoother`]: the phone's orientations over a finished curve, forward and backward, the
+//!   gyroscope bias as a state.
+//! - [`rest`]: rests from window statistics against the noise measured in the session.
 //! - [`qmethod`]: the weighted mean of unit quaternions (largest eigenvector of the 4×4
 //!   structure tensor), invariant to the sign of each input.
 //! - [`disturbance`]: the session's robust field reference and the per-sample flags.
@@ -11,6 +15,8 @@
 pub mod ahrs;
 pub mod disturbance;
 pub use sfs_geometry::qmethod;
+pub mod rest;
+pub mod smoother;
 pub mod triad;
 
 /// Per-sample flags (bit set), stored with each raw sample of a scan.
