@@ -3,6 +3,10 @@
 //! accelerometer xyz m/s², magnetometer xyz µT; NaN magnetometer = none), standard output gets
 //! one `[w, x, y, z]` quaternion (4 f64, sensor → world: x east, y magnetic north, z up) per
 //! record. Used by `benches/broad.py` to score the filter on the BROAD recordings.
+//!
+//! `--smooth`: the smoother of finished curves instead (`sfs::orientation::smoother`, the
+//! whole recording as one curve: rests and noise floors from its window statistics, the field
+//! reference from its median norm and dip, started from the causal filter's bias).
 
 use nalgebra::Vector3;
 use sfs::orientation::ahrs::{Ahrs, AhrsParams};
@@ -38,6 +42,14 @@ fn main() -> std::io::Result<()> {
     }
     let mut f = Ahrs::new(p);
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    if std::env::args().any(|a| a == "--smooth") {
+        for q in smooth(&input, &mut f) {
+            for x in [q.w, q.i, q.j, q.k] {
+                out.write_all(&x.to_le_bytes())?;
+            }
+        }
+        return out.flush();
+    }
     for rec in input.chunks_exact(80) {
         let v: Vec<f64> = rec
             .chunks_exact(8)
@@ -57,4 +69,76 @@ fn main() -> std::io::Result<()> {
         }
     }
     out.flush()
+}
+
+/// The smoothed orientations of the whole recording.
+fn smooth(input: &[u8], f: &mut Ahrs) -> Vec<nalgebra::UnitQuaternion<f64>> {
+    use sfs::orientation::{disturbance::FieldReference, rest, smoother, triad::triad};
+    let (mut t, mut gyro, mut acc, mut mag) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut now = 0.0;
+    let mut field = FieldReference::new();
+    for rec in input.chunks_exact(80) {
+        let v: Vec<f64> = rec
+            .chunks_exact(8)
+            .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")))
+            .collect();
+        if v[0].is_finite() && v[0] > 0.0 {
+            now += v[0];
+        }
+        let (g, a, m) = (
+            Vector3::new(v[1], v[2], v[3]),
+            Vector3::new(v[4], v[5], v[6]),
+            Vector3::new(v[7], v[8], v[9]),
+        );
+        f.update(v[0], &g, &a, m.iter().all(|x| x.is_finite()).then_some(&m));
+        field.add(&a, &m);
+        t.push(now);
+        gyro.push(g);
+        acc.push(a);
+        mag.push(m);
+    }
+    let (rests, floors) = rest::rests(&t, &gyro, &acc, &mag, None);
+    let m = smoother::Measurements::with_floors(
+        &t,
+        &gyro,
+        &acc,
+        &mag,
+        &rests,
+        field.reference(),
+        &floors,
+    );
+    let q0 = acc
+        .first()
+        .zip(mag.first())
+        .and_then(|(a, m)| triad(a, m))
+        .unwrap_or_else(nalgebra::UnitQuaternion::identity);
+    // Parameter studies: SFS_SMOOTH_<NAME>=value overrides a default (not for production use).
+    let mut p = smoother::SmootherParams::default();
+    let env = |k: &str| {
+        std::env::var(format!("SFS_SMOOTH_{k}"))
+            .ok()
+            .and_then(|v| v.parse::<f64>().ok())
+    };
+    if let Some(v) = env("ACC_MOTION") {
+        p.acc_motion = v;
+    }
+    if let Some(v) = env("ACC_TOL") {
+        p.acc_tol = v;
+    }
+    if let Some(v) = env("MAG_HEADING_DEG") {
+        p.mag_heading = v.to_radians();
+    }
+    if let Some(v) = env("BIAS_WALK_DEG") {
+        p.bias_walk = v.to_radians();
+    }
+    if let Some(v) = env("RESTART") {
+        p.restart_angle = v;
+    }
+    if let Some(v) = env("LOST_AFTER") {
+        p.lost_after = v;
+    }
+    if let Some(v) = env("GATE") {
+        p.gate = v;
+    }
+    smoother::smooth(&m, q0, f.bias(), &p).q
 }

@@ -290,22 +290,9 @@ pub struct Acquisition {
     held: Option<Vec<Event>>,
     /// Phone: the session's noise floors (window spreads of the gyroscope, accelerometer and
     /// magnetometer at rest), the least over the curves so far.
-    noise: Option<NoiseFloors>,
+    noise: Option<rest::NoiseFloors>,
 }
 
-/// The noise of a phone's sensors measured in the session: the spread of their quietest
-/// windows ([`rest::noise_floor`]), all three axes together.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct NoiseFloors {
-    gyro: f64,
-    acc: f64,
-    mag: f64,
-}
-
-/// Half-width of the windows whose statistics decide rest (phone), s.
-const REST_HALF_WINDOW: f64 = 0.2;
-/// A window whose spread is within this factor of the session's noise floor is at rest.
-const REST_SPREAD_FACTOR: f64 = 2.0;
 /// Curves longer than this are not smoothed (the smoother keeps 350 bytes per sample): they
 /// keep the causal filter's orientations.
 const MAX_SMOOTHED_SAMPLES: usize = 1_000_000;
@@ -894,41 +881,9 @@ impl Acquisition {
         if !(2..=MAX_SMOOTHED_SAMPLES).contains(&n) || !self.cfg.smooth {
             return vec![bias; n];
         }
-        let wg = rest::window_stats(&s.t, gyro, REST_HALF_WINDOW);
-        let wa = rest::window_stats(&s.t, acc, REST_HALF_WINDOW);
-        let wm = rest::window_stats(&s.t, mag, REST_HALF_WINDOW);
-        let here = NoiseFloors {
-            gyro: rest::noise_floor(&wg.spread),
-            acc: rest::noise_floor(&wa.spread),
-            mag: rest::noise_floor(&wm.spread),
-        };
-        let floors = match self.noise {
-            Some(f) => NoiseFloors {
-                gyro: f.gyro.min(here.gyro),
-                acc: f.acc.min(here.acc),
-                mag: f.mag.min(here.mag),
-            },
-            None => here,
-        };
+        let (rest, floors) = rest::rests(&s.t, gyro, acc, mag, self.noise);
         self.noise = Some(floors);
-        let rest: Vec<bool> = (0..n)
-            .map(|i| {
-                wg.spread[i] <= REST_SPREAD_FACTOR * floors.gyro
-                    && wa.spread[i] <= REST_SPREAD_FACTOR * floors.acc
-            })
-            .collect();
-        let axis = 3f64.sqrt();
-        let m = smoother::Measurements {
-            t: &s.t,
-            gyro,
-            acc,
-            mag,
-            rest: &rest,
-            field,
-            gyro_noise: floors.gyro / axis,
-            acc_noise: floors.acc / axis,
-            mag_noise: floors.mag / axis,
-        };
+        let m = smoother::Measurements::with_floors(&s.t, gyro, acc, mag, &rest, field, &floors);
         // Start from the first sample's gravity and field where they give an orientation (the
         // causal filter may not have settled yet), else from the causal filter.
         let q0 = acc

@@ -12,7 +12,8 @@
 //! - [`link`]: statistics of the decoded link (packets, rejects, gaps, reboots, STATUS).
 //! - [`sensor`]: packets → calibrated samples (HELLO scales, calibration, axis mapping).
 //! - [`orientation`]: samples → orientations of the frame [T B N] (TRIAD, the phone's
-//!   filter, the q-method mean, disturbance tests).
+//!   causal filter and its smoother of finished curves, rests from window statistics, the
+//!   q-method mean, disturbance tests).
 //! - [`keypad`], [`acquisition`], [`scan`]: orientations and key presses → tagged curves.
 //! - `sfs-geometry` (its own crate, `geometry/`, no I/O): tagged curves → filtered frames
 //!   (pre-filter, loop-closure test of the tags, regression on SO(3)) → positions of the

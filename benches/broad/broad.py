@@ -45,7 +45,7 @@ def errors(q_est, q_opt, movement):
     return dict(total=rms(total), heading=rms(heading), inclination=rms(incl))
 
 
-def run_sfs(exe, gyr, acc, mag, ts):
+def run_sfs(exe, gyr, acc, mag, ts, args=()):
     n = len(gyr)
     rec = np.empty((n, 10), dtype='<f8')
     rec[:, 0] = ts
@@ -53,7 +53,7 @@ def run_sfs(exe, gyr, acc, mag, ts):
     rec[:, 1:4] = gyr
     rec[:, 4:7] = acc
     rec[:, 7:10] = mag
-    out = subprocess.run([exe], input=rec.tobytes(), capture_output=True, check=True).stdout
+    out = subprocess.run([exe, *args], input=rec.tobytes(), capture_output=True, check=True).stdout
     return np.frombuffer(out, dtype='<f8').reshape(n, 4)
 
 
@@ -109,7 +109,9 @@ def main():
     files = sorted(pathlib.Path(args.data).glob('*.mat'))
     if not files:
         sys.exit(f'no BROAD .mat files in {args.data}')
-    filters = [('sfs', lambda *a: run_sfs(args.sfs, *a)), ('VQF (offline)', run_vqf),
+    filters = [('sfs', lambda *a: run_sfs(args.sfs, *a)),
+               ('sfs smoother', lambda *a: run_sfs(args.sfs, *a, args=('--smooth',))),
+               ('VQF (offline)', run_vqf),
                ('VQF (online)', run_vqf_online), ('Fusion', run_fusion)]
     results = {}
     for f in files:

@@ -67,6 +67,62 @@ pub fn window_stats(t: &[f64], x: &[Vector3<f64>], half: f64) -> WindowStats {
     out
 }
 
+/// The noise of a device's sensors: the spread of their quietest windows
+/// ([`noise_floor`]), all three axes together (σ per axis is the spread / √3).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseFloors {
+    /// Gyroscope, rad/s.
+    pub gyro: f64,
+    /// Accelerometer, m/s².
+    pub acc: f64,
+    /// Magnetometer, µT.
+    pub mag: f64,
+}
+
+impl NoiseFloors {
+    /// The lesser of each (the session's floors so far and one more curve's).
+    pub fn min(&self, o: &NoiseFloors) -> NoiseFloors {
+        NoiseFloors {
+            gyro: self.gyro.min(o.gyro),
+            acc: self.acc.min(o.acc),
+            mag: self.mag.min(o.mag),
+        }
+    }
+}
+
+/// Half-width of the windows whose statistics decide rest, s.
+pub const HALF_WINDOW: f64 = 0.2;
+/// A window whose spreads are within this factor of the noise floors is at rest.
+pub const SPREAD_FACTOR: f64 = 2.0;
+
+/// Rests of a stretch of samples (gyroscope and accelerometer windows both within
+/// [`SPREAD_FACTOR`] of their floors), and the floors: those measured here, or the lesser of
+/// them and `session`'s (a stretch without any rest then borrows the session's).
+pub fn rests(
+    t: &[f64],
+    gyro: &[Vector3<f64>],
+    acc: &[Vector3<f64>],
+    mag: &[Vector3<f64>],
+    session: Option<NoiseFloors>,
+) -> (Vec<bool>, NoiseFloors) {
+    let wg = window_stats(t, gyro, HALF_WINDOW);
+    let wa = window_stats(t, acc, HALF_WINDOW);
+    let wm = window_stats(t, mag, HALF_WINDOW);
+    let here = NoiseFloors {
+        gyro: noise_floor(&wg.spread),
+        acc: noise_floor(&wa.spread),
+        mag: noise_floor(&wm.spread),
+    };
+    let floors = session.map_or(here, |s| s.min(&here));
+    let rest = wg
+        .spread
+        .iter()
+        .zip(&wa.spread)
+        .map(|(&g, &a)| g <= SPREAD_FACTOR * floors.gyro && a <= SPREAD_FACTOR * floors.acc)
+        .collect();
+    (rest, floors)
+}
+
 /// The noise level of a signal from its window spreads: the 1st percentile (the quietest
 /// windows, which are rests when there are any: a curve scanned with few stops has rests on
 /// a few per cent of its samples). `0` for no windows.

@@ -120,6 +120,33 @@ pub struct Measurements<'a> {
     pub mag_noise: f64,
 }
 
+impl<'a> Measurements<'a> {
+    /// The measurements of samples whose rests and noise floors come from
+    /// [`super::rest::rests`].
+    pub fn with_floors(
+        t: &'a [f64],
+        gyro: &'a [Vector3<f64>],
+        acc: &'a [Vector3<f64>],
+        mag: &'a [Vector3<f64>],
+        rest: &'a [bool],
+        field: Option<(f64, f64)>,
+        floors: &super::rest::NoiseFloors,
+    ) -> Self {
+        let axis = 3f64.sqrt();
+        Measurements {
+            t,
+            gyro,
+            acc,
+            mag,
+            rest,
+            field,
+            gyro_noise: floors.gyro / axis,
+            acc_noise: floors.acc / axis,
+            mag_noise: floors.mag / axis,
+        }
+    }
+}
+
 /// Smoothed orientation (frame → world) and gyroscope bias per sample.
 #[derive(Debug, Clone, Default)]
 pub struct Smoothed {
@@ -253,9 +280,16 @@ fn pass(
     let mut covs: Vec<Matrix6<f64>> = Vec::with_capacity(n);
     // Since when every gravity / heading measurement was refused.
     let (mut gravity_lost, mut heading_lost): (Option<f64>, Option<f64>) = (None, None);
-    let widen = |cov: &mut Matrix6<f64>| {
-        for i in 0..3 {
-            cov[(i, i)] += p.restart_angle * p.restart_angle;
+    // Notes whether a measurement at time `t` was taken; after `lost_after` of refusals the
+    // orientation's σ is widened (the filter is lost, not the measurements wrong).
+    let note = |taken: bool, since: &mut Option<f64>, t: f64, cov: &mut Matrix6<f64>| {
+        if taken {
+            *since = None;
+        } else if t - *since.get_or_insert(t) > p.lost_after {
+            for i in 0..3 {
+                cov[(i, i)] += p.restart_angle * p.restart_angle;
+            }
+            *since = None;
         }
     };
     let mut q = q0;
@@ -291,16 +325,9 @@ fn pass(
             let y = a / an - h_dir;
             let mut h = SMatrix::<f64, 3, 6>::zeros();
             h.fixed_view_mut::<3, 3>(0, 0).copy_from(&skew(&h_dir));
-            if update(&mut q, &mut b, &mut cov, y, h, acc_var, p.gate) {
-                gravity_lost = None;
-            } else {
-                out.refused_gravity += 1;
-                let since = *gravity_lost.get_or_insert(m.t[k]);
-                if m.t[k] - since > p.lost_after {
-                    widen(&mut cov);
-                    gravity_lost = None;
-                }
-            }
+            let taken = update(&mut q, &mut b, &mut cov, y, h, acc_var, p.gate);
+            out.refused_gravity += usize::from(!taken);
+            note(taken, &mut gravity_lost, m.t[k], &mut cov);
         }
         // Heading.
         let mg = m.mag[k];
@@ -319,16 +346,9 @@ fn pass(
                 h.fixed_view_mut::<1, 3>(0, 0).copy_from(&row);
                 let var = (m.mag_noise.max(0.05) / mh).powi(2) + p.mag_heading.powi(2);
                 let y = SMatrix::<f64, 1, 1>::new(psi);
-                if update(&mut q, &mut b, &mut cov, y, h, var, p.gate) {
-                    heading_lost = None;
-                } else {
-                    out.refused_heading += 1;
-                    let since = *heading_lost.get_or_insert(m.t[k]);
-                    if m.t[k] - since > p.lost_after {
-                        widen(&mut cov);
-                        heading_lost = None;
-                    }
-                }
+                let taken = update(&mut q, &mut b, &mut cov, y, h, var, p.gate);
+                out.refused_heading += usize::from(!taken);
+                note(taken, &mut heading_lost, m.t[k], &mut cov);
             }
         }
         // Rest: the gyroscope reads its bias.
@@ -382,22 +402,7 @@ fn pass(
 mod tests {
     use super::*;
 
-    struct Rng(u64);
-    impl Rng {
-        fn gauss(&mut self) -> f64 {
-            let mut u = || {
-                self.0 ^= self.0 << 13;
-                self.0 ^= self.0 >> 7;
-                self.0 ^= self.0 << 17;
-                ((self.0 >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            let (a, b) = (u(), u());
-            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
-        }
-        fn v(&mut self, s: f64) -> Vector3<f64> {
-            Vector3::new(self.gauss(), self.gauss(), self.gauss()) * s
-        }
-    }
+    use crate::simulate::rng::Rng;
 
     const FIELD: Vector3<f64> = Vector3::new(0.0, 20.0, -43.0);
 
@@ -414,7 +419,7 @@ mod tests {
     /// gyroscope bias of 3°/s per axis; field-like noise; optionally a 0.3 s gap and a
     /// magnet.
     fn run(seed: u64, gap: bool, magnet: bool) -> Run {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         let bias = Vector3::new(1.0, -1.0, 1.0) * 3f64.to_radians();
         let mut q = UnitQuaternion::from_euler_angles(0.1, -0.2, 1.0);
         let mut r = Run {
@@ -450,17 +455,13 @@ mod tests {
             }
             r.t.push(t);
             r.truth.push(q);
-            r.gyro.push(w + bias + r_noise(&mut rng, 0.009));
+            r.gyro.push(w + bias + rng.vec3(0.009));
             r.acc
-                .push(q.inverse() * Vector3::new(0.0, 0.0, G) + rng.v(0.09));
-            r.mag.push(q.inverse() * field + rng.v(1.2));
+                .push(q.inverse() * Vector3::new(0.0, 0.0, G) + rng.vec3(0.09));
+            r.mag.push(q.inverse() * field + rng.vec3(1.2));
             r.rest.push(still && t > 0.3);
         }
         r
-    }
-
-    fn r_noise(rng: &mut Rng, s: f64) -> Vector3<f64> {
-        rng.v(s)
     }
 
     fn errors(r: &Run, s: &Smoothed) -> (f64, f64) {
