@@ -97,16 +97,28 @@ fn smooth(input: &[u8], f: &mut Ahrs) -> Vec<nalgebra::UnitQuaternion<f64>> {
         acc.push(a);
         mag.push(m);
     }
-    let (rests, floors) = rest::rests(&t, &gyro, &acc, &mag, None);
-    let m = smoother::Measurements::with_floors(
-        &t,
-        &gyro,
-        &acc,
-        &mag,
-        &rests,
-        field.reference(),
-        &floors,
+    let (mut rests, floors) = rest::rests(&t, &gyro, &acc, &mag, None);
+    if std::env::var("SFS_SMOOTH_NO_REST").is_ok() {
+        rests.iter_mut().for_each(|r| *r = false);
+    }
+    eprintln!(
+        "rests {} of {}, floors {floors:?}",
+        rests.iter().filter(|&&r| r).count(),
+        rests.len()
     );
+    let sd = floors.per_axis();
+    let m = smoother::Measurements {
+        t: &t,
+        gyro: &gyro,
+        acc: &acc,
+        mag: &mag,
+        rest: &rests,
+        disturbed: &[],
+        field: field.reference(),
+        gyro_noise: sd.gyro,
+        acc_noise: sd.acc,
+        mag_noise: sd.mag,
+    };
     let q0 = acc
         .first()
         .zip(mag.first())

@@ -76,6 +76,13 @@ fn main() {
         if tot.is_empty() {
             continue;
         }
+        let disturbed = c
+            .samples
+            .flags
+            .iter()
+            .filter(|&&f| f & sfs::orientation::flags::MAG_DISTURBED != 0)
+            .count();
+        print!("{disturbed:6} disturbed ");
         let med = |mut v: Vec<f64>, p: f64| {
             v.sort_by(f64::total_cmp);
             v[((v.len() - 1) as f64 * p) as usize]

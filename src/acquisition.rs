@@ -26,7 +26,9 @@
 
 use crate::keypad::{KeyEvent, Keypad};
 use crate::orientation::ahrs::{Ahrs, AhrsParams};
-use crate::orientation::disturbance::{acc_motion, mag_disturbed, FieldReference, Thresholds};
+use crate::orientation::disturbance::{
+    acc_motion, bridge_heading, disturbed_windows, mag_disturbed, FieldReference, Thresholds,
+};
 use crate::orientation::flags;
 use crate::orientation::rest;
 use crate::orientation::smoother::{self, SmootherParams};
@@ -63,6 +65,9 @@ pub struct AcquisitionConfig {
     /// Phone: measured segment lengths per curve index (m), from the configuration.
     pub segment_lengths: BTreeMap<usize, Vec<f64>>,
     pub ahrs: AhrsParams,
+    /// Morphorider: bridge the heading across stretches of a curve where the field is
+    /// disturbed ([`bridge_heading`]), from their clean ends. Default on.
+    pub bridge_heading: bool,
     /// Phone: smooth each finished curve's orientations forward and backward ([`smoother`]);
     /// off, a curve keeps the causal filter's. Default on.
     pub smooth: bool,
@@ -97,6 +102,7 @@ impl Default for AcquisitionConfig {
             nominal_speed: 0.05,
             segment_lengths: BTreeMap::new(),
             ahrs: AhrsParams::default(),
+            bridge_heading: true,
             smooth: true,
             smoother: SmootherParams::default(),
             array_window: 1.0,
@@ -883,7 +889,20 @@ impl Acquisition {
         }
         let (rest, floors) = rest::rests(&s.t, gyro, acc, mag, self.noise);
         self.noise = Some(floors);
-        let m = smoother::Measurements::with_floors(&s.t, gyro, acc, mag, &rest, field, &floors);
+        let disturbed = disturbed_windows(&s.t, acc, mag, field, &self.cfg.thresholds);
+        let sd = floors.per_axis();
+        let m = smoother::Measurements {
+            t: &s.t,
+            gyro,
+            acc,
+            mag,
+            rest: &rest,
+            disturbed: &disturbed,
+            field,
+            gyro_noise: sd.gyro,
+            acc_noise: sd.acc,
+            mag_noise: sd.mag,
+        };
         // Start from the first sample's gravity and field where they give an orientation (the
         // causal filter may not have settled yet), else from the causal filter.
         let q0 = acc
@@ -976,11 +995,10 @@ impl Acquisition {
         let mut missing_before_first = 0;
         // Morphorider: the wheel; phone: the calibrated sensors.
         let mut wheel: Vec<f64> = Vec::with_capacity(if phone { 0 } else { n });
-        let cap = if phone { n } else { 0 };
         let (mut gyros, mut accs, mut mags) = (
-            Vec::with_capacity(cap),
-            Vec::with_capacity(cap),
-            Vec::with_capacity(cap),
+            Vec::with_capacity(if phone { n } else { 0 }),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
         );
         let models = std::mem::take(&mut o.models);
         let mut model = 0;
@@ -999,10 +1017,10 @@ impl Acquisition {
             if !phone && mag_disturbed(field_ref, &acc, &mag, &th) {
                 s.flags[i] |= flags::MAG_DISTURBED;
             }
+            accs.push(acc);
+            mags.push(mag);
             let q = if phone {
                 gyros.push(m.gyro(r.gyro));
-                accs.push(acc);
-                mags.push(mag);
                 let [w, i, j, k] = r.x;
                 Some(UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(
                     w, i, j, k,
@@ -1034,6 +1052,30 @@ impl Acquisition {
             let first = s.q[missing_before_first];
             for q in &mut s.q[..missing_before_first] {
                 *q = first;
+            }
+        }
+        if !phone && self.cfg.bridge_heading {
+            // The fringe of a magnet's reach, which the per-sample tests let through; the
+            // heading across each disturbed stretch is bridged from its clean ends.
+            let windowed = disturbed_windows(&s.t, &accs, &mags, field_ref, &th);
+            let mut disturbed = Vec::with_capacity(n);
+            for (f, d) in s.flags.iter_mut().zip(windowed) {
+                if d {
+                    *f |= flags::MAG_DISTURBED;
+                }
+                disturbed.push(*f & flags::MAG_DISTURBED != 0);
+            }
+            let mut qs: Vec<UnitQuaternion<f64>> = s
+                .q
+                .iter()
+                .map(|q| {
+                    UnitQuaternion::new_normalize(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
+                })
+                .collect();
+            if bridge_heading(&mut qs, &wheel, &disturbed) > 0 {
+                for (dst, q) in s.q.iter_mut().zip(&qs) {
+                    *dst = quat_array(q);
+                }
             }
         }
         // Stationary.

@@ -24,7 +24,16 @@ pub struct Thresholds {
     pub mag_norm_rel: f64,
     /// Deviation of the dip angle from the reference, degrees. Default 4°.
     pub mag_dip_deg: f64,
+    /// The same two tolerances for the field averaged over a window of
+    /// [`WINDOW_HALF`] either side ([`disturbed_windows`]): the averaging takes the noise
+    /// away, so the fringe of a magnet's reach, which turns the heading by several degrees
+    /// while moving the norm and dip by about 1 % and 1°, is caught. Defaults 1.5 % and 1.5°.
+    pub mag_norm_rel_window: f64,
+    pub mag_dip_deg_window: f64,
 }
+
+/// Half-width of the windows of [`disturbed_windows`], s.
+pub const WINDOW_HALF: f64 = 0.25;
 
 impl Default for Thresholds {
     fn default() -> Self {
@@ -32,6 +41,8 @@ impl Default for Thresholds {
             acc_tol: 0.6,
             mag_norm_rel: 0.08,
             mag_dip_deg: 4.0,
+            mag_norm_rel_window: 0.015,
+            mag_dip_deg_window: 1.5,
         }
     }
 }
@@ -157,4 +168,145 @@ pub fn mag_disturbed(
         return true;
     };
     (mag.norm() - norm).abs() > th.mag_norm_rel * norm || (d - dip).abs() > th.mag_dip_deg
+}
+
+/// Per sample, whether the field averaged over the window `[t − WINDOW_HALF, t + WINDOW_HALF]`
+/// deviates from `reference` = `(norm µT, dip °)` by more than the window tolerances of `th`
+/// (all false without a reference). `t` non-decreasing; `acc`, `mag` in frame axes.
+pub fn disturbed_windows(
+    t: &[f64],
+    acc: &[Vector3<f64>],
+    mag: &[Vector3<f64>],
+    reference: Option<(f64, f64)>,
+    th: &Thresholds,
+) -> Vec<bool> {
+    let n = t.len().min(acc.len()).min(mag.len());
+    let Some((norm, dip)) = reference else {
+        return vec![false; n];
+    };
+    // Norm and dip as the first two components, so that one windowed mean gives both.
+    let nd: Vec<Vector3<f64>> = (0..n)
+        .map(|i| match dip_deg(&acc[i], &mag[i]) {
+            Some(d) => Vector3::new(mag[i].norm(), d, 0.0),
+            None => Vector3::new(norm, dip, 0.0),
+        })
+        .collect();
+    let w = super::rest::window_stats(&t[..n], &nd, WINDOW_HALF);
+    w.mean
+        .iter()
+        .map(|m| {
+            (m.x - norm).abs() > th.mag_norm_rel_window * norm
+                || (m.y - dip).abs() > th.mag_dip_deg_window
+        })
+        .collect()
+}
+
+/// Heading of a frame `q` (frame → world): the direction of its first axis in the horizontal
+/// plane, or of its second where the first is near vertical, rad (`atan2(x, y)`: 0 north, π/2
+/// east).
+fn heading(q: &nalgebra::UnitQuaternion<f64>) -> f64 {
+    let t = q * Vector3::x();
+    let v = if t.x.hypot(t.y) > 0.3 {
+        t
+    } else {
+        q * Vector3::y()
+    };
+    v.x.atan2(v.y)
+}
+
+/// Bridges the heading across stretches of disturbed samples (`disturbed[i]`): the field there
+/// is not the Earth's, and a TRIAD orientation turns with it about the vertical, by tens of
+/// degrees in a magnet's reach. Each stretch with clean samples on both sides gets the heading
+/// interpolated between theirs along `x` (the distance travelled, or time), its tilt kept; a
+/// stretch at an end of the curve keeps the heading of its one clean side; a curve disturbed
+/// throughout is left alone. Returns how many samples were changed.
+pub fn bridge_heading(
+    q: &mut [nalgebra::UnitQuaternion<f64>],
+    x: &[f64],
+    disturbed: &[bool],
+) -> usize {
+    let n = q.len().min(x.len()).min(disturbed.len());
+    let mut changed = 0;
+    let mut i = 0;
+    while i < n {
+        if !disturbed[i] {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        while i < n && disturbed[i] {
+            i += 1;
+        }
+        let (before, after) = (start.checked_sub(1), (i < n).then_some(i));
+        let (h0, h1, x0, x1) = match (before, after) {
+            (Some(a), Some(b)) => {
+                let (h0, h1) = (heading(&q[a]), heading(&q[b]));
+                let d = (h1 - h0 + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                    - std::f64::consts::PI;
+                (h0, h0 + d, x[a], x[b])
+            }
+            (Some(a), None) => (heading(&q[a]), heading(&q[a]), x[a], x[a] + 1.0),
+            (None, Some(b)) => (heading(&q[b]), heading(&q[b]), x[b] - 1.0, x[b]),
+            (None, None) => continue,
+        };
+        for k in start..i {
+            let u = if x1 > x0 {
+                ((x[k] - x0) / (x1 - x0)).clamp(0.0, 1.0)
+            } else {
+                0.5
+            };
+            let target = h0 + u * (h1 - h0);
+            // A heading grows clockwise seen from above: a turn of −δ about +z adds δ.
+            let turn = nalgebra::UnitQuaternion::from_axis_angle(
+                &Vector3::z_axis(),
+                heading(&q[k]) - target,
+            );
+            q[k] = turn * q[k];
+            changed += 1;
+        }
+    }
+    changed
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::UnitQuaternion;
+
+    /// A frame turning steadily about the vertical, a stretch of it turned by a magnet by 30°:
+    /// bridged back to within the interpolation's error; the clean samples untouched.
+    #[test]
+    fn bridge_heading_undoes_a_turn_of_the_field() {
+        let truth: Vec<UnitQuaternion<f64>> = (0..100)
+            .map(|i| {
+                UnitQuaternion::from_euler_angles(0.3, -0.2, 0.0)
+                    .rotation_to(&UnitQuaternion::identity())
+                    .inverse()
+                    * UnitQuaternion::from_euler_angles(0.0, 0.0, 0.01 * i as f64)
+            })
+            .map(|q| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.01) * q)
+            .collect();
+        let x: Vec<f64> = (0..100).map(|i| i as f64 * 0.01).collect();
+        let disturbed: Vec<bool> = (0..100).map(|i| (40..60).contains(&i)).collect();
+        let mut q: Vec<UnitQuaternion<f64>> = truth
+            .iter()
+            .zip(&disturbed)
+            .map(|(q, &d)| {
+                if d {
+                    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.5) * q
+                } else {
+                    *q
+                }
+            })
+            .collect();
+        assert_eq!(bridge_heading(&mut q, &x, &disturbed), 20);
+        for i in 0..100 {
+            let e = q[i].angle_to(&truth[i]).to_degrees();
+            assert!(e < 0.5, "sample {i}: {e:.2}°");
+        }
+        // All disturbed: nothing to bridge from.
+        let mut q2 = q.clone();
+        assert_eq!(bridge_heading(&mut q2, &x, &[true; 100]), 0);
+        assert_eq!(q2, q);
+    }
 }

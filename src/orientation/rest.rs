@@ -80,6 +80,16 @@ pub struct NoiseFloors {
 }
 
 impl NoiseFloors {
+    /// σ of one sample per axis (the spreads are over three axes).
+    pub fn per_axis(&self) -> NoiseFloors {
+        let k = 3f64.sqrt();
+        NoiseFloors {
+            gyro: self.gyro / k,
+            acc: self.acc / k,
+            mag: self.mag / k,
+        }
+    }
+
     /// The lesser of each (the session's floors so far and one more curve's).
     pub fn min(&self, o: &NoiseFloors) -> NoiseFloors {
         NoiseFloors {

@@ -35,7 +35,7 @@
 //! let acc = vec![truth.inverse() * Vector3::new(0.0, 0.0, 9.81); n];
 //! let mag = vec![truth.inverse() * Vector3::new(0.0, 20.0, -43.0); n];
 //! let rest = vec![true; n];
-//! let m = Measurements { t: &t, gyro: &gyro, acc: &acc, mag: &mag, rest: &rest,
+//! let m = Measurements { t: &t, gyro: &gyro, acc: &acc, mag: &mag, rest: &rest, disturbed: &[],
 //!     field: Some((47.4, 65.0)), gyro_noise: 0.005, acc_noise: 0.05, mag_noise: 0.5 };
 //! let s = smooth(&m, UnitQuaternion::identity(), Vector3::zeros(), &SmootherParams::default());
 //! assert!(s.q[n / 2].angle_to(&truth) < 0.01);
@@ -112,39 +112,15 @@ pub struct Measurements<'a> {
     pub mag: &'a [Vector3<f64>],
     /// Samples at rest (zero angular rate).
     pub rest: &'a [bool],
+    /// Samples whose field is known to be disturbed (the windowed test of
+    /// [`super::disturbance::disturbed_windows`]): their heading is not used. May be empty.
+    pub disturbed: &'a [bool],
     /// The session's field reference `(norm µT, dip °)`; without it the heading is not used.
     pub field: Option<(f64, f64)>,
     /// σ of one sample, per axis: gyroscope rad/s, accelerometer m/s², magnetometer µT.
     pub gyro_noise: f64,
     pub acc_noise: f64,
     pub mag_noise: f64,
-}
-
-impl<'a> Measurements<'a> {
-    /// The measurements of samples whose rests and noise floors come from
-    /// [`super::rest::rests`].
-    pub fn with_floors(
-        t: &'a [f64],
-        gyro: &'a [Vector3<f64>],
-        acc: &'a [Vector3<f64>],
-        mag: &'a [Vector3<f64>],
-        rest: &'a [bool],
-        field: Option<(f64, f64)>,
-        floors: &super::rest::NoiseFloors,
-    ) -> Self {
-        let axis = 3f64.sqrt();
-        Measurements {
-            t,
-            gyro,
-            acc,
-            mag,
-            rest,
-            field,
-            gyro_noise: floors.gyro / axis,
-            acc_noise: floors.acc / axis,
-            mag_noise: floors.mag / axis,
-        }
-    }
 }
 
 /// Smoothed orientation (frame → world) and gyroscope bias per sample.
@@ -333,7 +309,8 @@ fn pass(
         let mg = m.mag[k];
         if let (Some((norm, dip_deg)), Some(dip), true) = (m.field, dip, finite(&mg) && finite(&a))
         {
-            let field_ok = (mg.norm() - norm).abs() <= p.mag_norm_rel * norm
+            let field_ok = !m.disturbed.get(k).copied().unwrap_or(false)
+                && (mg.norm() - norm).abs() <= p.mag_norm_rel * norm
                 && super::disturbance::dip_deg(&a, &mg)
                     .is_some_and(|d| (d - dip_deg).abs() <= p.mag_dip);
             let mw = q * mg;
@@ -482,6 +459,7 @@ mod tests {
             acc: &r.acc,
             mag: &r.mag,
             rest: &r.rest,
+            disturbed: &[],
             field: Some((FIELD.norm(), (43f64 / FIELD.norm()).asin().to_degrees())),
             gyro_noise: 0.009,
             acc_noise: 0.09,
