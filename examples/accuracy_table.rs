@@ -4,7 +4,10 @@
 //! after rigid registration, % of the bounding-box diagonal).
 //!
 //! `cargo run --release --example accuracy_table -- [--seeds 1,2,3] [--devices morphorider,phone]
-//! [--profiles default,field] [--scenes a,b] [--study]`
+//! [--profiles default,field] [--scenes a,b] [--study] [--config FILE]`
+//!
+//! `--config FILE`: the acquisition and network settings of a configuration file instead of
+//! the defaults.
 //!
 //! Each cell runs the library as `sfs simulate` + `sfs replay` + `sfs eval` do (in process,
 //! two cells at a time).
@@ -116,6 +119,20 @@ fn put_truth(curves: &mut [Curve], truth: &SampleTruth, q: bool, d: bool) -> usi
     missed
 }
 
+/// The acquisition and network settings: `--config FILE`'s, or the defaults.
+fn config() -> (AcquisitionConfig, NetworkParams) {
+    let args: Vec<String> = std::env::args().collect();
+    match args.iter().position(|a| a == "--config") {
+        Some(i) => {
+            let path = args.get(i + 1).expect("--config FILE");
+            let s = sfs::config::load(std::path::Path::new(path))
+                .unwrap_or_else(|e| panic!("--config {path}: {e}"));
+            (s.acquisition, s.network)
+        }
+        None => (AcquisitionConfig::default(), NetworkParams::default()),
+    }
+}
+
 /// Mean and max error in % of the diagonal, or why there is none.
 fn cell(name: &str, device: DeviceKind, profile: Profile, seed: u64) -> Result<(f64, f64), String> {
     variant(name, device, profile, seed, &Variant::default())
@@ -131,7 +148,8 @@ fn variant(
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
     let s = scene::load(&scene::find(name, &dir)).map_err(|e| e.to_string())?;
     let sim = simulate::run_without(&s, device, profile, seed, &Mistakes::default(), &v.without);
-    let mut scan = Acquisition::scan_bytes(&sim.bytes, AcquisitionConfig::default());
+    let settings = config();
+    let mut scan = Acquisition::scan_bytes(&sim.bytes, settings.0);
     if v.true_q || v.true_d {
         let missed = put_truth(&mut scan.curves, &sim.samples, v.true_q, v.true_d);
         if missed > 0 {
@@ -142,7 +160,7 @@ fn variant(
         }
     }
     let net = Reconstructor::new()
-        .run(&scan.curves, &NetworkParams::default())
+        .run(&scan.curves, &settings.1)
         .map_err(|e| format!("{:?}", e.warnings))?;
     let e = sfs::eval::evaluate(&sim.truth, &sfs::gltf_out::as_read_network(&net.positions))
         .map_err(|e| e.to_string())?;

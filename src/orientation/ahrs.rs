@@ -63,8 +63,9 @@ pub struct AhrsParams {
     /// ≈ 7° on the simulated phone, whose operator rests too briefly at the nodes for the
     /// rest estimator). Off by default because it made every BROAD trial worse (a real,
     /// well-calibrated IMU in a real field); 10 s with `tau_tilt_bias` = 10 s is what
-    /// measured best on simulated phone scans with an uncalibrated gyroscope (BENCHMARKS.md;
-    /// `config/phone-uncalibrated.toml`).
+    /// measured best on simulated phone scans with an uncalibrated gyroscope (BENCHMARKS.md).
+    /// The reconstruction no longer depends on it: each finished curve is smoothed with the
+    /// bias as a state ([`super::smoother`]); it shapes the live preview only.
     pub tau_heading_bias: f64,
     /// Bias learning in motion from the tilt correction: the horizontal part of the bias
     /// follows the rate the tilt is corrected at with this time constant, s; 0 (the default)
