@@ -76,6 +76,49 @@ fn main() {
         if tot.is_empty() {
             continue;
         }
+        // Distance: the estimate against the truth (from the first tag), RMS and worst, mm;
+        // and the share of truly standing samples flagged standing, and of moving ones.
+        let near = |t: f64| {
+            let k = truth.session_t.partition_point(|&x| x < t - 2e-6);
+            (k < truth.t.len() && (truth.session_t[k] - t).abs() < 2e-6).then_some(k)
+        };
+        if let Some(k0) = c.tags.first().and_then(|g| near(g.t)) {
+            let (mut se, mut worst, mut m) = (0.0, 0.0f64, 0);
+            let (mut st, mut st_flag, mut mv, mut mv_flag) = (0, 0, 0, 0);
+            for i in 0..c.samples.len() {
+                if let Some(k) = near(c.samples.t[i]) {
+                    let e = c.samples.d[i] - (truth.s[k] - truth.s[k0]);
+                    se += e * e;
+                    worst = worst.max(e.abs());
+                    m += 1;
+                    let flagged = c.samples.flags[i] & sfs::orientation::flags::STATIONARY != 0;
+                    if flagged
+                        && !truth.standing[k]
+                        && std::env::var("SFS_SHOW_FALSE_STAND").is_ok()
+                        && i % 50 == 0
+                    {
+                        println!(
+                            "  curve {} t {:.2} s {:.3} flagged standing while moving",
+                            c.index, c.samples.t[i], truth.s[k]
+                        );
+                    }
+                    if truth.standing[k] {
+                        st += 1;
+                        st_flag += flagged as usize;
+                    } else {
+                        mv += 1;
+                        mv_flag += flagged as usize;
+                    }
+                }
+            }
+            print!(
+                "d rms {:5.1} max {:5.1} mm, standing flagged {:3.0} % moving flagged {:3.0} % | ",
+                (se / m.max(1) as f64).sqrt() * 1e3,
+                worst * 1e3,
+                100.0 * st_flag as f64 / st.max(1) as f64,
+                100.0 * mv_flag as f64 / mv.max(1) as f64
+            );
+        }
         let disturbed = c
             .samples
             .flags

@@ -55,10 +55,12 @@ pub struct AcquisitionConfig {
     /// Phone: gyroscope below this (rad/s) over the window counts as still. Default 3°/s.
     pub stationary_gyro: f64,
     /// Phone: a still run counts as standing only within this many seconds of the typing of
-    /// a node index (first digit to Enter). Default 2 s. A phone sliding slowly over a large,
+    /// a node index (first digit to Enter). Default 1 s. A phone sliding slowly over a large,
     /// gently curved surface turns as little as a standing one (0.5°/s on a 6 m radius at
     /// 5 cm/s), so a still run may cover a whole curve; only the operator's stand at the
-    /// node is taken out of the moving time.
+    /// node is taken out of the moving time. 2 s (the default before issue 17) took up to a
+    /// second of sliding on each side of a node as standing on the simulated spheres and
+    /// torus (BENCHMARKS.md, "Field accuracy").
     pub stand_margin: f64,
     /// Phone: speed assumed where no segment length is known, m/s. Default 0.05.
     pub nominal_speed: f64,
@@ -98,7 +100,7 @@ impl Default for AcquisitionConfig {
             stationary_window: 0.25,
             stationary_distance: 0.002,
             stationary_gyro: 3f64.to_radians(),
-            stand_margin: 2.0,
+            stand_margin: 1.0,
             nominal_speed: 0.05,
             segment_lengths: BTreeMap::new(),
             ahrs: AhrsParams::default(),

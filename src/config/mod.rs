@@ -32,7 +32,7 @@
 //! stationary_window_s = 0.25         # half-width of the standing-still test
 //! stationary_distance = 0.002        # Morphorider: still if the wheel moves less (m; (0, 1])
 //! stationary_gyro_deg_s = 3.0        # phone: still below this rotation rate
-//! stand_margin_s = 2.0               # phone: standing only this close to typing an index
+//! stand_margin_s = 1.0               # phone: standing only this close to typing an index
 //! heading_bias_tau_s = 0.0           # phone: learn the gyro bias in motion from the heading
 //! tilt_bias_tau_s = 0.0              #   and tilt corrections (time constants; 0 = off)
 //! smooth = true                      # phone: each finished curve's orientations smoothed
