@@ -27,7 +27,8 @@
 use crate::keypad::{KeyEvent, Keypad};
 use crate::orientation::ahrs::{Ahrs, AhrsParams};
 use crate::orientation::disturbance::{
-    acc_motion, bridge_heading, disturbed_windows, mag_disturbed, FieldReference, Thresholds,
+    acc_motion, bridge_heading, disturbed_windows, mag_disturbed, norm_dip, FieldReference,
+    Thresholds,
 };
 use crate::orientation::flags;
 use crate::orientation::rest;
@@ -301,9 +302,10 @@ pub struct Acquisition {
     noise: Option<rest::NoiseFloors>,
 }
 
-/// Curves longer than this are not smoothed (the smoother keeps 350 bytes per sample): they
-/// keep the causal filter's orientations.
-const MAX_SMOOTHED_SAMPLES: usize = 1_000_000;
+/// Curves longer than this are not smoothed (the smoother keeps about 350 bytes per sample:
+/// 90 MB here, 21 minutes of a 200 Hz phone): they keep the causal filter's orientations, and
+/// the log says so.
+const MAX_SMOOTHED_SAMPLES: usize = 250_000;
 
 /// Most events held before the first HELLO. A device sends one every 5 s, so a receiver that
 /// joins mid-stream holds about 5 s (10 s if that HELLO is lost on the link) of a 200 Hz
@@ -875,7 +877,7 @@ impl Acquisition {
 
     /// Phone: replaces the causal orientations of a finished curve (`s.q`) by the smoother's
     /// ([`smoother`]), with rests from window statistics against the session's noise; returns
-    /// the smoothed gyroscope bias per sample (the causal filter's `bias` where not smoothed).
+    /// the smoothed gyroscope bias per sample.
     fn smooth_phone(
         &mut self,
         s: &mut Samples,
@@ -886,12 +888,10 @@ impl Acquisition {
         bias: Vector3<f64>,
     ) -> Vec<Vector3<f64>> {
         let n = s.t.len();
-        if !(2..=MAX_SMOOTHED_SAMPLES).contains(&n) || !self.cfg.smooth {
-            return vec![bias; n];
-        }
         let (rest, floors) = rest::rests(&s.t, gyro, acc, mag, self.noise);
         self.noise = Some(floors);
-        let disturbed = disturbed_windows(&s.t, acc, mag, field, &self.cfg.thresholds);
+        let nd: Vec<[f32; 2]> = acc.iter().zip(mag).map(|(a, m)| norm_dip(a, m)).collect();
+        let disturbed = disturbed_windows(&s.t, &nd, field, &self.cfg.thresholds);
         let sd = floors.per_axis();
         let m = smoother::Measurements {
             t: &s.t,
@@ -995,13 +995,26 @@ impl Acquisition {
         let bias = self.ahrs.bias();
         let mut last_q: Option<UnitQuaternion<f64>> = None;
         let mut missing_before_first = 0;
-        // Morphorider: the wheel; phone: the calibrated sensors.
+        // Morphorider: the wheel and the field's norm and dip; phone: the calibrated sensors
+        // (for the smoother, on curves it smooths) or whether the gyroscope is still.
+        let smoothing = phone && self.cfg.smooth && (2..=MAX_SMOOTHED_SAMPLES).contains(&n);
+        if phone && self.cfg.smooth && n > MAX_SMOOTHED_SAMPLES {
+            tracing::warn!(
+                curve = o.index,
+                samples = n,
+                "a curve of more than {MAX_SMOOTHED_SAMPLES} samples keeps the causal filter's \
+                 orientations (not smoothed)"
+            );
+        }
         let mut wheel: Vec<f64> = Vec::with_capacity(if phone { 0 } else { n });
+        let mut nd: Vec<[f32; 2]> = Vec::with_capacity(if phone { 0 } else { n });
+        let k = if smoothing { n } else { 0 };
         let (mut gyros, mut accs, mut mags) = (
-            Vec::with_capacity(if phone { n } else { 0 }),
-            Vec::with_capacity(n),
-            Vec::with_capacity(n),
+            Vec::with_capacity(k),
+            Vec::with_capacity(k),
+            Vec::with_capacity(k),
         );
+        let mut gyro_still: Vec<bool> = Vec::new();
         let models = std::mem::take(&mut o.models);
         let mut model = 0;
         let raw = std::mem::take(&mut o.raw).chunks.into_iter().flatten();
@@ -1019,16 +1032,22 @@ impl Acquisition {
             if !phone && mag_disturbed(field_ref, &acc, &mag, &th) {
                 s.flags[i] |= flags::MAG_DISTURBED;
             }
-            accs.push(acc);
-            mags.push(mag);
             let q = if phone {
-                gyros.push(m.gyro(r.gyro));
+                let gyro = m.gyro(r.gyro);
+                if smoothing {
+                    gyros.push(gyro);
+                    accs.push(acc);
+                    mags.push(mag);
+                } else {
+                    gyro_still.push((gyro - bias).norm() < self.cfg.stationary_gyro);
+                }
                 let [w, i, j, k] = r.x;
                 Some(UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(
                     w, i, j, k,
                 )))
             } else {
                 wheel.push(r.x[0]);
+                nd.push(norm_dip(&acc, &mag));
                 triad(&acc, &mag)
             };
             let q = match q {
@@ -1059,37 +1078,27 @@ impl Acquisition {
         if !phone && self.cfg.bridge_heading {
             // The fringe of a magnet's reach, which the per-sample tests let through; the
             // heading across each disturbed stretch is bridged from its clean ends.
-            let windowed = disturbed_windows(&s.t, &accs, &mags, field_ref, &th);
-            let mut disturbed = Vec::with_capacity(n);
+            let windowed = disturbed_windows(&s.t, &nd, field_ref, &th);
+            drop(nd);
             for (f, d) in s.flags.iter_mut().zip(windowed) {
                 if d {
                     *f |= flags::MAG_DISTURBED;
                 }
-                disturbed.push(*f & flags::MAG_DISTURBED != 0);
             }
-            let mut qs: Vec<UnitQuaternion<f64>> = s
-                .q
-                .iter()
-                .map(|q| {
-                    UnitQuaternion::new_normalize(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
-                })
-                .collect();
-            if bridge_heading(&mut qs, &wheel, &disturbed) > 0 {
-                for (dst, q) in s.q.iter_mut().zip(&qs) {
-                    *dst = quat_array(q);
-                }
-            }
+            bridge_disturbed(&mut s, &wheel);
         }
         // Stationary.
         let w = self.cfg.stationary_window;
         if phone {
-            let bias_s = self.smooth_phone(&mut s, &gyros, &accs, &mags, field_ref, bias);
-            let still_rate = self.cfg.stationary_gyro;
-            let gyro_still: Vec<bool> = gyros
-                .iter()
-                .zip(&bias_s)
-                .map(|(g, b)| (g - b).norm() < still_rate)
-                .collect();
+            if smoothing {
+                let bias_s = self.smooth_phone(&mut s, &gyros, &accs, &mags, field_ref, bias);
+                let still_rate = self.cfg.stationary_gyro;
+                gyro_still = gyros
+                    .iter()
+                    .zip(&bias_s)
+                    .map(|(g, b)| (g - b).norm() < still_rate)
+                    .collect();
+            }
             let mut still = stationary_mask(&s.t, w, |a, b| gyro_still[a..=b].iter().all(|&x| x));
             // A phone moving straight on a flat part does not rotate either: only still runs
             // that contain the typing of a node index count (the operator stands to type).
@@ -1341,6 +1350,43 @@ impl Acquisition {
         }
         self.scan.field_reference = self.field.reference().map(|(n, d)| [n, d]);
         self.scan
+    }
+}
+
+/// Morphorider: bridges the heading across each run of `MAG_DISTURBED` samples of `s`
+/// ([`bridge_heading`], along the wheel distance `x`), converting only the run and its two
+/// clean neighbours (a long curve is not copied).
+fn bridge_disturbed(s: &mut Samples, x: &[f64]) {
+    let n = s.len().min(x.len());
+    let disturbed = |i: usize| s.flags[i] & flags::MAG_DISTURBED != 0;
+    let mut i = 0;
+    let mut runs = Vec::new();
+    while i < n {
+        if !disturbed(i) {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        while i < n && disturbed(i) {
+            i += 1;
+        }
+        runs.push((start.saturating_sub(1), (i + 1).min(n)));
+    }
+    for (a, b) in runs {
+        let mut q: Vec<UnitQuaternion<f64>> = s.q[a..b]
+            .iter()
+            .map(|q| {
+                UnitQuaternion::new_normalize(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
+            })
+            .collect();
+        let flagged: Vec<bool> = (a..b)
+            .map(|k| s.flags[k] & flags::MAG_DISTURBED != 0)
+            .collect();
+        if bridge_heading(&mut q, &x[a..b], &flagged) > 0 {
+            for (dst, q) in s.q[a..b].iter_mut().zip(&q) {
+                *dst = quat_array(q);
+            }
+        }
     }
 }
 
