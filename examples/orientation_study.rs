@@ -102,6 +102,16 @@ fn main() {
                             c.index, c.samples.t[i], truth.s[k]
                         );
                     }
+                    if !flagged
+                        && truth.standing[k]
+                        && std::env::var("SFS_SHOW_MISSED_STAND").is_ok()
+                        && i % 20 == 0
+                    {
+                        println!(
+                            "  curve {} t {:.2} s {:.3} standing, not flagged",
+                            c.index, c.samples.t[i], truth.s[k]
+                        );
+                    }
                     if truth.standing[k] {
                         st += 1;
                         st_flag += flagged as usize;

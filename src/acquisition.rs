@@ -1090,16 +1090,23 @@ impl Acquisition {
         // Stationary.
         let w = self.cfg.stationary_window;
         if phone {
-            if smoothing {
+            let mut still = if smoothing {
                 let bias_s = self.smooth_phone(&mut s, &gyros, &accs, &mags, field_ref, bias);
+                // Still: the window's mean rate (the smoothed bias taken off) is small; a hand
+                // rocking the standing device back and forth averages out.
+                let mut cum = Vec::with_capacity(n + 1);
+                cum.push(Vector3::zeros());
+                for (g, b) in gyros.iter().zip(&bias_s) {
+                    let last = cum.last().copied().unwrap_or_default();
+                    cum.push(last + (g - b));
+                }
                 let still_rate = self.cfg.stationary_gyro;
-                gyro_still = gyros
-                    .iter()
-                    .zip(&bias_s)
-                    .map(|(g, b)| (g - b).norm() < still_rate)
-                    .collect();
-            }
-            let mut still = stationary_mask(&s.t, w, |a, b| gyro_still[a..=b].iter().all(|&x| x));
+                stationary_mask(&s.t, w, |a, b| {
+                    ((cum[b + 1] - cum[a]) / (b + 1 - a) as f64).norm() < still_rate
+                })
+            } else {
+                stationary_mask(&s.t, w, |a, b| gyro_still[a..=b].iter().all(|&x| x))
+            };
             // A phone moving straight on a flat part does not rotate either: only still runs
             // that contain the typing of a node index count (the operator stands to type).
             keep_runs_touching(&s.t, &mut still, &o.typing);
