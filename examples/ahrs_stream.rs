@@ -101,11 +101,6 @@ fn smooth(input: &[u8], f: &mut Ahrs) -> Vec<nalgebra::UnitQuaternion<f64>> {
     if std::env::var("SFS_SMOOTH_NO_REST").is_ok() {
         rests.iter_mut().for_each(|r| *r = false);
     }
-    eprintln!(
-        "rests {} of {}, floors {floors:?}",
-        rests.iter().filter(|&&r| r).count(),
-        rests.len()
-    );
     let sd = floors.per_axis();
     let m = smoother::Measurements {
         t: &t,
