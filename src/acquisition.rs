@@ -1111,6 +1111,29 @@ impl Acquisition {
             // that contain the typing of a node index count (the operator stands to type).
             keep_runs_touching(&s.t, &mut still, &o.typing);
             clip_to_intervals(&s.t, &mut still, &o.typing, self.cfg.stand_margin);
+            if smoothing {
+                // The stop before each typing and the start after it, from the accelerometer's
+                // pulses (gravity taken off with the smoothed orientation): a phone sliding
+                // straight does not turn, so the gyroscope cannot tell them.
+                let lin: Vec<Vector3<f64>> = accs
+                    .iter()
+                    .zip(&s.q)
+                    .map(|(a, q)| {
+                        let q = UnitQuaternion::new_normalize(nalgebra::Quaternion::new(
+                            q[0], q[1], q[2], q[3],
+                        ));
+                        q * a - Vector3::new(0.0, 0.0, crate::sensor::G)
+                    })
+                    .collect();
+                // A pulse: the mean of 0.1 s of linear acceleration above 0.3 m/s² (a phone
+                // stopped by the hand; well above the noise of such a mean and the tilt's
+                // error). A gentler stop finds no pulse and keeps the margin.
+                let wl = rest::window_stats(&s.t, &lin, 0.05);
+                let floor = self.noise.map_or(0.05, |f| f.acc);
+                let threshold = (4.0 * floor / 20f64.sqrt()).max(0.3);
+                let pulse: Vec<bool> = wl.mean.iter().map(|m| m.norm() > threshold).collect();
+                cut_at_pulses(&s.t, &mut still, &o.typing, &pulse, self.cfg.stand_margin);
+            }
             for (f, st) in s.flags.iter_mut().zip(still) {
                 if st {
                     *f |= flags::STATIONARY;
@@ -1482,6 +1505,30 @@ fn keep_runs_touching(t: &[f64], mask: &mut [bool], intervals: &[(f64, f64)]) {
     }
 }
 
+/// Around each interval `(a, b)` (the typing of an index), clears `mask` before the last pulse
+/// within `margin` before `a` (the device stopping) and after the first pulse within `margin`
+/// after `b` (it starting again).
+fn cut_at_pulses(
+    t: &[f64],
+    mask: &mut [bool],
+    intervals: &[(f64, f64)],
+    pulse: &[bool],
+    margin: f64,
+) {
+    for &(a, b) in intervals {
+        let lo = t.partition_point(|&x| x < a - margin);
+        let ia = t.partition_point(|&x| x < a);
+        let ib = t.partition_point(|&x| x <= b);
+        let hi = t.partition_point(|&x| x <= b + margin);
+        if let Some(k) = (lo..ia).rev().find(|&k| pulse[k]) {
+            mask[lo..=k].iter_mut().for_each(|m| *m = false);
+        }
+        if let Some(k) = (ib..hi).find(|&k| pulse[k]) {
+            mask[k..hi].iter_mut().for_each(|m| *m = false);
+        }
+    }
+}
+
 /// Clears `mask` wherever `t` is more than `margin` from every interval (sorted by start).
 fn clip_to_intervals(t: &[f64], mask: &mut [bool], intervals: &[(f64, f64)], margin: f64) {
     let mut k = 0;
@@ -1553,6 +1600,36 @@ mod tests {
     /// than the stationary threshold for a whole curve; the still run touched the typing of
     /// its first index, so the whole curve counted as standing and its distances collapsed.
     /// Standing is now clipped to the margin around the typing.
+    /// Issue 17: the stand around a typing ends at the device's stop before it and starts
+    /// again at its start after it, where the accelerometer shows them; without a pulse the
+    /// margin stands.
+    #[test]
+    fn issue_17_the_stand_is_cut_at_the_pulses_around_the_typing() {
+        let t: Vec<f64> = (0..1000).map(|i| i as f64 * 0.01).collect();
+        let mut mask = vec![true; 1000];
+        let mut pulse = vec![false; 1000];
+        pulse[450] = true; // stopping at 4.5 s
+        pulse[670] = true; // starting at 6.7 s
+        cut_at_pulses(&t, &mut mask, &[(5.0, 6.0)], &pulse, 1.0);
+        assert!(
+            mask[400..=450].iter().all(|&m| !m),
+            "before the stop: moving"
+        );
+        assert!(!mask[450] && mask[451] && mask[669] && !mask[670] && !mask[699]);
+        assert!(
+            mask[..400].iter().all(|&m| m),
+            "outside the margin: untouched"
+        );
+        assert!(
+            mask[701..].iter().all(|&m| m),
+            "outside the margin: untouched"
+        );
+        // No pulse: nothing cut.
+        let mut kept = vec![true; 1000];
+        cut_at_pulses(&t, &mut kept, &[(5.0, 6.0)], &[false; 1000], 1.0);
+        assert!(kept.iter().all(|&m| m));
+    }
+
     #[test]
     fn issue5_standing_is_clipped_to_the_typing() {
         let t: Vec<f64> = (0..100).map(|i| i as f64 * 0.5).collect(); // 0 … 49.5 s
