@@ -120,8 +120,7 @@ fn put_truth(curves: &mut [Curve], truth: &SampleTruth, q: bool, d: bool) -> usi
 }
 
 /// The acquisition and network settings: `--config FILE`'s, or the defaults.
-fn config() -> (AcquisitionConfig, NetworkParams) {
-    let args: Vec<String> = std::env::args().collect();
+fn config(args: &[String]) -> (AcquisitionConfig, NetworkParams) {
     match args.iter().position(|a| a == "--config") {
         Some(i) => {
             let path = args.get(i + 1).expect("--config FILE");
@@ -133,23 +132,20 @@ fn config() -> (AcquisitionConfig, NetworkParams) {
     }
 }
 
-/// Mean and max error in % of the diagonal, or why there is none.
-fn cell(name: &str, device: DeviceKind, profile: Profile, seed: u64) -> Result<(f64, f64), String> {
-    variant(name, device, profile, seed, &Variant::default())
-}
-
+/// Mean and max error in % of the diagonal of one cell with `settings` (acquisition,
+/// network), or why there is none.
 fn variant(
     name: &str,
     device: DeviceKind,
     profile: Profile,
     seed: u64,
     v: &Variant,
+    settings: &(AcquisitionConfig, NetworkParams),
 ) -> Result<(f64, f64), String> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
     let s = scene::load(&scene::find(name, &dir)).map_err(|e| e.to_string())?;
     let sim = simulate::run_without(&s, device, profile, seed, &Mistakes::default(), &v.without);
-    let settings = config();
-    let mut scan = Acquisition::scan_bytes(&sim.bytes, settings.0);
+    let mut scan = Acquisition::scan_bytes(&sim.bytes, settings.0.clone());
     if v.true_q || v.true_d {
         let missed = put_truth(&mut scan.curves, &sim.samples, v.true_q, v.true_d);
         if missed > 0 {
@@ -190,8 +186,9 @@ fn main() {
         })
         .collect();
     let scenes = list(&args, "--scenes", &SCENES.join(","));
+    let settings = config(&args);
     if args.iter().any(|a| a == "--study") {
-        return study(&scenes, &devices, &profiles, &seeds);
+        return study(&scenes, &devices, &profiles, &seeds, &settings);
     }
     let mut columns = Vec::new();
     for &d in &devices {
@@ -209,21 +206,9 @@ fn main() {
                 .map(move |&(d, p, seed)| (s.clone(), d, p, seed))
         })
         .collect();
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let results = std::sync::Mutex::new(vec![None; jobs.len()]);
-    std::thread::scope(|sc| {
-        for _ in 0..2 {
-            sc.spawn(|| loop {
-                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                let Some((s, d, p, seed)) = jobs.get(i) else {
-                    return;
-                };
-                let r = cell(s, *d, *p, *seed);
-                results.lock().unwrap()[i] = Some(r);
-            });
-        }
+    let results = parallel(&jobs, |(s, d, p, seed)| {
+        variant(s, *d, *p, *seed, &Variant::default(), &settings)
     });
-    let results = results.into_inner().unwrap();
     print!("| scene |");
     for (d, p, seed) in &columns {
         print!(" {} {} s{seed} |", d.name(), p.name());
@@ -234,9 +219,8 @@ fn main() {
         print!("| {s} |");
         for j in 0..columns.len() {
             match &results[k * columns.len() + j] {
-                Some(Ok((mean, max))) => print!(" {mean:.3} / {max:.2} |"),
-                Some(Err(e)) => print!(" failed: {e} |"),
-                None => print!(" — |"),
+                Ok((mean, max)) => print!(" {mean:.3} / {max:.2} |"),
+                Err(e) => print!(" failed: {e} |"),
             }
         }
         println!();
@@ -269,7 +253,13 @@ fn parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec<R> 
 
 /// The fault study (`--study`): one table per device and profile, a column per variant, the
 /// mean error over the seeds per scene and the mean over the scenes.
-fn study(scenes: &[String], devices: &[DeviceKind], profiles: &[Profile], seeds: &[u64]) {
+fn study(
+    scenes: &[String],
+    devices: &[DeviceKind],
+    profiles: &[Profile],
+    seeds: &[u64],
+    settings: &(AcquisitionConfig, NetworkParams),
+) {
     for &device in devices {
         for &profile in profiles {
             let mut variants = vec![Variant::default()];
@@ -301,7 +291,7 @@ fn study(scenes: &[String], devices: &[DeviceKind], profiles: &[Profile], seeds:
                 })
                 .collect();
             let results = parallel(&jobs, |&(s, v, seed)| {
-                variant(&scenes[s], device, profile, seed, &variants[v])
+                variant(&scenes[s], device, profile, seed, &variants[v], settings)
             });
             println!(
                 "\n{} {}, mean error % of the diagonal, mean over seeds {:?}\n",

@@ -911,11 +911,7 @@ impl Acquisition {
             .first()
             .zip(mag.first())
             .and_then(|(a, m)| triad(a, m))
-            .or_else(|| {
-                s.q.first().map(|q| {
-                    UnitQuaternion::new_normalize(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
-                })
-            })
+            .or_else(|| s.q.first().map(quat_of))
             .unwrap_or_else(UnitQuaternion::identity);
         let out = smoother::smooth(&m, q0, bias, &self.cfg.smoother);
         tracing::debug!(
@@ -1118,12 +1114,7 @@ impl Acquisition {
                 let lin: Vec<Vector3<f64>> = accs
                     .iter()
                     .zip(&s.q)
-                    .map(|(a, q)| {
-                        let q = UnitQuaternion::new_normalize(nalgebra::Quaternion::new(
-                            q[0], q[1], q[2], q[3],
-                        ));
-                        q * a - Vector3::new(0.0, 0.0, crate::sensor::G)
-                    })
+                    .map(|(a, q)| quat_of(q) * a - Vector3::new(0.0, 0.0, crate::sensor::G))
                     .collect();
                 // A pulse: the mean of 0.1 s of linear acceleration above 0.3 m/s² (a phone
                 // stopped by the hand; well above the noise of such a mean and the tilt's
@@ -1403,12 +1394,7 @@ fn bridge_disturbed(s: &mut Samples, x: &[f64]) {
         runs.push((start.saturating_sub(1), (i + 1).min(n)));
     }
     for (a, b) in runs {
-        let mut q: Vec<UnitQuaternion<f64>> = s.q[a..b]
-            .iter()
-            .map(|q| {
-                UnitQuaternion::new_normalize(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
-            })
-            .collect();
+        let mut q: Vec<UnitQuaternion<f64>> = s.q[a..b].iter().map(quat_of).collect();
         let flagged: Vec<bool> = (a..b)
             .map(|k| s.flags[k] & flags::MAG_DISTURBED != 0)
             .collect();
@@ -1422,6 +1408,11 @@ fn bridge_disturbed(s: &mut Samples, x: &[f64]) {
 
 fn quat_array(q: &UnitQuaternion<f64>) -> [f64; 4] {
     [q.w, q.i, q.j, q.k]
+}
+
+/// The unit quaternion of a stored `[w, x, y, z]` (normalised).
+fn quat_of(a: &[f64; 4]) -> UnitQuaternion<f64> {
+    UnitQuaternion::new_normalize(nalgebra::Quaternion::new(a[0], a[1], a[2], a[3]))
 }
 
 /// Linear interpolation of `y(x)` at `x0` (`x` non-decreasing), clamped at the ends.

@@ -330,10 +330,7 @@ impl Ahrs {
         let dt = if dt_ok { dt } else { 0.0 };
         // A gap (a stall dropped samples): integrate across it from the rates on both
         // sides; correct as after one typical interval.
-        let gap = self
-            .interval
-            .filter(|&i| dt > self.p.gap_intervals * i)
-            .is_some();
+        let gap = self.interval.is_some_and(|i| dt > self.p.gap_intervals * i);
         if dt > 0.0 && !gap {
             let i = self.interval.get_or_insert(dt);
             *i += (dt - *i) * 0.01;
