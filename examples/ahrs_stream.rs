@@ -7,6 +7,8 @@
 //! `--smooth`: the smoother of finished curves instead (`sfs::orientation::smoother`, the
 //! whole recording as one curve: rests and noise floors from its window statistics, the field
 //! reference from its median norm and dip, started from the causal filter's bias).
+//! `SFS_SMOOTH_SHOW=1` prints on standard error what it refused, its rests, noise floors and
+//! bias (`benches/broad/broad.py` passes standard error through).
 
 use nalgebra::Vector3;
 use sfs::orientation::ahrs::{Ahrs, AhrsParams};
@@ -147,5 +149,26 @@ fn smooth(input: &[u8], f: &mut Ahrs) -> Vec<nalgebra::UnitQuaternion<f64>> {
     if let Some(v) = env("GATE") {
         p.gate = v;
     }
-    smoother::smooth(&m, q0, f.bias(), &p).q
+    let s = smoother::smooth(&m, q0, f.bias(), &p);
+    if std::env::var("SFS_SMOOTH_SHOW").is_ok() {
+        let rest_share = rests.iter().filter(|&&r| r).count() as f64 / rests.len().max(1) as f64;
+        let b0 = s
+            .bias
+            .first()
+            .copied()
+            .unwrap_or_default()
+            .map(f64::to_degrees);
+        let b1 = s
+            .bias
+            .last()
+            .copied()
+            .unwrap_or_default()
+            .map(f64::to_degrees);
+        eprintln!(
+            "n {} refused heading {} gravity {} rest {:.0} % floors gyro {:.4} acc {:.4} mag {:.3} bias start {:.2?} end {:.2?} °/s",
+            t.len(), s.refused_heading, s.refused_gravity, 100.0 * rest_share, sd.gyro, sd.acc, sd.mag,
+            b0.as_slice(), b1.as_slice()
+        );
+    }
+    s.q
 }

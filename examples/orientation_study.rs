@@ -2,6 +2,10 @@
 //! of the frames the reconstruction error comes from.
 //!
 //! `cargo run --release --example orientation_study -- SCENE [phone|morphorider] [default|field] [SEED]`
+//!
+//! Environment: `SFS_SHOW_FALSE_STAND` / `SFS_SHOW_MISSED_STAND` list samples flagged standing
+//! while moving / moving while standing; `SFS_SHOW_WORST` includes standing samples in the
+//! orientation errors; `SFS_SHOW_MID` prints each segment's distance error at its middle.
 
 use device_protocol::DeviceKind;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -120,6 +124,17 @@ fn main() {
                         mv_flag += flagged as usize;
                     }
                 }
+            }
+            if std::env::var("SFS_SHOW_MID").is_ok() {
+                for w in c.tags.windows(2) {
+                    let mid = 0.5 * (w[0].d + w[1].d);
+                    let i = c.samples.d.partition_point(|&d| d < mid);
+                    if let Some(k) = c.samples.t.get(i).and_then(|&t| near(t)) {
+                        let e = c.samples.d[i] - (truth.s[k] - truth.s[k0]);
+                        print!("mid {:+.1} ", e * 1e3);
+                    }
+                }
+                println!();
             }
             print!(
                 "d rms {:5.1} max {:5.1} mm, standing flagged {:3.0} % moving flagged {:3.0} % | ",

@@ -61,7 +61,9 @@ pub struct AcquisitionConfig {
     /// 5 cm/s), so a still run may cover a whole curve; only the operator's stand at the
     /// node is taken out of the moving time. 2 s (the default before issue 17) took up to a
     /// second of sliding on each side of a node as standing on the simulated spheres and
-    /// torus (BENCHMARKS.md, "Field accuracy").
+    /// torus (BENCHMARKS.md, "Field accuracy"). Where the accelerometer shows the stop before
+    /// the typing (or the start after it) within 3 s, the stand runs to that pulse instead,
+    /// still or not (the hand tilting the device, a turn in place).
     pub stand_margin: f64,
     /// Phone: speed assumed where no segment length is known, m/s. Default 0.05.
     pub nominal_speed: f64,
@@ -1110,7 +1112,9 @@ impl Acquisition {
             if smoothing {
                 // The stop before each typing and the start after it, from the accelerometer's
                 // pulses (gravity taken off with the smoothed orientation): a phone sliding
-                // straight does not turn, so the gyroscope cannot tell them.
+                // straight does not turn, and one tilted by the hand or turned in place while
+                // standing does, so the gyroscope cannot tell them. Between the two pulses the
+                // device stands, whatever it turned.
                 let lin: Vec<Vector3<f64>> = accs
                     .iter()
                     .zip(&s.q)
@@ -1118,12 +1122,13 @@ impl Acquisition {
                     .collect();
                 // A pulse: the mean of 0.1 s of linear acceleration above 0.3 m/s² (a phone
                 // stopped by the hand; well above the noise of such a mean and the tilt's
-                // error). A gentler stop finds no pulse and keeps the margin.
+                // error). A gentler stop finds no pulse and keeps the still run, within the
+                // margin.
                 let wl = rest::window_stats(&s.t, &lin, 0.05);
                 let floor = self.noise.map_or(0.05, |f| f.acc);
                 let threshold = (4.0 * floor / 20f64.sqrt()).max(0.3);
                 let pulse: Vec<bool> = wl.mean.iter().map(|m| m.norm() > threshold).collect();
-                cut_at_pulses(&s.t, &mut still, &o.typing, &pulse, self.cfg.stand_margin);
+                stand_between_pulses(&s.t, &mut still, &o.typing, &pulse, PULSE_REACH);
             }
             for (f, st) in s.flags.iter_mut().zip(still) {
                 if st {
@@ -1496,25 +1501,34 @@ fn keep_runs_touching(t: &[f64], mask: &mut [bool], intervals: &[(f64, f64)]) {
     }
 }
 
-/// Around each interval `(a, b)` (the typing of an index), clears `mask` before the last pulse
-/// within `margin` before `a` (the device stopping) and after the first pulse within `margin`
-/// after `b` (it starting again).
-fn cut_at_pulses(
+/// How far before the first digit a phone's stop, and after Enter its start, are looked for in
+/// the accelerometer's pulses, s: the operator may stand a while, and turn the device in place
+/// (a rotation that no rate test tells from sliding), before moving on.
+const PULSE_REACH: f64 = 3.0;
+
+/// Around each interval `(a, b)` (the typing of an index): where a pulse lies within `reach`
+/// before `a` (the device stopping), the stand runs from the last such pulse to `a`, whatever
+/// the device did meanwhile (the hand tilting or turning it in place); likewise from `b` to the
+/// first pulse within `reach` after `b` (it starting again). A side without a pulse keeps
+/// `mask` as it is.
+fn stand_between_pulses(
     t: &[f64],
     mask: &mut [bool],
     intervals: &[(f64, f64)],
     pulse: &[bool],
-    margin: f64,
+    reach: f64,
 ) {
     for &(a, b) in intervals {
-        let lo = t.partition_point(|&x| x < a - margin);
+        let lo = t.partition_point(|&x| x < a - reach);
         let ia = t.partition_point(|&x| x < a);
         let ib = t.partition_point(|&x| x <= b);
-        let hi = t.partition_point(|&x| x <= b + margin);
+        let hi = t.partition_point(|&x| x <= b + reach);
         if let Some(k) = (lo..ia).rev().find(|&k| pulse[k]) {
             mask[lo..=k].iter_mut().for_each(|m| *m = false);
+            mask[k + 1..ia].iter_mut().for_each(|m| *m = true);
         }
         if let Some(k) = (ib..hi).find(|&k| pulse[k]) {
+            mask[ib..k].iter_mut().for_each(|m| *m = true);
             mask[k..hi].iter_mut().for_each(|m| *m = false);
         }
     }
@@ -1591,34 +1605,35 @@ mod tests {
     /// than the stationary threshold for a whole curve; the still run touched the typing of
     /// its first index, so the whole curve counted as standing and its distances collapsed.
     /// Standing is now clipped to the margin around the typing.
-    /// Issue 17: the stand around a typing ends at the device's stop before it and starts
-    /// again at its start after it, where the accelerometer shows them; without a pulse the
-    /// margin stands.
+    /// Issue 17: the stand around a typing runs from the device's stop before it to its start
+    /// after it, where the accelerometer shows them, whatever the hand did meanwhile (a turn in
+    /// place is no still run of the gyroscope); without a pulse the mask stands.
     #[test]
-    fn issue_17_the_stand_is_cut_at_the_pulses_around_the_typing() {
+    fn issue_17_the_stand_runs_between_the_pulses_around_the_typing() {
         let t: Vec<f64> = (0..1000).map(|i| i as f64 * 0.01).collect();
-        let mut mask = vec![true; 1000];
+        // Still only during the typing (5-6 s): the turn in place before and after is not.
+        let mut mask: Vec<bool> = t.iter().map(|&x| (5.0..=6.0).contains(&x)).collect();
+        mask[..100].iter_mut().for_each(|m| *m = true); // far away: untouched
         let mut pulse = vec![false; 1000];
-        pulse[450] = true; // stopping at 4.5 s
-        pulse[670] = true; // starting at 6.7 s
-        cut_at_pulses(&t, &mut mask, &[(5.0, 6.0)], &pulse, 1.0);
+        pulse[300] = true; // stopping at 3.0 s
+        pulse[780] = true; // starting at 7.8 s
+        pulse[950] = true; // beyond the reach
+        stand_between_pulses(&t, &mut mask, &[(5.0, 6.0)], &pulse, 3.0);
         assert!(
-            mask[400..=450].iter().all(|&m| !m),
+            mask[200..=300].iter().all(|&m| !m),
             "before the stop: moving"
         );
-        assert!(!mask[450] && mask[451] && mask[669] && !mask[670] && !mask[699]);
+        assert!(mask[301..780].iter().all(|&m| m), "stop to start: standing");
+        assert!(mask[780..].iter().all(|&m| !m), "after the start: moving");
         assert!(
-            mask[..400].iter().all(|&m| m),
-            "outside the margin: untouched"
+            mask[..100].iter().all(|&m| m),
+            "outside the reach: untouched"
         );
-        assert!(
-            mask[701..].iter().all(|&m| m),
-            "outside the margin: untouched"
-        );
-        // No pulse: nothing cut.
-        let mut kept = vec![true; 1000];
-        cut_at_pulses(&t, &mut kept, &[(5.0, 6.0)], &[false; 1000], 1.0);
-        assert!(kept.iter().all(|&m| m));
+        // No pulse: nothing changed.
+        let before: Vec<bool> = t.iter().map(|&x| (4.5..=6.5).contains(&x)).collect();
+        let mut kept = before.clone();
+        stand_between_pulses(&t, &mut kept, &[(5.0, 6.0)], &[false; 1000], 3.0);
+        assert_eq!(kept, before);
     }
 
     #[test]

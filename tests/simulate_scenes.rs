@@ -162,24 +162,32 @@ fn simulated_bytes_decode_with_the_faults_put_in() {
             field,
             "{profile:?}: longest gap on a curve {gap} s"
         );
-        // Issue 17: the hand tilts the standing device by 3-5° while an index is typed.
-        let mut tilt: f64 = 0.0;
+        // Issue 17: the hand tilts the standing device by 3-5° while an index is typed (its
+        // normal turns), and the device is put down turned about its normal at each curve's
+        // start and turned in place before moving (the normal stays).
+        let (mut tilt, mut turn): (f64, f64) = (0.0, 0.0);
         let mut since = None;
         for (i, (&standing, c)) in t.standing.iter().zip(&t.curve).enumerate() {
             if standing && c.is_some() {
                 let first = *since.get_or_insert(i);
-                tilt = tilt.max(t.q[first].angle_to(&t.q[i]).to_degrees());
+                let normal = |k: usize| t.q[k] * nalgebra::Vector3::z();
+                tilt = tilt.max(normal(first).angle(&normal(i)).to_degrees());
+                turn = turn.max(t.q[first].angle_to(&t.q[i]).to_degrees());
             } else {
                 since = None;
             }
         }
+        assert!(
+            if field { turn > 22.0 } else { turn < 1.0 },
+            "{profile:?}: the standing device turned by up to {turn:.2}°"
+        );
         assert!(
             if field {
                 (2.2..6.3).contains(&tilt)
             } else {
                 tilt < 1.0
             },
-            "{profile:?}: the resting device turned by up to {tilt:.2}°"
+            "{profile:?}: the resting device tilted by up to {tilt:.2}°"
         );
     }
 }

@@ -53,7 +53,9 @@ def run_sfs(exe, gyr, acc, mag, ts, args=()):
     rec[:, 1:4] = gyr
     rec[:, 4:7] = acc
     rec[:, 7:10] = mag
-    out = subprocess.run([exe, *args], input=rec.tobytes(), capture_output=True, check=True).stdout
+    run = subprocess.run([exe, *args], input=rec.tobytes(), capture_output=True, check=True)
+    sys.stderr.write(run.stderr.decode())
+    out = run.stdout
     return np.frombuffer(out, dtype='<f8').reshape(n, 4)
 
 
@@ -105,6 +107,7 @@ def main():
     ap.add_argument('--data', required=True)
     ap.add_argument('--sfs', required=True)
     ap.add_argument('--json')
+    ap.add_argument('--only', help='run only the filters whose names are given, comma-separated')
     args = ap.parse_args()
     files = sorted(pathlib.Path(args.data).glob('*.mat'))
     if not files:
@@ -113,6 +116,9 @@ def main():
                ('sfs smoother', lambda *a: run_sfs(args.sfs, *a, args=('--smooth',))),
                ('VQF (offline)', run_vqf),
                ('VQF (online)', run_vqf_online), ('Fusion', run_fusion)]
+    if args.only:
+        keep = args.only.split(',')
+        filters = [f for f in filters if f[0] in keep]
     results = {}
     for f in files:
         m = spio.loadmat(f, squeeze_me=True)

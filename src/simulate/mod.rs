@@ -83,6 +83,8 @@ pub enum Fault {
     GyroBias,
     /// The hand tilting the resting device while typing.
     Tilt,
+    /// The device put down turned at each curve's start and turned in place.
+    Turns,
     /// The ferromagnetic object near part of the surface.
     Magnet,
     /// A wrong index undone with U.
@@ -105,11 +107,12 @@ pub enum Fault {
 
 impl Fault {
     /// Every fault of the field profile.
-    pub const ALL: [Fault; 13] = [
+    pub const ALL: [Fault; 14] = [
         Fault::Noise,
         Fault::Mounting,
         Fault::GyroBias,
         Fault::Tilt,
+        Fault::Turns,
         Fault::Magnet,
         Fault::WrongIndex,
         Fault::Cancel,
@@ -128,6 +131,7 @@ impl Fault {
             Fault::Mounting => "mounting",
             Fault::GyroBias => "gyro-bias",
             Fault::Tilt => "tilt",
+            Fault::Turns => "turns",
             Fault::Magnet => "magnet",
             Fault::WrongIndex => "wrong-index",
             Fault::Cancel => "cancel",
@@ -205,6 +209,15 @@ pub fn run_without(
             events.push("the hand tilts the device by 3-5° while typing each index".into());
         } else {
             op.typing_tilt_deg = 1e-12;
+        }
+        if on(Fault::Turns) {
+            op.turn_in_place_deg = 45.0;
+            events.push(
+                "the device put down turned by 22-68° at each curve's start, turned in place before moving"
+                    .into(),
+            );
+        } else {
+            op.turn_in_place_deg = 1e-12;
         }
         if on(Fault::Mounting) {
             p.mounting = Rotation3::from_axis_angle(

@@ -40,6 +40,12 @@ pub struct OperatorParams {
     /// (±25 %, about a random axis in the surface's tangent plane, in and out smoothly).
     /// Default 0.
     pub typing_tilt_deg: f64,
+    /// The device is put down at each curve's start node turned about the surface normal by
+    /// about this much (±50 %, either way), the index typed, and then turned in place to the
+    /// curve's direction over `turn_time` before it moves, degrees. Default 0.
+    pub turn_in_place_deg: f64,
+    /// Duration of that turn, s. Default 0.8.
+    pub turn_time: f64,
     /// Operator mistakes to act out (none by default).
     pub mistakes: Mistakes,
 }
@@ -68,6 +74,8 @@ impl Default for OperatorParams {
             carry_time: 3.0,
             stand_wobble: 0.0003,
             typing_tilt_deg: 0.0,
+            turn_in_place_deg: 0.0,
+            turn_time: 0.8,
             mistakes: Mistakes::default(),
         }
     }
@@ -186,6 +194,24 @@ struct Timeline<'r> {
     rng: &'r mut Rng,
     /// The hand's tilt while an index is typed.
     tilt: Option<Tilt>,
+    /// The device turned about the normal at a curve's start, until turned in place.
+    turn: Option<Turn>,
+}
+
+/// A turn about the normal (frame z) of a standing device: `angle` until `start`, then eased
+/// to zero over `duration`.
+struct Turn {
+    angle: f64,
+    start: f64,
+    duration: f64,
+}
+
+impl Turn {
+    fn at(&self, t: f64) -> UnitQuaternion<f64> {
+        let u = ((t - self.start) / self.duration).clamp(0.0, 1.0);
+        let ease = u * u * (3.0 - 2.0 * u);
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), self.angle * (1.0 - ease))
+    }
 }
 
 /// A tilt of the standing device: `amp · sin²(π (t − start) / duration)` radians about `axis`
@@ -251,11 +277,16 @@ impl Timeline<'_> {
                 * (std::f64::consts::PI * u).sin();
             let sw = (s + w).clamp(0.0, p.length());
             self.wheel = base_wheel + (sw - s);
+            let next = self.t + self.dt;
             let tilt = self
                 .tilt
                 .as_ref()
-                .map_or_else(UnitQuaternion::identity, |k| k.at(self.t + self.dt));
-            self.push(p.frame(sw) * tilt, p.pos(sw), c, sw, true);
+                .map_or_else(UnitQuaternion::identity, |k| k.at(next));
+            let turn = self
+                .turn
+                .as_ref()
+                .map_or_else(UnitQuaternion::identity, |k| k.at(next));
+            self.push(p.frame(sw) * tilt * turn, p.pos(sw), c, sw, true);
         }
         self.wheel = base_wheel;
     }
@@ -330,11 +361,28 @@ pub fn perform(
         wheel: 0.0,
         rng,
         tilt: None,
+        turn: None,
     };
     let mut prev_end: Option<UnitQuaternion<f64>> = None;
     for (ci, spec) in curves.iter().enumerate() {
         let p = Param::new(spec);
-        let start_q = p.frame(0.0);
+        // Put down turned about the normal (if the operator does so), turned in place later.
+        let turn = if op.turn_in_place_deg > 0.0 {
+            let sign = if tl.rng.uniform() < 0.5 { -1.0 } else { 1.0 };
+            let angle = sign * op.turn_in_place_deg.to_radians() * tl.rng.range(0.5, 1.5);
+            Some(Turn {
+                angle,
+                start: f64::INFINITY,
+                duration: op.turn_time,
+            })
+        } else {
+            None
+        };
+        let start_q = p.frame(0.0)
+            * turn
+                .as_ref()
+                .map_or_else(UnitQuaternion::identity, |k| k.at(0.0));
+        tl.turn = turn;
         // Carry the device to the start (orientation slerps; the wheel does not turn).
         if let Some(q0) = prev_end {
             let n = (op.carry_time / tl.dt) as usize;
@@ -355,6 +403,10 @@ pub fn perform(
             tl.key(start_key);
             let node = spec.tags[0].1;
             tl.type_index(&p, Some(ci), 0.0, node, op);
+            if let Some(turn) = &mut tl.turn {
+                turn.start = tl.t;
+                tl.stand(&p, Some(ci), 0.0, op.turn_time + 0.1, op.stand_wobble);
+            }
             let target = 0.4 * p.cum[spec.tags[1].0];
             let s = tl.roll(&p, ci, 0.0, target, op, period, phase);
             tl.stand(&p, Some(ci), s, 0.5, op.stand_wobble);
@@ -371,6 +423,9 @@ pub fn perform(
                     0.0,
                     false,
                 );
+            }
+            if let Some(turn) = &mut tl.turn {
+                turn.start = f64::INFINITY; // put down turned again
             }
         }
         tl.key(start_key);
@@ -389,6 +444,14 @@ pub fn perform(
                 tl.stand(&p, Some(ci), s, op.key_interval, op.stand_wobble);
             }
             tl.type_index(&p, Some(ci), s, node, op);
+            if k == 0 {
+                if let Some(turn) = &mut tl.turn {
+                    // Turned in place to the curve's direction before moving off.
+                    turn.start = tl.t;
+                    tl.stand(&p, Some(ci), s, op.turn_time + 0.1, op.stand_wobble);
+                }
+                tl.turn = None;
+            }
             truth.tags.push((
                 node,
                 s,
