@@ -146,6 +146,9 @@ fn smooth(input: &[u8], f: &mut Ahrs) -> Vec<nalgebra::UnitQuaternion<f64>> {
     if let Some(v) = env("LOST_AFTER") {
         p.lost_after = v;
     }
+    if let Some(v) = env("HAND_MOTION") {
+        p.hand_motion = v;
+    }
     if let Some(v) = env("GATE") {
         p.gate = v;
     }

@@ -5,7 +5,8 @@
 //!
 //! Environment: `SFS_SHOW_FALSE_STAND` / `SFS_SHOW_MISSED_STAND` list samples flagged standing
 //! while moving / moving while standing; `SFS_SHOW_WORST` includes standing samples in the
-//! orientation errors; `SFS_SHOW_MID` prints each segment's distance error at its middle.
+//! orientation errors; `SFS_SHOW_MID` prints each segment's distance error at its middle;
+//! `SFS_TRACE=CURVE` prints that curve's errors every 200 samples.
 
 use device_protocol::DeviceKind;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -76,6 +77,21 @@ fn main() {
             let d = est * tq.inverse();
             let x = d * Vector3::x();
             head.push(x.y.atan2(x.x).to_degrees());
+            if std::env::var("SFS_TRACE")
+                .ok()
+                .and_then(|v| v.parse::<usize>().ok())
+                == Some(c.index)
+                && i % 200 == 0
+            {
+                println!(
+                    "  t {:.1} s {:.3} heading {:+.1}° tilt {:.2}° flags {:#x}",
+                    c.samples.t[i],
+                    truth.s[k],
+                    head.last().copied().unwrap_or(0.0),
+                    tilt.last().copied().unwrap_or(0.0),
+                    c.samples.flags[i]
+                );
+            }
         }
         if tot.is_empty() {
             continue;

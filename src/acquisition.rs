@@ -883,15 +883,18 @@ impl Acquisition {
     fn smooth_phone(
         &mut self,
         s: &mut Samples,
-        gyro: &[Vector3<f64>],
-        acc: &[Vector3<f64>],
-        mag: &[Vector3<f64>],
+        [gyro, acc, mag]: [&[Vector3<f64>]; 3],
         field: Option<(f64, f64)>,
         bias: Vector3<f64>,
+        typing: &[(f64, f64)],
     ) -> Vec<Vector3<f64>> {
         let n = s.t.len();
-        let (rest, floors) = rest::rests(&s.t, gyro, acc, mag, self.noise);
+        let (mut rest, floors) = rest::rests(&s.t, gyro, acc, mag, self.noise);
         self.noise = Some(floors);
+        // Zero rate only where the operator stands to type: elsewhere a still gyroscope may be
+        // a phone sliding slowly, whose turn the bias would absorb (BENCHMARKS.md, "Field
+        // accuracy": a great circle on the sphere took 40° of heading so).
+        clip_to_intervals(&s.t, &mut rest, typing, self.cfg.stand_margin);
         let nd: Vec<[f32; 2]> = acc.iter().zip(mag).map(|(a, m)| norm_dip(a, m)).collect();
         let disturbed = disturbed_windows(&s.t, &nd, field, &self.cfg.thresholds);
         let sd = floors.per_axis();
@@ -1089,7 +1092,8 @@ impl Acquisition {
         let w = self.cfg.stationary_window;
         if phone {
             let mut still = if smoothing {
-                let bias_s = self.smooth_phone(&mut s, &gyros, &accs, &mags, field_ref, bias);
+                let imu = [&gyros[..], &accs[..], &mags[..]];
+                let bias_s = self.smooth_phone(&mut s, imu, field_ref, bias, &o.typing);
                 // Still: the window's mean rate (the smoothed bias taken off) is small; a hand
                 // rocking the standing device back and forth averages out.
                 let mut cum = Vec::with_capacity(n + 1);

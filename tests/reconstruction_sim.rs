@@ -13,12 +13,12 @@ fn decode(bytes: &[u8]) -> Scan {
     Acquisition::scan_bytes(bytes, AcquisitionConfig::default())
 }
 
-/// Issue 5: in the seed-1 phone scan of the lilium, the link lost the leading digit of node
-/// 29 on curve 7 (it arrived as node 9, a node the curve had started from) and the only digit
-/// of a node on curve 3. The first tied the curve to the wrong node and made the mean error
-/// 3.2 % of the diagonal; the second dropped a tag and misapplied the measured segment
-/// lengths. Now the keypad keeps the second as an anonymous tag and the loop-closure test
-/// detaches the first, naming it.
+/// Issue 5: in a phone scan of the lilium the link loses digits of node indices: the leading
+/// digit of a two-digit index (it arrives as a one-digit node, tying the curve to the wrong
+/// node: 3.2 % of the diagonal in the first such capture) and the only digit of another (a tag
+/// lost, the measured segment lengths misapplied). Now the keypad keeps the second as an
+/// anonymous tag and the loop-closure test detaches the first, naming it. (Seed 59 since the
+/// simulator's sample timing was fixed in issue 17; seed 1 before.)
 #[test]
 fn issue5_lost_index_digits_do_not_distort_the_network() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -30,23 +30,32 @@ fn issue5_lost_index_digits_do_not_distort_the_network() {
         return;
     }
     let s = scene::load(&scene::find("lilium", &root.join("config/scenes"))).unwrap();
-    let sim = simulate::run(&s, DeviceKind::Phone, Profile::Default, 1);
+    let sim = simulate::run(&s, DeviceKind::Phone, Profile::Default, 59);
     let scan = decode(&sim.bytes);
     // The capture must still hold the two faults this test is about.
-    let tags = |i: usize| -> Vec<u32> { scan.curves[i].tags.iter().map(|t| t.node).collect() };
+    let mut wrong = Vec::new();
+    let mut anonymous = Vec::new();
+    for (c, (curve, truth)) in scan.curves.iter().zip(&sim.truth.curves).enumerate() {
+        for (k, tag) in curve.tags.iter().enumerate() {
+            if sfs::keypad::is_anonymous(tag.node) {
+                anonymous.push((c, k));
+            } else if truth.nodes.get(k) != Some(&tag.node) {
+                wrong.push((c, k, tag.node, truth.nodes[k], tag.uncertain));
+            }
+        }
+    }
+    let [(wc, wk, wnode, right, uncertain)] = wrong[..] else {
+        panic!("the simulator no longer loses one leading digit ({wrong:?}); pick the seed again");
+    };
     assert_eq!(
-        (tags(7)[4], sim.truth.curves[7].nodes[4]),
-        (9, 29),
-        "the simulator no longer loses this digit; pick the seed again"
+        wnode.to_string(),
+        right.to_string()[1..],
+        "a leading digit lost"
     );
+    assert!(uncertain, "packets were lost while node {right} was typed");
     assert!(
-        scan.curves[7].tags[4].uncertain,
-        "packets were lost while node 29 was typed"
-    );
-    assert!(
-        sfs::keypad::is_anonymous(tags(3)[5]),
-        "curve 3 keeps its tag with a lost index as an anonymous node: {:?}",
-        tags(3)
+        !anonymous.is_empty(),
+        "a tag whose only digit was lost is kept as an anonymous node; pick the seed again"
     );
     let net = Reconstructor::new()
         .run(&scan.curves, &NetworkParams::default())
@@ -55,7 +64,7 @@ fn issue5_lost_index_digits_do_not_distort_the_network() {
     assert!(
         net.warnings.iter().any(|w| matches!(
             w,
-            NetworkWarning::TagDetached(d) if (d.curve, d.node, d.tag) == (7, 9, 4)
+            NetworkWarning::TagDetached(d) if (d.curve, d.node, d.tag) == (wc, wnode, wk)
         )),
         "{:?}",
         net.warnings
@@ -67,7 +76,12 @@ fn issue5_lost_index_digits_do_not_distort_the_network() {
             .iter()
             .map(|(c, t)| (*c, t.tag, t.node, t.detached))
             .collect();
-    assert_eq!(marked, vec![(7, 4, 9, true)], "{:?}", net.report.closure);
+    assert_eq!(
+        marked,
+        vec![(wc, wk, wnode, true)],
+        "{:?}",
+        net.report.closure
+    );
     assert_eq!(net.report.closure.len(), scan.curves.len());
     let worst = net
         .report

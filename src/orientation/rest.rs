@@ -1,6 +1,9 @@
 //! Rests from window statistics: the spread of a signal over a sliding window (its RMS
 //! deviation from the window's mean) against the noise measured in the same session, not a
-//! per-sample threshold. A device at rest shows only its sensor noise; a moving one, more.
+//! per-sample threshold. A device at rest shows only its sensor noise; a moving one, more. A
+//! steady slow turn keeps the gyroscope as steady as a rest (its mean is off by the rate, which
+//! an unknown bias hides): a rest must also keep its gravity and field directions
+//! ([`turn_rate`]).
 //!
 //! ```
 //! use nalgebra::Vector3;
@@ -13,6 +16,7 @@
 //! assert!(noise_floor(&s.spread) < 1e-12);
 //! ```
 
+use super::triad::triad;
 use nalgebra::Vector3;
 
 /// Per sample, the statistics of the window `[t − half, t + half]` around it.
@@ -105,8 +109,57 @@ pub const HALF_WINDOW: f64 = 0.2;
 /// A window whose spreads are within this factor of the noise floors is at rest.
 pub const SPREAD_FACTOR: f64 = 2.0;
 
+/// Half-span of the test that tells a slow steady turn from a rest, s: the gravity and field
+/// directions averaged over the `TURN_HALF` before a sample and the `TURN_HALF` after it.
+pub const TURN_HALF: f64 = 1.0;
+/// A rest turns (by those directions) by less than this, rad/s: 1°/s.
+pub const TURN_LIMIT: f64 = 0.017_453_292_519_943_295;
+
+/// Per sample, the rate at which the device turns as the accelerometer and magnetometer see it,
+/// rad/s: the angle between the orientations (TRIAD) of their means over `[t − half, t]` and
+/// `[t, t + half]`, over the time between the two windows' centres. A gyroscope steady over a
+/// short window does not tell a rest from a steady slow turn (a phone sliding along a great
+/// circle); this does, whatever the gyroscope's bias. Where the field's norm changes between
+/// the two windows by more than 2 % (a magnet nearby turns the field, not the device) only the
+/// turn of gravity counts.
+pub fn turn_rate(t: &[f64], acc: &[Vector3<f64>], mag: &[Vector3<f64>], half: f64) -> Vec<f64> {
+    let n = t.len().min(acc.len()).min(mag.len());
+    let wa = window_stats(&t[..n], &acc[..n], half / 2.0);
+    let wm = window_stats(&t[..n], &mag[..n], half / 2.0);
+    (0..n)
+        .map(|i| {
+            let j0 = t[..n].partition_point(|&x| x < t[i] - half / 2.0).min(i);
+            let j1 = t[..n]
+                .partition_point(|&x| x <= t[i] + half / 2.0)
+                .saturating_sub(1)
+                .max(i);
+            let span = t[j1] - t[j0];
+            if span <= 0.0 {
+                return 0.0;
+            }
+            let (a0, a1) = (wa.mean[j0], wa.mean[j1]);
+            let (m0, m1) = (wm.mean[j0], wm.mean[j1]);
+            let (n0, n1) = (m0.norm(), m1.norm());
+            let steady_field = n0 > 0.0 && n1 > 0.0 && (n0 - n1).abs() <= 0.02 * n0.max(n1);
+            let both = match (triad(&a0, &m0), triad(&a1, &m1)) {
+                (Some(q0), Some(q1)) if steady_field => Some(q0.angle_to(&q1)),
+                _ => None,
+            };
+            let angle = both.unwrap_or_else(|| {
+                if a0.norm() > 0.0 && a1.norm() > 0.0 {
+                    a0.angle(&a1)
+                } else {
+                    0.0
+                }
+            });
+            angle / span
+        })
+        .collect()
+}
+
 /// Rests of a stretch of samples (gyroscope and accelerometer windows both within
-/// [`SPREAD_FACTOR`] of their floors), and the floors: those measured here, or the lesser of
+/// [`SPREAD_FACTOR`] of their floors, and turning by less than [`TURN_LIMIT`] by
+/// [`turn_rate`]), and the floors: those measured here, or the lesser of
 /// them and `session`'s (a stretch without any rest then borrows the session's).
 pub fn rests(
     t: &[f64],
@@ -124,11 +177,15 @@ pub fn rests(
         mag: noise_floor(&wm.spread),
     };
     let floors = session.map_or(here, |s| s.min(&here));
+    let turn = turn_rate(t, acc, mag, TURN_HALF);
     let rest = wg
         .spread
         .iter()
         .zip(&wa.spread)
-        .map(|(&g, &a)| g <= SPREAD_FACTOR * floors.gyro && a <= SPREAD_FACTOR * floors.acc)
+        .zip(&turn)
+        .map(|((&g, &a), &w)| {
+            g <= SPREAD_FACTOR * floors.gyro && a <= SPREAD_FACTOR * floors.acc && w < TURN_LIMIT
+        })
         .collect();
     (rest, floors)
 }
@@ -177,6 +234,58 @@ mod tests {
             assert!((w.mean[i] - m).norm() < 1e-9, "mean at {i}");
             assert!((w.spread[i] - var.sqrt()).abs() < 1e-7, "spread at {i}");
         }
+    }
+
+    /// Issue 17 (a phone sliding along a great circle took 40° of heading): 8 s still, then
+    /// 8 s turning steadily at 3°/s about a horizontal axis, then 8 s turning at 3°/s about the
+    /// vertical (a phone on a table), with sensor noise. The gyroscope is steady throughout;
+    /// only the still part is a rest.
+    #[test]
+    fn issue_17_a_slow_steady_turn_is_no_rest() {
+        use nalgebra::UnitQuaternion;
+        let mut seed = 99u64;
+        let mut noise = |s: f64| {
+            let mut v = Vector3::zeros();
+            for x in v.iter_mut() {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                *x = s * ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 3.46;
+            }
+            v
+        };
+        let rate = 3f64.to_radians();
+        let (g, field) = (Vector3::new(0.0, 0.0, 9.81), Vector3::new(0.0, 20.0, -43.0));
+        let (mut t, mut gyro, mut acc, mut mag) = (vec![], vec![], vec![], vec![]);
+        let mut q = UnitQuaternion::identity();
+        for i in 0..2400 {
+            let ti = i as f64 * 0.01;
+            let w = if ti < 8.0 {
+                Vector3::zeros()
+            } else if ti < 16.0 {
+                Vector3::x() * rate
+            } else {
+                q.inverse() * Vector3::z() * rate
+            };
+            q *= UnitQuaternion::from_scaled_axis(w * 0.01);
+            t.push(ti);
+            gyro.push(w + Vector3::new(0.01, -0.02, 0.015) + noise(0.003));
+            acc.push(q.inverse() * g + noise(0.03));
+            mag.push(q.inverse() * field + noise(0.4));
+        }
+        let (rest, _) = rests(&t, &gyro, &acc, &mag, None);
+        let share =
+            |a: usize, b: usize| rest[a..b].iter().filter(|&&r| r).count() as f64 / (b - a) as f64;
+        assert!(share(100, 700) > 0.95, "still: {}", share(100, 700));
+        assert!(share(900, 1500) < 0.05, "pitching: {}", share(900, 1500));
+        assert!(share(1700, 2300) < 0.05, "yawing: {}", share(1700, 2300));
+        // Without the turn test the gyroscope's spread alone calls the turns rests.
+        let wg = window_stats(&t, &gyro, HALF_WINDOW);
+        let floor = noise_floor(&wg.spread);
+        let steady = wg.spread[900..1500]
+            .iter()
+            .filter(|&&s| s <= SPREAD_FACTOR * floor);
+        assert!(steady.count() > 500);
     }
 
     #[test]

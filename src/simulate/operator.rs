@@ -196,6 +196,8 @@ struct Timeline<'r> {
     tilt: Option<Tilt>,
     /// The device turned about the normal at a curve's start, until turned in place.
     turn: Option<Turn>,
+    /// The interval to the next sample, once drawn.
+    pending_dt: Option<f64>,
 }
 
 /// A turn about the normal (frame z) of a standing device: `angle` until `start`, then eased
@@ -234,9 +236,20 @@ impl Tilt {
 }
 
 impl Timeline<'_> {
-    fn next_t(&mut self) -> f64 {
+    /// The interval to the next sample instant (drawn once, then kept until it is taken).
+    fn peek_dt(&mut self) -> f64 {
+        if let Some(h) = self.pending_dt {
+            return h;
+        }
         // Sample instants are regular up to a small jitter, which the timestamps record.
-        self.t += self.dt * (1.0 + self.jitter * (self.rng.uniform() - 0.5));
+        let h = self.dt * (1.0 + self.jitter * (self.rng.uniform() - 0.5));
+        self.pending_dt = Some(h);
+        h
+    }
+
+    fn next_t(&mut self) -> f64 {
+        self.t += self.peek_dt();
+        self.pending_dt = None;
         self.t
     }
 
@@ -311,7 +324,10 @@ impl Timeline<'_> {
             let v = op.speed
                 * (1.0
                     + op.speed_variation * (std::f64::consts::TAU * self.t / period + phase).sin());
-            let step = v.max(0.2 * op.speed) * self.dt;
+            // Over the sample's own interval: a step of the nominal interval at a jittered
+            // instant would be a speed jittering by ±5 % from sample to sample (accelerations
+            // of ±0.5 m/s² that no hand makes).
+            let step = v.max(0.2 * op.speed) * self.peek_dt();
             let ns = (s + step).min(target);
             self.wheel += ns - s;
             s = ns;
@@ -362,6 +378,7 @@ pub fn perform(
         rng,
         tilt: None,
         turn: None,
+        pending_dt: None,
     };
     let mut prev_end: Option<UnitQuaternion<f64>> = None;
     for (ci, spec) in curves.iter().enumerate() {
