@@ -113,7 +113,7 @@ pub const SPREAD_FACTOR: f64 = 2.0;
 /// directions averaged over the `TURN_HALF` before a sample and the `TURN_HALF` after it.
 pub const TURN_HALF: f64 = 1.0;
 /// A rest turns (by those directions) by less than this, rad/s: 1°/s.
-pub const TURN_LIMIT: f64 = 0.017_453_292_519_943_295;
+pub const TURN_LIMIT: f64 = std::f64::consts::PI / 180.0;
 
 /// Per sample, the rate at which the device turns as the accelerometer and magnetometer see it,
 /// rad/s: the angle between the orientations (TRIAD) of their means over `[t − half, t]` and

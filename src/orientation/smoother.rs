@@ -86,7 +86,8 @@ pub struct SmootherParams {
     /// The gravity measurement's σ is widened, sample by sample, by this many times the hand's
     /// linear acceleration over g (measured as the spread of the accelerometer turned to the
     /// world by a first pass, less its noise): a device shaken or carried is not levelled by
-    /// its accelerometer. Default 1. (BROAD's translation trial: 25.9° without it, 1.9° with.)
+    /// its accelerometer. Default 1 (BROAD's translation trial: 25.9° without it, 1.5° with it;
+    /// BENCHMARKS.md).
     pub hand_motion: f64,
 }
 
