@@ -19,7 +19,10 @@ fn main() {
                         c.points.len(),
                         len,
                         if c.closed { ", closed" } else { "" },
-                        if c.boundary { ", boundary" } else { "" }
+                        match c.kind {
+                            sfs::simulate::operator::CurveKind::Interior => String::new(),
+                            k => format!(", {k}"),
+                        }
                     );
                 }
             }

@@ -11,7 +11,7 @@ fn main() {
         .iter()
         .map(|c| NetworkCurve {
             index: c.index,
-            boundary: c.boundary,
+            kind: c.kind(),
             nodes: c.nodes.clone(),
             points: c.points.iter().map(|p| Vector3::from(*p)).collect(),
             normals: c.normals.iter().map(|p| Vector3::from(*p)).collect(),

@@ -24,7 +24,7 @@
 //! per segment to its measured length (SEGMENT_LENGTH or configuration) or to the nominal
 //! speed.
 
-use crate::keypad::{KeyEvent, Keypad};
+use crate::keypad::{CurveKind, KeyEvent, Keypad};
 use crate::orientation::ahrs::{Ahrs, AhrsParams};
 use crate::orientation::disturbance::{
     acc_motion, bridge_heading, disturbed_windows, mag_disturbed, norm_dip, FieldReference,
@@ -67,6 +67,8 @@ pub struct AcquisitionConfig {
     pub stand_margin: f64,
     /// Phone: speed assumed where no segment length is known, m/s. Default 0.05.
     pub nominal_speed: f64,
+    /// Curve kinds set by curve index (configuration `[curves] kinds`), over the start key's.
+    pub kinds: std::collections::BTreeMap<usize, CurveKind>,
     /// Phone: measured segment lengths per curve index (m), from the configuration.
     pub segment_lengths: BTreeMap<usize, Vec<f64>>,
     pub ahrs: AhrsParams,
@@ -105,6 +107,7 @@ impl Default for AcquisitionConfig {
             stationary_gyro: 3f64.to_radians(),
             stand_margin: 1.0,
             nominal_speed: 0.05,
+            kinds: Default::default(),
             segment_lengths: BTreeMap::new(),
             ahrs: AhrsParams::default(),
             bridge_heading: true,
@@ -133,7 +136,8 @@ pub const MAX_WHEEL_STEP: f64 = 0.5;
 #[derive(Debug, Clone, PartialEq)]
 pub struct OpenCurveInfo {
     pub index: usize,
-    pub boundary: bool,
+    /// As started (the configuration's override applies when the curve ends).
+    pub kind: CurveKind,
     /// Nodes tagged so far.
     pub nodes: Vec<u32>,
     pub samples: usize,
@@ -201,7 +205,7 @@ impl RawSamples {
 #[derive(Debug, Clone)]
 struct OpenCurve {
     index: usize,
-    boundary: bool,
+    kind: CurveKind,
     tags: Vec<(u32, f64, bool)>,
     /// The travel measure (see [`Acquisition::travel`]) at each tag.
     tag_travel: Vec<f64>,
@@ -415,7 +419,7 @@ impl Acquisition {
         };
         Some(OpenCurveInfo {
             index: o.index,
-            boundary: o.boundary,
+            kind: o.kind,
             nodes: o.tags.iter().map(|t| t.0).collect(),
             samples: o.raw.len(),
             distance_m,
@@ -828,10 +832,10 @@ impl Acquisition {
         let travel = self.travel();
         for ev in events.drain(..) {
             match ev {
-                KeyEvent::Started { curve, boundary } => {
+                KeyEvent::Started { curve, kind } => {
                     self.open = Some(OpenCurve {
                         index: curve,
-                        boundary,
+                        kind,
                         tags: Vec::new(),
                         tag_travel: Vec::new(),
                         typing: Vec::new(),
@@ -1159,9 +1163,21 @@ impl Acquisition {
             }
         }
         s.w = s.flags.iter().map(|&f| flags::weight(f)).collect();
+        let kind = match self.cfg.kinds.get(&o.index) {
+            Some(&k) if k != o.kind => {
+                tracing::info!(
+                    curve = o.index,
+                    started = %o.kind,
+                    kind = %k,
+                    "curve kind set by the configuration"
+                );
+                k
+            }
+            _ => o.kind,
+        };
         let mut curve = Curve {
             index: o.index,
-            boundary: o.boundary,
+            kind,
             closed: o.tags.first().map(|t| t.0) == o.tags.last().map(|t| t.0),
             tags: o
                 .tags
@@ -1226,7 +1242,7 @@ impl Acquisition {
         self.scan.field_reference = self.field.reference().map(|(n, d)| [n, d]);
         tracing::info!(
             curve = curve.index,
-            boundary = curve.boundary,
+            kind = %curve.kind,
             nodes = ?curve.nodes(),
             samples = n,
             length_m = format!("{:.3}", curve.length()),
@@ -1377,6 +1393,20 @@ impl Acquisition {
                 samples: o.raw.len(),
             });
             self.scan.counts.curves_discarded += 1;
+        }
+        let curves = self.scan.curves.len();
+        let missing: Vec<(usize, CurveKind)> = self
+            .cfg
+            .kinds
+            .range(curves..)
+            .map(|(&c, &k)| (c, k))
+            .collect();
+        for (curve, kind) in missing {
+            self.warn(AcquisitionWarning::KindOfMissingCurve {
+                curve,
+                kind,
+                curves,
+            });
         }
         self.scan.field_reference = self.field.reference().map(|(n, d)| [n, d]);
         self.scan

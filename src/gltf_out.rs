@@ -3,7 +3,9 @@
 //! glTF 2.0 binary, metres, +Y up: world `(x east, y north, z up)` ↦ glTF `(x, z, −y)`.
 //! - A node named `network` whose mesh has one primitive per curve in mode LINE_STRIP
 //!   (POSITION with exact min/max, NORMAL = unit surface normal at the sample; primitive extras
-//!   `{"curve": index, "boundary": bool, "nodes": [node sequence]}`); the node's extras hold
+//!   `{"curve": index, "kind": "boundary" | "interior" | "crease" | "guide", "boundary": bool,
+//!   "nodes": [node sequence]}`, `boundary` kept for readers before curve kinds); the node's
+//!   extras hold
 //!   the node positions `{"nodes": {"<index>": [x, y, z]}}` in the glb's frame.
 //! - When a surface exists, a node named `surface`: a triangle mesh (POSITION, NORMAL, u32
 //!   indices).
@@ -14,7 +16,8 @@
 //! ```
 //! use nalgebra::Vector3;
 //! use sfs::gltf_out::{network_glb, NetworkCurve};
-//! let c = NetworkCurve { index: 0, boundary: false, nodes: vec![0, 1],
+//! use sfs_geometry::curve::CurveKind;
+//! let c = NetworkCurve { index: 0, kind: CurveKind::Interior, nodes: vec![0, 1],
 //!     points: vec![Vector3::zeros(), Vector3::x()], normals: vec![Vector3::z(); 2] };
 //! let glb = network_glb(&[c], &Default::default(), None).unwrap();
 //! assert_eq!(&glb[..4], b"glTF");
@@ -23,6 +26,7 @@
 use gltf::json;
 use json::validation::{Checked, USize64};
 use nalgebra::Vector3;
+use sfs_geometry::curve::CurveKind;
 use sfs_geometry::network::poisson::Positions;
 use std::collections::BTreeMap;
 
@@ -30,7 +34,7 @@ use std::collections::BTreeMap;
 #[derive(Debug, Clone, PartialEq)]
 pub struct NetworkCurve {
     pub index: usize,
-    pub boundary: bool,
+    pub kind: CurveKind,
     pub nodes: Vec<u32>,
     pub points: Vec<Vector3<f64>>,
     /// Unit surface normals at the points.
@@ -236,9 +240,12 @@ pub fn network_glb(
         prims.push(json::mesh::Primitive {
             attributes,
             extensions: None,
-            extras: raw(
-                serde_json::json!({"curve": c.index, "boundary": c.boundary, "nodes": c.nodes}),
-            ),
+            extras: raw(serde_json::json!({
+                "curve": c.index,
+                "kind": c.kind.name(),
+                "boundary": c.kind == CurveKind::Boundary,
+                "nodes": c.nodes,
+            })),
             indices: None,
             material: None,
             mode: Checked::Valid(json::mesh::Mode::LineStrip),
@@ -368,7 +375,7 @@ pub fn network_curves(p: &Positions) -> Vec<NetworkCurve> {
         .iter()
         .map(|c| NetworkCurve {
             index: c.index,
-            boundary: c.boundary,
+            kind: c.kind,
             nodes: c.nodes.iter().map(|n| n.1).collect(),
             points: c.points.clone(),
             normals: c.normals.clone(),
@@ -448,10 +455,18 @@ pub fn read_glb(bytes: &[u8]) -> Result<ReadNetwork, ReadError> {
                             .get("curve")
                             .and_then(|v| v.as_u64())
                             .unwrap_or(pi as u64) as usize,
-                        boundary: extras
-                            .get("boundary")
-                            .and_then(|v| v.as_bool())
-                            .unwrap_or(false),
+                        // Files written before curve kinds say only `boundary`.
+                        kind: extras
+                            .get("kind")
+                            .and_then(|v| v.as_str())
+                            .and_then(CurveKind::of_name)
+                            .unwrap_or(
+                                if extras.get("boundary").and_then(|v| v.as_bool()) == Some(true) {
+                                    CurveKind::Boundary
+                                } else {
+                                    CurveKind::Interior
+                                },
+                            ),
                         nodes: extras
                             .get("nodes")
                             .and_then(|v| serde_json::from_value(v.clone()).ok())
@@ -486,7 +501,7 @@ mod tests {
     fn roundtrip_and_errors() {
         let c = NetworkCurve {
             index: 3,
-            boundary: true,
+            kind: CurveKind::Crease,
             nodes: vec![4, 5],
             points: vec![Vector3::new(0.1, 0.2, 0.3), Vector3::new(0.4, -0.5, 0.6)],
             normals: vec![Vector3::z() * 2.0, Vector3::x()],
@@ -504,8 +519,8 @@ mod tests {
         assert_eq!(r.curves.len(), 1);
         let rc = &r.curves[0];
         assert_eq!(
-            (rc.index, rc.boundary, rc.nodes.clone()),
-            (3, true, vec![4, 5])
+            (rc.index, rc.kind, rc.nodes.clone()),
+            (3, CurveKind::Crease, vec![4, 5])
         );
         for (a, b) in rc.points.iter().zip(&c.points) {
             assert!((a - b).norm() < 1e-6);

@@ -3,6 +3,7 @@
 //! | key | meaning |
 //! |---|---|
 //! | `B` / `I` | start a curve on the boundary / in the interior |
+//! | `K` / `G` | start a crease / a guide curve (interior; [`CurveKind`]) |
 //! | `0`–`9` then Enter | tag the node with this index at the position of the Enter press |
 //! | `U` | undo the operator's last Enter in the current curve (a tag, or a repeat of one) |
 //! | `C` | cancel the current curve |
@@ -14,7 +15,7 @@
 //! followed by another key are dropped; a repeated tag of the same node is ignored (and a `U`
 //! after it undoes that repeat, not the tag before it); `U` with no tag and `C`/`E` with no
 //! curve are ignored; `E` with fewer than two tags discards the
-//! curve; `B`/`I` while a curve is open ends it first (kept if it has two tags, else
+//! curve; a start key (`B`, `I`, `K`, `G`) while a curve is open ends it first (kept if it has two tags, else
 //! discarded); an unknown key is ignored.
 //!
 //! The same node tagged twice in a row is a *repeat* (an Enter pressed again at the node) or a
@@ -182,7 +183,7 @@ impl std::fmt::Display for Issue {
 pub enum KeyEvent {
     Started {
         curve: CurveIndex,
-        boundary: bool,
+        kind: CurveKind,
     },
     /// Node `node` tagged at time `t` (the Enter press). `uncertain`: packets were lost
     /// while it was typed, so a digit may be missing.
@@ -212,7 +213,7 @@ pub const MAX_NODE: u32 = 999_999;
 
 /// Anonymous nodes (tags whose index was lost on the link) are numbered from
 /// [`ANONYMOUS_NODE_BASE`] up, above every index the keypad accepts.
-pub use sfs_geometry::curve::{is_anonymous, ANONYMOUS_NODE_BASE};
+pub use sfs_geometry::curve::{is_anonymous, CurveKind, ANONYMOUS_NODE_BASE};
 const _: () = assert!(MAX_NODE < ANONYMOUS_NODE_BASE);
 
 #[derive(Debug, Clone)]
@@ -498,7 +499,7 @@ impl Keypad {
                     uncertain,
                 });
             }
-            b'B' | b'I' => {
+            b'B' | b'I' | b'K' | b'G' => {
                 self.drop_digits(t, key, out);
                 if self.open.is_some() {
                     self.warn(
@@ -517,7 +518,7 @@ impl Keypad {
                 });
                 out.push(KeyEvent::Started {
                     curve,
-                    boundary: key == b'B',
+                    kind: CurveKind::of_key(key).unwrap_or_default(),
                 });
             }
             b'U' => {
@@ -606,9 +607,39 @@ mod tests {
             ev[0],
             KeyEvent::Started {
                 curve: 0,
-                boundary: true
+                kind: CurveKind::Boundary
             }
         ));
+    }
+
+    /// Issue 18: `K` starts a crease and `G` a guide curve; like `B`/`I`, a start key with a
+    /// curve open ends it first (with the usual warning); the receiver before them reported
+    /// them as unknown keys.
+    #[test]
+    fn issue_18_k_and_g_start_creases_and_guide_curves() {
+        let ev = run("K1\n2\nEG2\n3\nI3\n1\nE");
+        let started: Vec<(CurveIndex, CurveKind)> = ev
+            .iter()
+            .filter_map(|e| match e {
+                KeyEvent::Started { curve, kind } => Some((*curve, *kind)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            started,
+            [
+                (0, CurveKind::Crease),
+                (1, CurveKind::Guide),
+                (2, CurveKind::Interior)
+            ]
+        );
+        assert_eq!(ended(&ev), [0, 1, 2]);
+        let w = warnings(&ev);
+        assert_eq!(w.len(), 1, "{ev:?}");
+        assert_eq!(w[0].curve, Some(1), "the guide curve never ended: {}", w[0]);
+        assert!(!w
+            .iter()
+            .any(|w| matches!(w.issue, Issue::UnknownKey { .. })));
     }
 
     #[test]

@@ -46,6 +46,9 @@ pub struct Report {
 #[derive(Debug, Clone, Serialize)]
 pub struct CurveSummary {
     pub index: usize,
+    /// `boundary`, `interior`, `crease` or `guide`.
+    pub kind: sfs_geometry::curve::CurveKind,
+    /// `kind == "boundary"` (for readers of the format before curve kinds).
     pub boundary: bool,
     /// The node sequence as scanned.
     pub nodes: Vec<u32>,
@@ -57,7 +60,8 @@ impl From<&Curve> for CurveSummary {
     fn from(c: &Curve) -> Self {
         CurveSummary {
             index: c.index,
-            boundary: c.boundary,
+            kind: c.kind,
+            boundary: c.boundary(),
             nodes: c.nodes(),
             samples: c.samples.len(),
             length_m: c.length(),

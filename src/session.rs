@@ -384,7 +384,7 @@ impl Flow {
         v.link(&self.stats, self.acq.session_time());
         let curve = self.acq.open_curve().map(|c| crate::view::CurrentCurve {
             index: c.index,
-            kind: if c.boundary { "boundary" } else { "interior" },
+            kind: c.kind.name(),
             nodes: c.nodes,
             samples: c.samples,
             distance_m: c.distance_m,

@@ -130,6 +130,12 @@ pub enum AcquisitionWarning {
         nodes: Vec<u32>,
         samples: usize,
     },
+    /// The configuration sets the kind of a curve the session does not have.
+    KindOfMissingCurve {
+        curve: usize,
+        kind: sfs_geometry::curve::CurveKind,
+        curves: usize,
+    },
 }
 
 impl AcquisitionWarning {
@@ -148,6 +154,7 @@ impl AcquisitionWarning {
             WheelBack { .. } => "wheel_back",
             CurveTooLong { .. } => "curve_too_long",
             NeverEnded { .. } => "curve_never_ended",
+            KindOfMissingCurve { .. } => "kind_of_missing_curve",
         }
     }
 
@@ -160,7 +167,8 @@ impl AcquisitionWarning {
             | NoSamples { curve, .. }
             | WheelBack { curve, .. }
             | CurveTooLong { curve, .. }
-            | NeverEnded { curve, .. } => Some(*curve),
+            | NeverEnded { curve, .. }
+            | KindOfMissingCurve { curve, .. } => Some(*curve),
             _ => None,
         }
     }
@@ -238,6 +246,15 @@ impl std::fmt::Display for AcquisitionWarning {
             } => write!(
                 f,
                 "curve {curve}: the session ended before its E (nodes {nodes:?}, {samples} samples); not used"
+            ),
+            KindOfMissingCurve {
+                curve,
+                kind,
+                curves,
+            } => write!(
+                f,
+                "curve {curve}: the configuration makes it a {kind} curve (curves.kinds), but the session has {curves} curves (0 to {}); a wrong index?",
+                curves.saturating_sub(1)
             ),
         }
     }

@@ -34,7 +34,7 @@ fn curves_of(
         .iter()
         .map(|c| NetworkCurve {
             index: c.index,
-            boundary: c.boundary,
+            kind: c.kind(),
             nodes: c.nodes.clone(),
             points: c
                 .points

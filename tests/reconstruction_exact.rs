@@ -59,7 +59,7 @@ fn exact_scan(s: &Scene) -> Scan {
             .collect::<Vec<_>>();
         scan.curves.push(Curve {
             index: ci,
-            boundary: c.boundary,
+            kind: c.kind,
             closed: c.closed,
             segment_lengths: vec![None; tags.len() - 1],
             tags,

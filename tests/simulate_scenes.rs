@@ -61,7 +61,7 @@ fn shipped_scenes_build_the_expected_networks() {
             "{name}: closed"
         );
         assert_eq!(
-            s.curves.iter().filter(|c| c.boundary).count(),
+            s.curves.iter().filter(|c| c.boundary()).count(),
             boundary,
             "{name}: boundary"
         );

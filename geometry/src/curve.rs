@@ -9,16 +9,17 @@
 //! y magnetic north, z up).
 //!
 //! ```
-//! use sfs_geometry::curve::{Curve, Samples, Tag};
+//! use sfs_geometry::curve::{Curve, CurveKind, Samples, Tag};
 //! let tag = |node, d| Tag { node, d, t: d, uncertain: false };
 //! let c = Curve {
-//!     index: 0, boundary: false, closed: false,
+//!     index: 0, kind: CurveKind::Interior, closed: false,
 //!     tags: vec![tag(1, 0.0), tag(2, 0.5)],
 //!     segment_lengths: vec![None],
 //!     samples: Samples::default(),
 //! };
 //! assert_eq!(c.nodes(), [1, 2]);
 //! assert_eq!(c.length(), 0.5);
+//! assert!(!c.boundary());
 //! ```
 
 #[cfg(feature = "serde")]
@@ -77,14 +78,83 @@ impl Samples {
     }
 }
 
-/// One accepted curve.
+/// What a curve means for the surface: the start key that began it (`B`, `I`, `K`, `G`), or
+/// the configuration's override by curve index. Written in lower case (`"crease"`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Serialize, Deserialize),
+    serde(rename_all = "lowercase")
+)]
+pub enum CurveKind {
+    /// `B`: lies on the boundary of the surface.
+    Boundary,
+    /// `I`: a smooth curve inside the surface, interpolated (G¹ across it).
+    #[default]
+    Interior,
+    /// `K`: a sharp edge, interpolated; the surface's normal jumps across it (each side keeps
+    /// its own). The device rests on one of the two faces.
+    Crease,
+    /// `G`: gives the surface its general form, approximated rather than interpolated.
+    Guide,
+}
+
+impl CurveKind {
+    /// Every kind, in the order of their keys `B`, `I`, `K`, `G`.
+    pub const ALL: [CurveKind; 4] = [
+        CurveKind::Boundary,
+        CurveKind::Interior,
+        CurveKind::Crease,
+        CurveKind::Guide,
+    ];
+
+    /// The kind a start key begins, if `key` is one.
+    pub fn of_key(key: u8) -> Option<CurveKind> {
+        CurveKind::ALL.into_iter().find(|k| k.key() == key)
+    }
+
+    /// The start key of this kind.
+    pub fn key(self) -> u8 {
+        match self {
+            CurveKind::Boundary => b'B',
+            CurveKind::Interior => b'I',
+            CurveKind::Crease => b'K',
+            CurveKind::Guide => b'G',
+        }
+    }
+
+    /// The name written in `scan.json`, `report.json` and the configuration.
+    pub fn name(self) -> &'static str {
+        match self {
+            CurveKind::Boundary => "boundary",
+            CurveKind::Interior => "interior",
+            CurveKind::Crease => "crease",
+            CurveKind::Guide => "guide",
+        }
+    }
+
+    /// The kind of a [`name`](Self::name).
+    pub fn of_name(name: &str) -> Option<CurveKind> {
+        CurveKind::ALL.into_iter().find(|k| k.name() == name)
+    }
+}
+
+impl std::fmt::Display for CurveKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// One accepted curve. Serialised with its `kind` and, for readers of the format before
+/// curve kinds, `boundary` (`kind == "boundary"`).
 #[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(feature = "serde", derive(Serialize, Deserialize))]
+#[cfg_attr(feature = "serde", derive(Deserialize))]
 pub struct Curve {
     /// Index in scan order (accepted curves only).
     pub index: usize,
-    /// Lies on the boundary of the surface (`B`), else interior (`I`).
-    pub boundary: bool,
+    /// What the curve means for the surface.
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub kind: CurveKind,
     /// First and last tag are the same node.
     pub closed: bool,
     /// Node tags in order of travel (at least two).
@@ -95,7 +165,28 @@ pub struct Curve {
     pub samples: Samples,
 }
 
+#[cfg(feature = "serde")]
+impl Serialize for Curve {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        let mut st = s.serialize_struct("Curve", 7)?;
+        st.serialize_field("index", &self.index)?;
+        st.serialize_field("kind", &self.kind)?;
+        st.serialize_field("boundary", &self.boundary())?;
+        st.serialize_field("closed", &self.closed)?;
+        st.serialize_field("tags", &self.tags)?;
+        st.serialize_field("segment_lengths", &self.segment_lengths)?;
+        st.serialize_field("samples", &self.samples)?;
+        st.end()
+    }
+}
+
 impl Curve {
+    /// Lies on the boundary of the surface (`B`).
+    pub fn boundary(&self) -> bool {
+        self.kind == CurveKind::Boundary
+    }
+
     /// The node sequence as scanned.
     pub fn nodes(&self) -> Vec<u32> {
         self.tags.iter().map(|t| t.node).collect()

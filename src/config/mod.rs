@@ -1,6 +1,7 @@
 //! The configuration file (`config/*.toml`, serde), resolved once into
 //! [`Settings`](crate::settings::Settings): one module per section (`source`, `acquisition`
-//! with `[calibration]`, `network`, `surface`, `output`, `monitor`), each checking its keys.
+//! with `[calibration]`, `curves`, `network`, `surface`, `output`, `monitor`), each checking
+//! its keys.
 //! Every error names the key and the reason ([`ConfigError`]). Command-line flags are kept
 //! apart (`cli`) and applied on top by `main`.
 //!
@@ -46,6 +47,9 @@
 //! loop_turn_deg = 180.0              # phone: the same, as the angle turned through
 //! [acquisition.segment_lengths]      # phone: measured segment lengths (m) per curve index
 //! "0" = [0.30, 0.25]
+//!
+//! [curves]                           # what curves mean, by curve index (else their start key)
+//! kinds = { "3" = "crease" }         #   boundary | interior | crease | guide
 //!
 //! [network]                          # curve-network reconstruction
 //! h = 0.01                           # sampling step, m
@@ -104,6 +108,7 @@
 //! ```
 
 mod acquisition;
+mod curves;
 mod monitor;
 mod network;
 mod output;
@@ -149,6 +154,8 @@ struct ConfigFile {
     calibration: acquisition::CalibrationToml,
     #[serde(default)]
     acquisition: acquisition::AcquisitionToml,
+    #[serde(default)]
+    curves: curves::CurvesToml,
     #[serde(default)]
     network: network::NetworkToml,
     #[serde(default)]
@@ -225,7 +232,8 @@ impl ConfigFile {
     /// Every section resolved, once.
     fn settings(&self, file: &Path) -> Result<Settings, ConfigError> {
         let source = self.source_spec(file)?;
-        let acquisition = self.acquisition_config(file)?;
+        let mut acquisition = self.acquisition_config(file)?;
+        acquisition.kinds = self.curve_kinds(file)?;
         let network = self.network_params(file)?;
         let surface = self.surface_params(file)?;
         let monitor = self.monitor_config(file, surface, &network)?;
@@ -548,6 +556,17 @@ mod tests {
                 "curve index",
             ),
             ("[acquisition]\nspeed = 1.0\n", "acquisition.speed", "unknown field"),
+            (
+                "[curves]\nkinds = { \"three\" = \"crease\" }\n",
+                "curves.kinds.three",
+                "curve index",
+            ),
+            (
+                "[curves]\nkinds = { \"3\" = \"sharp\" }\n",
+                "curves.kinds.3",
+                "one of boundary, interior, crease, guide",
+            ),
+            ("[curves]\ncrease = [3]\n", "curves.crease", "unknown field"),
         ];
         for (text, key, reason) in cases {
             let e = parse(&format!("{base}{text}")).unwrap_err();
@@ -578,5 +597,17 @@ mod tests {
         assert!(n.no_regression && (n.prefilter.h - 0.005).abs() < 1e-15);
         assert_eq!(a.segment_lengths[&0], vec![0.3, 0.2]);
         assert!((a.calibration.mounting.angle() - 2f64.to_radians()).abs() < 1e-12);
+        // Issue 18: curve kinds by index.
+        let k = parse(&format!(
+            "{base}[curves]\nkinds = {{ \"3\" = \"crease\", \"0\" = \"guide\" }}\n"
+        ))
+        .unwrap()
+        .acquisition
+        .kinds;
+        use sfs_geometry::curve::CurveKind;
+        assert_eq!(
+            k.into_iter().collect::<Vec<_>>(),
+            [(0, CurveKind::Guide), (3, CurveKind::Crease)]
+        );
     }
 }

@@ -168,7 +168,7 @@ fn resample(c: &LayoutCurve, on: &[(f64, UnitQuaternion<f64>)], step: f64) -> Un
     let w = vec![1.0; d.len()];
     UniformCurve {
         index: c.index,
-        boundary: false,
+        kind: sfs_geometry::curve::CurveKind::Interior,
         d,
         q,
         nodes,

@@ -7,7 +7,7 @@
 //! use sfs::simulate::{self, operator::{CurveSpec, OperatorParams}, device::DeviceParams, rng::Rng};
 //! // A 20 cm straight line on a table, from node 0 to node 1.
 //! let points: Vec<_> = (0..=20).map(|i| Vector3::new(i as f64 * 0.01, 0.0, 0.0)).collect();
-//! let curve = CurveSpec { normals: vec![Vector3::z(); points.len()], points, tags: vec![(0, 0), (20, 1)], boundary: false };
+//! let curve = CurveSpec { normals: vec![Vector3::z(); points.len()], points, tags: vec![(0, 0), (20, 1)], kind: Default::default() };
 //! let mut rng = Rng::new(1);
 //! let script = simulate::operator::perform(&[curve], &OperatorParams::default(), 100.0, 0.02, &mut rng);
 //! let (bytes, truth) = simulate::device::render(&script, &DeviceParams::morphorider(), &mut rng);
@@ -367,7 +367,8 @@ fn truth_of(
             .map(|(i, c)| TruthCurve {
                 index: i,
                 nodes: c.nodes(),
-                boundary: c.boundary,
+                kind: Some(c.kind),
+                boundary: c.kind == operator::CurveKind::Boundary,
                 closed: c.closed,
                 points: c.points.iter().map(v).collect(),
                 normals: c

@@ -5,6 +5,7 @@
 
 use super::rng::Rng;
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+pub use sfs_geometry::curve::CurveKind;
 
 /// A curve to scan: a dense polyline on the surface with outward normals, and its node tags.
 #[derive(Debug, Clone)]
@@ -16,7 +17,8 @@ pub struct CurveSpec {
     /// `(point index, node index)` in order of travel; the first at point 0, the last at the
     /// last point.
     pub tags: Vec<(usize, u32)>,
-    pub boundary: bool,
+    /// What the curve means; the operator starts it with its key (`B`, `I`, `K`, `G`).
+    pub kind: CurveKind,
 }
 
 /// How the operator moves (documented defaults).
@@ -106,7 +108,7 @@ pub struct State {
 /// The truth of one scanned curve.
 #[derive(Debug, Clone)]
 pub struct CurveTruth {
-    pub boundary: bool,
+    pub kind: CurveKind,
     /// `(node, true distance s, time of Enter, wheel reading then)`.
     pub tags: Vec<(u32, f64, f64, f64)>,
     pub length: f64,
@@ -414,7 +416,7 @@ pub fn perform(
         }
         let phase = tl.rng.range(0.0, std::f64::consts::TAU);
         let period = tl.rng.range(3.0, 6.0);
-        let start_key = if spec.boundary { b'B' } else { b'I' };
+        let start_key = spec.kind.key();
         if op.mistakes.cancel_and_rescan == Some(ci) && spec.tags.len() >= 2 {
             // A false start: first node, 40 % of the way, C, back to the start.
             tl.key(start_key);
@@ -447,7 +449,7 @@ pub fn perform(
         }
         tl.key(start_key);
         let mut truth = CurveTruth {
-            boundary: spec.boundary,
+            kind: spec.kind,
             tags: Vec::new(),
             length: p.length(),
         };

@@ -17,7 +17,9 @@
 //! # through = [[1,1,1], [1,1,-1], [0,0,0]]   # … or through three points
 //! near = [1.0, 0.0, 0.0]               # which piece of the section, if several
 //! closed = true                        # the whole loop; else an arc `from` → `to`
-//! boundary = true                      # lies on the surface's boundary
+//! boundary = true                      # lies on the surface's boundary (key B) …
+//! # crease = true                      # … or is a sharp edge (K), or a guide curve (G);
+//! # guide = true                       #   none of them: an interior curve (I)
 //! ```
 //!
 //! Surfaces: `sphere` (`center`, `radius`), `torus` (`center`, `major`, `minor`, axis z),
@@ -29,7 +31,7 @@
 //! run end to end. Nodes: every crossing of two curves and every end of an open curve.
 
 use super::mesh::{Section, TriMesh};
-use super::operator::CurveSpec;
+use super::operator::{CurveKind, CurveSpec};
 use super::surface::Surface;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -94,6 +96,10 @@ struct CurveToml {
     closed: bool,
     #[serde(default)]
     boundary: bool,
+    #[serde(default)]
+    crease: bool,
+    #[serde(default)]
+    guide: bool,
 }
 
 fn section_kind() -> String {
@@ -178,7 +184,7 @@ impl SurfaceRef {
 pub struct SceneCurve {
     pub points: Vec<Vector3<f64>>,
     pub normals: Vec<Vector3<f64>>,
-    pub boundary: bool,
+    pub kind: CurveKind,
     pub closed: bool,
     /// `(point index, node index)` in order of travel.
     pub tags: Vec<(usize, u32)>,
@@ -190,8 +196,13 @@ impl SceneCurve {
             points: self.points.clone(),
             normals: self.normals.clone(),
             tags: self.tags.clone(),
-            boundary: self.boundary,
+            kind: self.kind,
         }
+    }
+
+    /// Lies on the surface's boundary.
+    pub fn boundary(&self) -> bool {
+        self.kind == CurveKind::Boundary
     }
 
     pub fn nodes(&self) -> Vec<u32> {
@@ -400,7 +411,7 @@ struct Piece {
     normals: Vec<Vector3<f64>>,
     closed: bool,
     plane: Option<(Vector3<f64>, f64)>,
-    boundary: bool,
+    kind: CurveKind,
 }
 
 fn v3(a: [f64; 3]) -> Vector3<f64> {
@@ -500,6 +511,21 @@ pub enum CurveError {
     HalfArc,
     #[error("from and to are the same point of the section")]
     EmptyArc,
+    #[error("boundary, crease and guide: at most one of them")]
+    TwoKinds,
+}
+
+impl CurveToml {
+    /// What the curve means, from its `boundary` / `crease` / `guide` flags.
+    fn kind(&self) -> Result<CurveKind, CurveError> {
+        match (self.boundary, self.crease, self.guide) {
+            (false, false, false) => Ok(CurveKind::Interior),
+            (true, false, false) => Ok(CurveKind::Boundary),
+            (false, true, false) => Ok(CurveKind::Crease),
+            (false, false, true) => Ok(CurveKind::Guide),
+            _ => Err(CurveError::TwoKinds),
+        }
+    }
 }
 
 fn piece(s: &Surface, tess: &TriMesh, c: &CurveToml, h: f64) -> Result<Piece, CurveError> {
@@ -522,7 +548,7 @@ fn piece(s: &Surface, tess: &TriMesh, c: &CurveToml, h: f64) -> Result<Piece, Cu
             normals,
             closed: true,
             plane: None,
-            boundary: c.boundary,
+            kind: c.kind()?,
         });
     }
     if c.kind != "section" {
@@ -591,7 +617,7 @@ fn piece(s: &Surface, tess: &TriMesh, c: &CurveToml, h: f64) -> Result<Piece, Cu
         normals,
         closed,
         plane: Some((normal, offset)),
-        boundary: c.boundary,
+        kind: c.kind()?,
     })
 }
 
@@ -788,7 +814,7 @@ fn network(s: &Surface, pieces: Vec<Piece>, h: f64) -> Result<Network, (usize, S
         curves.push(SceneCurve {
             points: pts,
             normals: nrm,
-            boundary: pc.boundary,
+            kind: pc.kind,
             closed: pc.closed,
             tags,
         });

@@ -15,6 +15,7 @@ pub fn sphere_arc(
     boundary: bool,
     n: usize,
 ) -> CurveSpec {
+    use super::operator::CurveKind;
     let mut points = Vec::with_capacity(n + 1);
     let mut normals = Vec::with_capacity(n + 1);
     for i in 0..=n {
@@ -31,7 +32,11 @@ pub fn sphere_arc(
         points,
         normals,
         tags,
-        boundary,
+        kind: if boundary {
+            CurveKind::Boundary
+        } else {
+            CurveKind::Interior
+        },
     }
 }
 

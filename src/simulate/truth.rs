@@ -2,6 +2,7 @@
 
 use super::scene::SurfaceRef;
 use serde::{Deserialize, Serialize};
+use sfs_geometry::curve::CurveKind;
 use std::collections::BTreeMap;
 
 /// One curve of the truth network.
@@ -11,12 +12,28 @@ pub struct TruthCurve {
     pub index: usize,
     /// Node sequence as scanned.
     pub nodes: Vec<u32>,
+    /// What the curve means (its start key); absent in truth files written before curve
+    /// kinds (see [`TruthCurve::kind`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kind: Option<CurveKind>,
+    /// `kind == "boundary"`.
     pub boundary: bool,
     pub closed: bool,
     /// Dense polyline, m.
     pub points: Vec<[f64; 3]>,
     /// Unit outward surface normals at the points.
     pub normals: Vec<[f64; 3]>,
+}
+
+impl TruthCurve {
+    /// What the curve means: its `kind`, else (older files) boundary or interior.
+    pub fn kind(&self) -> CurveKind {
+        self.kind.unwrap_or(if self.boundary {
+            CurveKind::Boundary
+        } else {
+            CurveKind::Interior
+        })
+    }
 }
 
 /// A fixed sensor of an array.

@@ -116,7 +116,7 @@ impl From<&sfs_geometry::network::closure::CurveMisfit> for ClosureStatus {
 #[derive(Debug, Clone, Default, Serialize, PartialEq)]
 pub struct CurrentCurve {
     pub index: usize,
-    /// `boundary` or `interior`.
+    /// `boundary`, `interior`, `crease` or `guide` (as started).
     pub kind: &'static str,
     /// Nodes tagged so far.
     pub nodes: Vec<u32>,

@@ -525,7 +525,7 @@ mod tests {
                     .collect();
                 curves.push(UniformCurve {
                     index: curves.len(),
-                    boundary: false,
+                    kind: crate::curve::CurveKind::Interior,
                     d: (0..=n).map(|s| s as f64 * h).collect(),
                     q,
                     nodes,
@@ -553,7 +553,7 @@ mod tests {
             .collect();
         let mut curves = vec![UniformCurve {
             index: 0,
-            boundary: true,
+            kind: crate::curve::CurveKind::Boundary,
             d: (0..=n).map(|s| s as f64 * h).collect(),
             q,
             nodes: vec![(0, 0), (100, 1), (200, 2), (300, 0)],

@@ -15,12 +15,19 @@ use std::collections::BTreeMap;
 #[derive(Debug, Clone, PartialEq)]
 pub struct CurvePositions {
     pub index: usize,
-    pub boundary: bool,
+    pub kind: crate::curve::CurveKind,
     pub points: Vec<Vector3<f64>>,
     pub normals: Vec<Vector3<f64>>,
     pub tangents: Vec<Vector3<f64>>,
     /// `(sample index, node)`.
     pub nodes: Vec<(usize, u32)>,
+}
+
+impl CurvePositions {
+    /// Lies on the boundary of the surface.
+    pub fn boundary(&self) -> bool {
+        self.kind == crate::curve::CurveKind::Boundary
+    }
 }
 
 /// The reconstructed network.
@@ -139,7 +146,7 @@ impl PoissonSolver {
             .enumerate()
             .map(|(ci, c)| CurvePositions {
                 index: c.index,
-                boundary: c.boundary,
+                kind: c.kind,
                 points: var_of[ci].iter().map(|&v| x[v]).collect(),
                 normals: c.q.iter().map(|q| q * Vector3::z()).collect(),
                 tangents: tangents[ci].clone(),
@@ -180,7 +187,7 @@ mod tests {
             .collect();
         UniformCurve {
             index,
-            boundary: false,
+            kind: crate::curve::CurveKind::Interior,
             d,
             q,
             nodes: vec![(0, nodes.0), (n / 2, nodes.1), (n, nodes.0)],

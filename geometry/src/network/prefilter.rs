@@ -37,7 +37,7 @@ impl Default for PrefilterParams {
 #[derive(Debug, Clone, PartialEq)]
 pub struct UniformCurve {
     pub index: usize,
-    pub boundary: bool,
+    pub kind: crate::curve::CurveKind,
     /// Distance of every sample from the first node, m.
     pub d: Vec<f64>,
     /// Orientation of the frame [T B N] at every sample.
@@ -299,7 +299,7 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
     }
     Ok(UniformCurve {
         index: c.index,
-        boundary: c.boundary,
+        kind: c.kind,
         d,
         q,
         nodes,
@@ -331,7 +331,7 @@ mod tests {
         }
         Curve {
             index: 0,
-            boundary: false,
+            kind: crate::curve::CurveKind::Interior,
             closed: false,
             tags: vec![
                 Tag {

@@ -642,7 +642,7 @@ mod tests {
         (
             UniformCurve {
                 index,
-                boundary: false,
+                kind: crate::curve::CurveKind::Interior,
                 d: (0..=n).map(|j| j as f64 * h).collect(),
                 q,
                 nodes: vec![(0, nodes.0), (n, nodes.1)],

@@ -177,7 +177,7 @@ impl NetworkSegments {
                 if j > i {
                     net.push(
                         c.index,
-                        c.boundary,
+                        c.boundary(),
                         (a, b),
                         c.points[i..=j].to_vec(),
                         c.normals[i..=j].to_vec(),

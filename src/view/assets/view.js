@@ -5,7 +5,8 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 
-const COLOURS = { boundary: 0xff9800, interior: 0x4fc3f7, latest: 0xffee58, preview: 0xe040fb, node: 0xffffff, mark: '#ff1744' };
+const CURVE_KINDS = ['boundary', 'interior', 'crease', 'guide'];
+const COLOURS = { boundary: 0xff9800, interior: 0x4fc3f7, crease: 0x66bb6a, guide: 0x90a4ae, latest: 0xffee58, preview: 0xe040fb, node: 0xffffff, mark: '#ff1744' };
 
 const state = {
   ready: false, errors: [], updates: 0, curves: [], nodes: [], surfaceTriangles: 0,
@@ -140,6 +141,8 @@ function drawMarks() {
 const MATERIALS = {
   boundary: new THREE.LineBasicMaterial({ color: COLOURS.boundary }),
   interior: new THREE.LineBasicMaterial({ color: COLOURS.interior }),
+  crease: new THREE.LineBasicMaterial({ color: COLOURS.crease }),
+  guide: new THREE.LineBasicMaterial({ color: COLOURS.guide }),
   latest: new THREE.LineBasicMaterial({ color: COLOURS.latest }),
   node: new THREE.PointsMaterial({ color: COLOURS.node, size: 6, sizeAttenuation: false }),
   preview: new THREE.LineDashedMaterial({ color: COLOURS.preview, dashSize: 0.01, gapSize: 0.006 }),
@@ -159,7 +162,7 @@ const shared = new Set(Object.values(MATERIALS));
   g.setIndex([0, 1, 2]);
   const warm = new THREE.Group();
   warm.add(new THREE.Mesh(g, MATERIALS.surface), new THREE.Points(g, MATERIALS.node));
-  for (const k of ['boundary', 'interior', 'latest', 'preview']) warm.add(new THREE.Line(g, MATERIALS[k]));
+  for (const k of ['boundary', 'interior', 'crease', 'guide', 'latest', 'preview']) warm.add(new THREE.Line(g, MATERIALS[k]));
   scene.add(warm);
   renderer.compile(scene, camera);
   scene.remove(warm);
@@ -176,7 +179,7 @@ function clear(group) {
 }
 
 // Rebuilds the scene from a glb (the output contract: a `network` node whose mesh has a
-// LINE_STRIP per curve with extras {curve, boundary, nodes} and node positions in its extras;
+// LINE_STRIP per curve with extras {curve, kind, boundary, nodes} and node positions in its extras;
 // an optional `surface` node).
 function show(gltf) {
   clear(network); clear(labels);
@@ -186,12 +189,14 @@ function show(gltf) {
   gltf.scene.traverse((o) => {
     if (o.isLine) {
       const x = o.geometry.userData || {};
-      curves.push({ index: x.curve, boundary: !!x.boundary, nodes: x.nodes || [] });
+      // `kind` since curve kinds; before them only `boundary`.
+      const kind = CURVE_KINDS.includes(x.kind) ? x.kind : (x.boundary ? 'boundary' : 'interior');
+      curves.push({ index: x.curve, kind, boundary: kind === 'boundary', nodes: x.nodes || [] });
       const latest = x.curve === state.lastCurve;
-      const material = latest ? MATERIALS.latest : (x.boundary ? MATERIALS.boundary : MATERIALS.interior);
+      const material = latest ? MATERIALS.latest : MATERIALS[kind];
       // The loaded geometry itself: the parsed glb is dropped after this.
       const line = new THREE.Line(o.geometry, material);
-      line.userData = { curve: x.curve, boundary: !!x.boundary };
+      line.userData = { curve: x.curve, kind, boundary: kind === 'boundary' };
       network.add(line);
       o.geometry.computeBoundingBox();
       box.union(o.geometry.boundingBox);

@@ -1,0 +1,178 @@
+//! Issue 18, point 1: curve kinds from the keypad's start keys (`K` crease, `G` guide) and from
+//! the configuration by curve index, through the real binary into `scan.json`, `report.json`
+//! and `network.glb`.
+
+mod common;
+use common::*;
+use sfs::simulate::device::{render, DeviceParams};
+use sfs::simulate::operator::{perform, CurveKind, OperatorParams};
+use sfs::simulate::rng::Rng;
+use std::path::Path;
+use std::process::Command;
+
+/// The dome (boundary equator, two meridians over the pole) with the first meridian scanned
+/// as a crease and the second as a guide curve, as a Morphorider capture.
+fn dome_capture(dir: &Path, kinds: [CurveKind; 3]) -> std::path::PathBuf {
+    let mut curves = sfs::simulate::shapes::dome(0.3);
+    for (c, k) in curves.iter_mut().zip(kinds) {
+        c.kind = k;
+    }
+    let p = DeviceParams::morphorider();
+    let mut rng = Rng::new(3);
+    let script = perform(
+        &curves,
+        &OperatorParams::default(),
+        p.rate_hz,
+        p.jitter,
+        &mut rng,
+    );
+    let (bytes, _) = render(&script, &p, &mut rng);
+    let cap = dir.join("dome.bin");
+    std::fs::write(&cap, bytes).unwrap();
+    cap
+}
+
+fn replay(cap: &Path, out: &Path, config: Option<&Path>) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_sfs"));
+    cmd.args(["--log", "warn", "replay"])
+        .arg(cap)
+        .arg("--out")
+        .arg(out);
+    if let Some(c) = config {
+        cmd.arg("--config").arg(c);
+    }
+    let o = cmd.output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+}
+
+/// The kinds written in `scan.json`, `report.json` (with `boundary` kept) and the glb's
+/// `network` primitives, in curve order.
+fn kinds_written(out: &Path) -> Vec<String> {
+    let scan = json(&out.join("scan.json"));
+    let report = json(&out.join("report.json"));
+    let from_scan: Vec<String> = scan["curves"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| {
+            assert_eq!(c["boundary"], c["kind"] == "boundary", "{}", c["kind"]);
+            c["kind"].as_str().unwrap().to_owned()
+        })
+        .collect();
+    let from_report: Vec<String> = report["curves"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| {
+            assert_eq!(c["boundary"], c["kind"] == "boundary", "{}", c["kind"]);
+            c["kind"].as_str().unwrap().to_owned()
+        })
+        .collect();
+    let glb = sfs::gltf_out::read_glb(&std::fs::read(out.join("network.glb")).unwrap()).unwrap();
+    let from_glb: Vec<String> = glb
+        .curves
+        .iter()
+        .map(|c| c.kind.name().to_owned())
+        .collect();
+    assert_eq!(from_scan, from_report);
+    assert_eq!(from_scan, from_glb);
+    from_scan
+}
+
+#[test]
+fn issue_18_k_and_g_reach_scan_report_and_glb() {
+    let dir = tmpdir("kinds-keys");
+    let cap = dome_capture(
+        &dir,
+        [CurveKind::Boundary, CurveKind::Crease, CurveKind::Guide],
+    );
+    replay(&cap, &dir.join("out"), None);
+    assert_eq!(
+        kinds_written(&dir.join("out")),
+        ["boundary", "crease", "guide"]
+    );
+    let report = json(&dir.join("out/report.json"));
+    assert!(
+        !report["warnings"].to_string().contains("unknown key"),
+        "{}",
+        report["warnings"]
+    );
+}
+
+#[test]
+fn issue_18_the_configuration_sets_kinds_by_curve_index() {
+    let dir = tmpdir("kinds-config");
+    let cap = dome_capture(
+        &dir,
+        [
+            CurveKind::Boundary,
+            CurveKind::Interior,
+            CurveKind::Interior,
+        ],
+    );
+    replay(&cap, &dir.join("plain"), None);
+    assert_eq!(
+        kinds_written(&dir.join("plain")),
+        ["boundary", "interior", "interior"]
+    );
+    let cfg = dir.join("kinds.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[source]\nkind = \"replay\"\npath = {:?}\n\n[curves]\nkinds = {{ \"2\" = \"crease\", \"9\" = \"guide\" }}\n",
+            cap
+        ),
+    )
+    .unwrap();
+    replay(&cap, &dir.join("set"), Some(&cfg));
+    assert_eq!(
+        kinds_written(&dir.join("set")),
+        ["boundary", "interior", "crease"]
+    );
+    // An index the session does not have is named.
+    let warnings = json(&dir.join("set/report.json"))["warnings"].to_string();
+    assert!(
+        warnings.contains("curve 9: the configuration makes it a guide curve"),
+        "{warnings}"
+    );
+    // The geometry is that of the plain replay: only the kinds differ (surfacing with kinds
+    // is issue 18's next points).
+    let a =
+        sfs::gltf_out::read_glb(&std::fs::read(dir.join("plain/network.glb")).unwrap()).unwrap();
+    let b = sfs::gltf_out::read_glb(&std::fs::read(dir.join("set/network.glb")).unwrap()).unwrap();
+    for (x, y) in a.curves.iter().zip(&b.curves) {
+        assert_eq!(x.points, y.points);
+    }
+    // `sfs config check` accepts it, and names the key of a wrong kind.
+    let ok = Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["config", "check"])
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let bad = dir.join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[source]\nkind = \"stdin\"\n[curves]\nkinds = { \"1\" = \"sharp\" }\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["config", "check"])
+        .arg(&bad)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("curves.kinds.1") && err.contains("not a curve kind"),
+        "{err}"
+    );
+}
