@@ -537,6 +537,60 @@ mod tests {
         assert!(max < 5.0, "max error {max:.2}°");
     }
 
+    /// Issue 17: a 0.3 s stall of the sample stream while turning at ~50°/s is bridged (the
+    /// rotation meanwhile integrated from the rates on both sides), not a step in the
+    /// low-pass; and after a reboot during which the device was turned by 40° the filter
+    /// starts again from gravity and the field instead of fading the rotation out over its
+    /// heading loop.
+    #[test]
+    fn issue_17_a_stall_is_bridged_and_a_reboot_restarts() {
+        let run = |stall: bool, reboot: bool| -> f64 {
+            let mut rng = Rng(5);
+            let mut f = Ahrs::new(AhrsParams::default());
+            let mut truth = UnitQuaternion::from_euler_angles(0.1, -0.1, 0.4);
+            let (mut t, mut last) = (0.0f64, 0.0f64);
+            let mut worst: f64 = 0.0;
+            while t < 12.0 {
+                let dt = 0.005;
+                let w = if t > 4.0 {
+                    Vector3::new(0.3, -0.2, 0.8) * (t * 0.9).cos()
+                } else {
+                    Vector3::zeros()
+                };
+                truth *= UnitQuaternion::from_scaled_axis(w * dt);
+                t += dt;
+                if stall && (6.0..6.3).contains(&t) {
+                    continue; // samples lost: the device turns on
+                }
+                if reboot && (8.0..8.005).contains(&t) {
+                    truth *= UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7);
+                    f.restart();
+                }
+                let gyro = w + rng.v(0.003);
+                let acc = truth.inverse() * GRAV + rng.v(0.03);
+                let mag = truth.inverse() * FIELD + rng.v(0.4);
+                let q = f.update(t - last, &gyro, &acc, Some(&mag));
+                last = t;
+                if t > 6.3 && t < 11.0 && !(8.0..9.0).contains(&t) {
+                    worst = worst.max(q.angle_to(&truth).to_degrees());
+                }
+            }
+            worst
+        };
+        let plain = run(false, false);
+        let stall = run(true, false);
+        let reboot = run(false, true);
+        eprintln!("worst error: plain {plain:.2}°, stall {stall:.2}°, reboot {reboot:.2}°");
+        assert!(
+            stall < plain + 1.0,
+            "after the stall {stall:.2}° (plain {plain:.2}°)"
+        );
+        assert!(
+            reboot < plain + 1.5,
+            "after the reboot {reboot:.2}° (plain {plain:.2}°)"
+        );
+    }
+
     #[test]
     fn converges_within_a_second_from_rest() {
         let mut rng = Rng(7);
