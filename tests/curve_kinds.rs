@@ -54,24 +54,18 @@ fn json(path: &Path) -> serde_json::Value {
 fn kinds_written(out: &Path) -> Vec<String> {
     let scan = json(&out.join("scan.json"));
     let report = json(&out.join("report.json"));
-    let from_scan: Vec<String> = scan["curves"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| {
-            assert_eq!(c["boundary"], c["kind"] == "boundary", "{}", c["kind"]);
-            c["kind"].as_str().unwrap().to_owned()
-        })
-        .collect();
-    let from_report: Vec<String> = report["curves"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| {
-            assert_eq!(c["boundary"], c["kind"] == "boundary", "{}", c["kind"]);
-            c["kind"].as_str().unwrap().to_owned()
-        })
-        .collect();
+    let kinds = |file: &serde_json::Value| -> Vec<String> {
+        file["curves"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| {
+                assert_eq!(c["boundary"], c["kind"] == "boundary", "{}", c["kind"]);
+                c["kind"].as_str().unwrap().to_owned()
+            })
+            .collect()
+    };
+    let (from_scan, from_report) = (kinds(&scan), kinds(&report));
     let glb = sfs::gltf_out::read_glb(&std::fs::read(out.join("network.glb")).unwrap()).unwrap();
     let from_glb: Vec<String> = glb
         .curves
@@ -174,5 +168,43 @@ fn issue_18_the_configuration_sets_kinds_by_curve_index() {
     assert!(
         err.contains("curves.kinds.1") && err.contains("not a curve kind"),
         "{err}"
+    );
+}
+
+/// A curve written with its kind reads back the same; one written before curve kinds (only
+/// `boundary`) reads back as a boundary or interior curve.
+#[test]
+fn issue_18_curves_read_back_with_or_without_kind() {
+    use sfs::scan::{Curve, Samples, Tag};
+    let tag = |node, d| Tag {
+        node,
+        d,
+        t: d,
+        uncertain: false,
+    };
+    let c = Curve {
+        index: 2,
+        kind: CurveKind::Crease,
+        closed: false,
+        tags: vec![tag(1, 0.0), tag(2, 0.5)],
+        segment_lengths: vec![None],
+        samples: Samples::default(),
+    };
+    let mut v = serde_json::to_value(&c).unwrap();
+    assert_eq!(
+        (v["kind"].as_str(), v["boundary"].as_bool()),
+        (Some("crease"), Some(false))
+    );
+    assert_eq!(serde_json::from_value::<Curve>(v.clone()).unwrap(), c);
+    v.as_object_mut().unwrap().remove("kind");
+    v["boundary"] = true.into();
+    assert_eq!(
+        serde_json::from_value::<Curve>(v.clone()).unwrap().kind,
+        CurveKind::Boundary
+    );
+    v["boundary"] = false.into();
+    assert_eq!(
+        serde_json::from_value::<Curve>(v).unwrap().kind,
+        CurveKind::Interior
     );
 }

@@ -146,14 +146,13 @@ impl std::fmt::Display for CurveKind {
 }
 
 /// One accepted curve. Serialised with its `kind` and, for readers of the format before
-/// curve kinds, `boundary` (`kind == "boundary"`).
+/// curve kinds, `boundary` (`kind == "boundary"`); read back from either.
 #[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(feature = "serde", derive(Deserialize))]
+#[cfg_attr(feature = "serde", derive(Deserialize), serde(from = "CurveFile"))]
 pub struct Curve {
     /// Index in scan order (accepted curves only).
     pub index: usize,
     /// What the curve means for the surface.
-    #[cfg_attr(feature = "serde", serde(default))]
     pub kind: CurveKind,
     /// First and last tag are the same node.
     pub closed: bool,
@@ -163,6 +162,38 @@ pub struct Curve {
     /// (SEGMENT_LENGTH packets or configuration; phone).
     pub segment_lengths: Vec<Option<f64>>,
     pub samples: Samples,
+}
+
+/// A curve as written: `kind`, or (files before curve kinds) only `boundary`.
+#[cfg(feature = "serde")]
+#[derive(Deserialize)]
+struct CurveFile {
+    index: usize,
+    kind: Option<CurveKind>,
+    #[serde(default)]
+    boundary: bool,
+    closed: bool,
+    tags: Vec<Tag>,
+    segment_lengths: Vec<Option<f64>>,
+    samples: Samples,
+}
+
+#[cfg(feature = "serde")]
+impl From<CurveFile> for Curve {
+    fn from(c: CurveFile) -> Curve {
+        Curve {
+            index: c.index,
+            kind: c.kind.unwrap_or(if c.boundary {
+                CurveKind::Boundary
+            } else {
+                CurveKind::Interior
+            }),
+            closed: c.closed,
+            tags: c.tags,
+            segment_lengths: c.segment_lengths,
+            samples: c.samples,
+        }
+    }
 }
 
 #[cfg(feature = "serde")]
