@@ -155,18 +155,8 @@ fn smooth(input: &[u8], f: &mut Ahrs) -> Vec<nalgebra::UnitQuaternion<f64>> {
     let s = smoother::smooth(&m, q0, f.bias(), &p);
     if std::env::var("SFS_SMOOTH_SHOW").is_ok() {
         let rest_share = rests.iter().filter(|&&r| r).count() as f64 / rests.len().max(1) as f64;
-        let b0 = s
-            .bias
-            .first()
-            .copied()
-            .unwrap_or_default()
-            .map(f64::to_degrees);
-        let b1 = s
-            .bias
-            .last()
-            .copied()
-            .unwrap_or_default()
-            .map(f64::to_degrees);
+        let deg = |b: Option<&Vector3<f64>>| b.copied().unwrap_or_default().map(f64::to_degrees);
+        let (b0, b1) = (deg(s.bias.first()), deg(s.bias.last()));
         eprintln!(
             "n {} refused heading {} gravity {} rest {:.0} % floors gyro {:.4} acc {:.4} mag {:.3} bias start {:.2?} end {:.2?} °/s",
             t.len(), s.refused_heading, s.refused_gravity, 100.0 * rest_share, sd.gyro, sd.acc, sd.mag,

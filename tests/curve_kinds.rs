@@ -45,6 +45,14 @@ fn replay(cap: &Path, out: &Path, config: Option<&Path>) {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
+fn config_check(file: &Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["config", "check"])
+        .arg(file)
+        .output()
+        .unwrap()
+}
+
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
 }
@@ -142,11 +150,7 @@ fn issue_18_the_configuration_sets_kinds_by_curve_index() {
         assert_eq!(x.points, y.points);
     }
     // `sfs config check` accepts it, and names the key of a wrong kind.
-    let ok = Command::new(env!("CARGO_BIN_EXE_sfs"))
-        .args(["config", "check"])
-        .arg(&cfg)
-        .output()
-        .unwrap();
+    let ok = config_check(&cfg);
     assert!(
         ok.status.success(),
         "{}",
@@ -158,11 +162,7 @@ fn issue_18_the_configuration_sets_kinds_by_curve_index() {
         "[source]\nkind = \"stdin\"\n[curves]\nkinds = { \"1\" = \"sharp\" }\n",
     )
     .unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_sfs"))
-        .args(["config", "check"])
-        .arg(&bad)
-        .output()
-        .unwrap();
+    let out = config_check(&bad);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(

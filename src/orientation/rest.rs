@@ -126,32 +126,37 @@ pub fn turn_rate(t: &[f64], acc: &[Vector3<f64>], mag: &[Vector3<f64>], half: f6
     let n = t.len().min(acc.len()).min(mag.len());
     let wa = window_stats(&t[..n], &acc[..n], half / 2.0);
     let wm = window_stats(&t[..n], &mag[..n], half / 2.0);
+    // The orientation of each window's means, once per sample.
+    let frame: Vec<_> = wa
+        .mean
+        .iter()
+        .zip(&wm.mean)
+        .map(|(a, m)| triad(a, m))
+        .collect();
+    // The window centred half / 2 before (first sample from then) and half / 2 after (last
+    // sample until then), by two pointers over the sorted times.
+    let (mut before, mut until) = (0usize, 0usize);
     (0..n)
         .map(|i| {
-            let j0 = t[..n].partition_point(|&x| x < t[i] - half / 2.0).min(i);
-            let j1 = t[..n]
-                .partition_point(|&x| x <= t[i] + half / 2.0)
-                .saturating_sub(1)
-                .max(i);
+            while t[before] < t[i] - half / 2.0 {
+                before += 1;
+            }
+            while until < n && t[until] <= t[i] + half / 2.0 {
+                until += 1;
+            }
+            let (j0, j1) = (before.min(i), until.saturating_sub(1).max(i));
             let span = t[j1] - t[j0];
             if span <= 0.0 {
                 return 0.0;
             }
             let (a0, a1) = (wa.mean[j0], wa.mean[j1]);
-            let (m0, m1) = (wm.mean[j0], wm.mean[j1]);
-            let (n0, n1) = (m0.norm(), m1.norm());
+            let (n0, n1) = (wm.mean[j0].norm(), wm.mean[j1].norm());
             let steady_field = n0 > 0.0 && n1 > 0.0 && (n0 - n1).abs() <= 0.02 * n0.max(n1);
-            let both = match (triad(&a0, &m0), triad(&a1, &m1)) {
-                (Some(q0), Some(q1)) if steady_field => Some(q0.angle_to(&q1)),
-                _ => None,
+            let angle = match (frame[j0], frame[j1]) {
+                (Some(q0), Some(q1)) if steady_field => q0.angle_to(&q1),
+                _ if a0.norm() > 0.0 && a1.norm() > 0.0 => a0.angle(&a1),
+                _ => 0.0,
             };
-            let angle = both.unwrap_or_else(|| {
-                if a0.norm() > 0.0 && a1.norm() > 0.0 {
-                    a0.angle(&a1)
-                } else {
-                    0.0
-                }
-            });
             angle / span
         })
         .collect()

@@ -306,6 +306,15 @@ impl Timeline<'_> {
         self.wheel = base_wheel;
     }
 
+    /// If the device was put down turned, turns it in place to the curve's direction (standing
+    /// at `s` of curve `c`) before it moves off.
+    fn turn_in_place(&mut self, p: &Param, c: usize, s: f64, op: &OperatorParams) {
+        if let Some(turn) = &mut self.turn {
+            turn.start = self.t;
+            self.stand(p, Some(c), s, op.turn_time + 0.1, op.stand_wobble);
+        }
+    }
+
     fn key(&mut self, k: u8) {
         self.script.keys.push((self.t, k));
     }
@@ -422,10 +431,7 @@ pub fn perform(
             tl.key(start_key);
             let node = spec.tags[0].1;
             tl.type_index(&p, Some(ci), 0.0, node, op);
-            if let Some(turn) = &mut tl.turn {
-                turn.start = tl.t;
-                tl.stand(&p, Some(ci), 0.0, op.turn_time + 0.1, op.stand_wobble);
-            }
+            tl.turn_in_place(&p, ci, 0.0, op);
             let target = 0.4 * p.cum[spec.tags[1].0];
             let s = tl.roll(&p, ci, 0.0, target, op, period, phase);
             tl.stand(&p, Some(ci), s, 0.5, op.stand_wobble);
@@ -464,11 +470,7 @@ pub fn perform(
             }
             tl.type_index(&p, Some(ci), s, node, op);
             if k == 0 {
-                if let Some(turn) = &mut tl.turn {
-                    // Turned in place to the curve's direction before moving off.
-                    turn.start = tl.t;
-                    tl.stand(&p, Some(ci), s, op.turn_time + 0.1, op.stand_wobble);
-                }
+                tl.turn_in_place(&p, ci, s, op);
                 tl.turn = None;
             }
             truth.tags.push((
