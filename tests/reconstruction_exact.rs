@@ -3,8 +3,8 @@
 //! 0.05 % of the diagonal (paper, synthetic: BOWL 0.10 %, BUMPY 0.08 %). Bad input: curves that
 //! cannot be used are left out with a reason, a network in two parts is placed per part.
 
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
-use sfs::scan::{Curve, Samples, Scan, Tag};
+use nalgebra::Vector3;
+use sfs::scan::{Scan, Tag};
 use sfs::simulate::scene::{self, Scene};
 use sfs::simulate::truth::Truth;
 use sfs::simulate::{self, Profile};
@@ -24,51 +24,6 @@ fn load(name: &str) -> Option<(Scene, Truth)> {
     Some((s, t))
 }
 
-/// The exact scan of a scene: every truth point a sample, with its exact frame.
-fn exact_scan(s: &Scene) -> Scan {
-    let mut scan = Scan::default();
-    for (ci, c) in s.curves.iter().enumerate() {
-        let n = c.points.len();
-        let mut smp = Samples::default();
-        let mut d = 0.0;
-        for i in 0..n {
-            if i > 0 {
-                d += (c.points[i] - c.points[i - 1]).norm();
-            }
-            let t = (c.points[(i + 1).min(n - 1)] - c.points[i.saturating_sub(1)]).normalize();
-            let nn = c.normals[i];
-            let nn = (nn - t * nn.dot(&t)).normalize();
-            let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
-                Matrix3::from_columns(&[t, nn.cross(&t), nn]),
-            ));
-            smp.t.push(i as f64);
-            smp.d.push(d);
-            smp.q.push([q.w, q.i, q.j, q.k]);
-            smp.flags.push(0);
-            smp.w.push(1.0);
-        }
-        let tags = c
-            .tags
-            .iter()
-            .map(|&(i, node)| Tag {
-                node,
-                d: smp.d[i],
-                t: i as f64,
-                uncertain: false,
-            })
-            .collect::<Vec<_>>();
-        scan.curves.push(Curve {
-            index: ci,
-            kind: c.kind,
-            closed: c.closed,
-            segment_lengths: vec![None; tags.len() - 1],
-            tags,
-            samples: smp,
-        });
-    }
-    scan
-}
-
 fn score(t: &Truth, scan: &Scan, h: f64) -> f64 {
     let mut p = NetworkParams::default();
     p.prefilter.h = h;
@@ -86,7 +41,7 @@ fn exact_input_converges_and_meets_the_target() {
             eprintln!("skipping {name}: scene not available");
             continue;
         };
-        let scan = exact_scan(&s);
+        let scan = s.exact_scan();
         let diag = t.bbox_diagonal;
         let errs: Vec<f64> = [0.032, 0.016, 0.008]
             .iter()
@@ -101,7 +56,7 @@ fn exact_input_converges_and_meets_the_target() {
 #[test]
 fn unusable_curves_are_left_out_with_a_reason_and_parts_placed_separately() {
     let (s, _) = load("sphere-octa").unwrap();
-    let mut scan = exact_scan(&s);
+    let mut scan = s.exact_scan();
     // A curve with one tag, a curve shorter than 2h, and a separate loop with its own nodes.
     let mut one_tag = scan.curves[0].clone();
     one_tag.index = 3;

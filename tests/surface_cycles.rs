@@ -24,7 +24,7 @@ fn network(name: &str) -> Option<NetworkSegments> {
             let ((i, a), (j, b)) = (w[0], w[1]);
             net.push(
                 ci,
-                c.boundary(),
+                c.kind,
                 (a, b),
                 c.points[i..=j].to_vec(),
                 c.normals[i..=j].to_vec(),

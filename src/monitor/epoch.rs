@@ -175,5 +175,6 @@ fn resample(c: &LayoutCurve, on: &[(f64, UnitQuaternion<f64>)], step: f64) -> Un
         h,
         w,
         outliers: 0,
+        kinks: Vec::new(),
     }
 }

@@ -123,13 +123,20 @@ pub struct Script {
     pub curves: Vec<CurveTruth>,
 }
 
-/// Arc-length parametrised curve with smooth frames.
+/// Arc-length parametrised curve with smooth frames, but at corners.
 struct Param<'a> {
     spec: &'a CurveSpec,
     cum: Vec<f64>,
     t: Vec<Vector3<f64>>,
     n: Vec<Vector3<f64>>,
+    /// At a tagged point where the curve turns about the surface normal by more than
+    /// [`CORNER_DEG`] (a box's corner): the tangents arriving and leaving. The operator stops
+    /// there and turns the device in place.
+    corner: Vec<Option<(Vector3<f64>, Vector3<f64>)>>,
 }
+
+/// A turn about the normal sharper than this at a node is a corner, degrees.
+pub const CORNER_DEG: f64 = 30.0;
 
 impl<'a> Param<'a> {
     fn new(spec: &'a CurveSpec) -> Self {
@@ -152,7 +159,33 @@ impl<'a> Param<'a> {
                 (n - t[i] * n.dot(&t[i])).normalize()
             })
             .collect();
-        Param { spec, cum, t, n }
+        let mut corner = vec![None; m];
+        for &(i, _) in &spec.tags {
+            if i == 0 || i + 1 >= m {
+                continue;
+            }
+            let nn = spec.normals[i];
+            let flat = |d: Vector3<f64>| d - nn * nn.dot(&d);
+            let (din, dout) = (p[i] - p[i - 1], p[i + 1] - p[i]);
+            if flat(din).angle(&flat(dout)) > CORNER_DEG.to_radians() {
+                corner[i] = Some((din.normalize(), dout.normalize()));
+            }
+        }
+        Param {
+            spec,
+            cum,
+            t,
+            n,
+            corner,
+        }
+    }
+
+    /// The turn about the frame's normal that takes the frame leaving corner point `i` to the
+    /// one arriving there, radians (`None` where the curve has no corner).
+    fn corner_turn(&self, i: usize) -> Option<f64> {
+        let (tin, _) = self.corner[i]?;
+        let local = self.frame(self.cum[i]).inverse() * tin;
+        Some(local.y.atan2(local.x))
     }
 
     fn length(&self) -> f64 {
@@ -176,9 +209,29 @@ impl<'a> Param<'a> {
         p[i - 1] * (1.0 - u) + p[i] * u
     }
 
+    /// The frame at `s`; at a corner, the one leaving it.
     fn frame(&self, s: f64) -> UnitQuaternion<f64> {
         let (i, u) = self.locate(s);
-        let t = (self.t[i - 1] * (1.0 - u) + self.t[i] * u).normalize();
+        self.frame_in_segment(i, u)
+    }
+
+    /// The frame at `s`; at a corner, the one arriving there.
+    fn frame_in(&self, s: f64) -> UnitQuaternion<f64> {
+        let s = s.clamp(0.0, self.length());
+        let i = self
+            .cum
+            .partition_point(|&c| c < s)
+            .clamp(1, self.cum.len() - 1);
+        let (a, b) = (self.cum[i - 1], self.cum[i]);
+        let u = if b > a { (s - a) / (b - a) } else { 0.0 };
+        self.frame_in_segment(i, u)
+    }
+
+    /// The frame at `u` of the way from point `i − 1` to point `i`.
+    fn frame_in_segment(&self, i: usize, u: f64) -> UnitQuaternion<f64> {
+        let ta = self.corner[i - 1].map_or(self.t[i - 1], |c| c.1);
+        let tb = self.corner[i].map_or(self.t[i], |c| c.0);
+        let t = (ta * (1.0 - u) + tb * u).normalize();
         let n = self.n[i - 1] * (1.0 - u) + self.n[i] * u;
         let n = (n - t * n.dot(&t)).normalize();
         let b = n.cross(&t);
@@ -342,7 +395,7 @@ impl Timeline<'_> {
             let ns = (s + step).min(target);
             self.wheel += ns - s;
             s = ns;
-            self.push(p.frame(s), p.pos(s), Some(c), s, false);
+            self.push(p.frame_in(s), p.pos(s), Some(c), s, false);
         }
         s
     }
@@ -462,6 +515,22 @@ pub fn perform(
         let mut s = 0.0;
         for (k, &(pi, node)) in spec.tags.iter().enumerate() {
             s = tl.roll(&p, ci, s, p.cum[pi], op, period, phase);
+            // At a corner: stand still, type, turn in place to the way on.
+            let corner = p.corner_turn(pi);
+            let still = OperatorParams {
+                stand_wobble: 0.0,
+                ..op.clone()
+            };
+            let op = if let Some(angle) = corner {
+                tl.turn = Some(Turn {
+                    angle,
+                    start: f64::INFINITY,
+                    duration: op.turn_time,
+                });
+                &still
+            } else {
+                op
+            };
             if op.mistakes.wrong_index == Some((ci, k)) {
                 // A wrong index confirmed, noticed, undone.
                 tl.type_index(&p, Some(ci), s, node + 1, op);
@@ -469,7 +538,7 @@ pub fn perform(
                 tl.stand(&p, Some(ci), s, op.key_interval, op.stand_wobble);
             }
             tl.type_index(&p, Some(ci), s, node, op);
-            if k == 0 {
+            if k == 0 || corner.is_some() {
                 tl.turn_in_place(&p, ci, s, op);
                 tl.turn = None;
             }

@@ -32,7 +32,7 @@
 
 use super::mesh::{Section, TriMesh};
 use super::operator::{CurveKind, CurveSpec};
-use super::surface::Surface;
+use super::surface::{Faces, Surface};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -78,6 +78,10 @@ struct SurfaceToml {
     base_z: Option<f64>,
     #[serde(default)]
     flip_normals: bool,
+    size: Option<[f64; 3]>,
+    length: Option<f64>,
+    width: Option<f64>,
+    height: Option<f64>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -92,6 +96,8 @@ struct CurveToml {
     from: Option<[f64; 3]>,
     to: Option<[f64; 3]>,
     via: Option<[f64; 3]>,
+    points: Option<Vec<[f64; 3]>>,
+    rest: Option<[f64; 3]>,
     #[serde(default)]
     closed: bool,
     #[serde(default)]
@@ -129,6 +135,17 @@ pub enum SurfaceRef {
         a: f64,
         rim: f64,
     },
+    /// A box of sizes `size` centred at `center` (its six faces).
+    Box {
+        center: [f64; 3],
+        size: [f64; 3],
+    },
+    /// A gable roof ([`Faces::gable`]).
+    Gable {
+        length: f64,
+        width: f64,
+        height: f64,
+    },
     /// `x ↦ scale · x + translate` applied to the file's vertices.
     Mesh {
         path: PathBuf,
@@ -162,6 +179,15 @@ impl SurfaceRef {
                 r1: *r1,
             },
             SurfaceRef::Paraboloid { a, rim } => Surface::Paraboloid { a: *a, rim: *rim },
+            SurfaceRef::Box { center, size } => Surface::Faces(Box::new(Faces::cuboid(
+                Vector3::from(*center),
+                Vector3::from(*size),
+            ))),
+            SurfaceRef::Gable {
+                length,
+                width,
+                height,
+            } => Surface::Faces(Box::new(Faces::gable(*length, *width, *height))),
             SurfaceRef::Mesh {
                 path,
                 scale,
@@ -240,6 +266,55 @@ impl Scene {
     /// The operator's curves.
     pub fn specs(&self) -> Vec<CurveSpec> {
         self.curves.iter().map(SceneCurve::spec).collect()
+    }
+
+    /// The exact scan of the scene: every truth point a sample, with its exact frame (the
+    /// tangent from its neighbours, the surface normal), distances its arc length; for the
+    /// reconstruction and the surface without any sensor.
+    pub fn exact_scan(&self) -> crate::scan::Scan {
+        use crate::scan::{Curve, Samples, Scan, Tag};
+        use nalgebra::{Matrix3, Rotation3, UnitQuaternion};
+        let mut scan = Scan::default();
+        for (ci, c) in self.curves.iter().enumerate() {
+            let n = c.points.len();
+            let mut smp = Samples::default();
+            let mut d = 0.0;
+            for i in 0..n {
+                if i > 0 {
+                    d += (c.points[i] - c.points[i - 1]).norm();
+                }
+                let t = (c.points[(i + 1).min(n - 1)] - c.points[i.saturating_sub(1)]).normalize();
+                let nn = c.normals[i];
+                let nn = (nn - t * nn.dot(&t)).normalize();
+                let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
+                    Matrix3::from_columns(&[t, nn.cross(&t), nn]),
+                ));
+                smp.t.push(i as f64);
+                smp.d.push(d);
+                smp.q.push([q.w, q.i, q.j, q.k]);
+                smp.flags.push(0);
+                smp.w.push(1.0);
+            }
+            let tags: Vec<Tag> = c
+                .tags
+                .iter()
+                .map(|&(i, node)| Tag {
+                    node,
+                    d: smp.d[i],
+                    t: i as f64,
+                    uncertain: false,
+                })
+                .collect();
+            scan.curves.push(Curve {
+                index: ci,
+                kind: c.kind,
+                closed: c.closed,
+                segment_lengths: vec![None; tags.len().saturating_sub(1)],
+                tags,
+                samples: smp,
+            });
+        }
+        scan
     }
 }
 
@@ -349,6 +424,20 @@ fn build_surface(s: &SurfaceToml, base: &Path) -> Result<(Surface, SurfaceRef), 
             a: positive(s.a, "a")?,
             rim: positive(s.rim, "rim")?,
         },
+        "box" => {
+            let size = s
+                .size
+                .ok_or(("size".to_string(), "required for a box".to_string()))?;
+            for (k, x) in size.iter().enumerate() {
+                positive(Some(*x), &format!("size[{k}]"))?;
+            }
+            SurfaceRef::Box { center, size }
+        }
+        "gable" => SurfaceRef::Gable {
+            length: positive(s.length, "length")?,
+            width: positive(s.width, "width")?,
+            height: positive(s.height, "height")?,
+        },
         "mesh" => {
             let rel = s
                 .path
@@ -391,12 +480,12 @@ fn build_surface(s: &SurfaceToml, base: &Path) -> Result<(Surface, SurfaceRef), 
                 },
             ));
         }
-        other => {
-            return Err((
-                "kind".into(),
-                format!("unknown surface {other:?}: sphere, torus, frustum, paraboloid or mesh"),
-            ))
-        }
+        other => return Err((
+            "kind".into(),
+            format!(
+                "unknown surface {other:?}: sphere, torus, frustum, paraboloid, box, gable or mesh"
+            ),
+        )),
     };
     Ok((
         r.build().map_err(|e| ("path".to_string(), e.to_string()))?,
@@ -485,6 +574,21 @@ fn resample(
         out_p.push(p);
         out_n.push(nn);
     }
+    // On flat faces a point on an edge has two normals: take, at every point, the face of the
+    // chord towards its neighbour (the one the curve runs on).
+    if let (Surface::Faces(_), Some(_)) = (s, plane) {
+        let m = out_p.len();
+        for i in 0..m {
+            let j = if i + 1 < m {
+                i + 1
+            } else {
+                i.saturating_sub(1)
+            };
+            if let Some((_, g)) = s.implicit(&((out_p[i] + out_p[j]) / 2.0)) {
+                out_n[i] = g;
+            }
+        }
+    }
     (out_p, out_n)
 }
 
@@ -495,8 +599,18 @@ pub enum CurveError {
     NotAMesh,
     #[error("the mesh has no boundary")]
     NoBoundary,
-    #[error("unknown curve kind {0:?}: section or mesh-boundary")]
+    #[error("unknown curve kind {0:?}: section, polyline or mesh-boundary")]
     UnknownKind(String),
+    #[error("kind = \"polyline\" needs a surface of flat faces (box or gable)")]
+    NotFaces,
+    #[error("a polyline needs `points`, at least two")]
+    NoPoints,
+    #[error("polyline segment {0} does not lie on a face")]
+    OffFaces(usize),
+    #[error(
+        "polyline segment {0} runs along an edge: say which face the device rests on with `rest`"
+    )]
+    AlongEdge(usize),
     #[error("normal must be a non-zero vector")]
     ZeroNormal,
     #[error("the three `through` points are collinear")]
@@ -550,6 +664,9 @@ fn piece(s: &Surface, tess: &TriMesh, c: &CurveToml, h: f64) -> Result<Piece, Cu
             plane: None,
             kind: c.kind()?,
         });
+    }
+    if c.kind == "polyline" {
+        return polyline(s, c, h);
     }
     if c.kind != "section" {
         return Err(CurveError::UnknownKind(c.kind.clone()));
@@ -617,6 +734,80 @@ fn piece(s: &Surface, tess: &TriMesh, c: &CurveToml, h: f64) -> Result<Piece, Cu
         normals,
         closed,
         plane: Some((normal, offset)),
+        kind: c.kind()?,
+    })
+}
+
+/// A polyline on flat faces through `points` (closed: back to the first), sampled about every
+/// `h` with its corners kept; each segment's normal is its face's (along an edge, the face
+/// whose normal is nearest `rest`: the one the device rests on), a corner's the mean of its
+/// two segments'.
+fn polyline(s: &Surface, c: &CurveToml, h: f64) -> Result<Piece, CurveError> {
+    let Surface::Faces(faces) = s else {
+        return Err(CurveError::NotFaces);
+    };
+    let mut corners: Vec<Vector3<f64>> = c
+        .points
+        .as_ref()
+        .ok_or(CurveError::NoPoints)?
+        .iter()
+        .map(|p| v3(*p))
+        .collect();
+    if corners.len() < 2 {
+        return Err(CurveError::NoPoints);
+    }
+    if c.closed {
+        corners.push(corners[0]);
+    }
+    let scale = corners.iter().map(|p| p.norm()).fold(1.0, f64::max);
+    let mut normals = Vec::new();
+    for (k, w) in corners.windows(2).enumerate() {
+        let on: Vec<usize> = faces
+            .faces_at(&w[0], 1e-9 * scale)
+            .into_iter()
+            .filter(|f| faces.faces_at(&w[1], 1e-9 * scale).contains(f))
+            .collect();
+        let n = match on.len() {
+            0 => return Err(CurveError::OffFaces(k)),
+            1 => faces.planes[on[0]].0,
+            _ => {
+                let rest = v3(c.rest.ok_or(CurveError::AlongEdge(k))?);
+                on.iter()
+                    .map(|&f| faces.planes[f].0)
+                    .max_by(|a, b| a.dot(&rest).total_cmp(&b.dot(&rest)))
+                    .expect("two faces")
+            }
+        };
+        normals.push(n);
+    }
+    let (mut points, mut nrm) = (Vec::new(), Vec::new());
+    for (k, w) in corners.windows(2).enumerate() {
+        let m = (((w[1] - w[0]).norm() / h).ceil() as usize).max(1);
+        for j in 0..m {
+            points.push(w[0] + (w[1] - w[0]) * (j as f64 / m as f64));
+            let n = if j == 0 && k > 0 {
+                (normals[k - 1] + normals[k]).normalize()
+            } else {
+                normals[k]
+            };
+            nrm.push(n);
+        }
+    }
+    let last = normals.len() - 1;
+    points.push(*corners.last().expect("two"));
+    nrm.push(if c.closed {
+        (normals[last] + normals[0]).normalize()
+    } else {
+        normals[last]
+    });
+    if c.closed {
+        nrm[0] = nrm[nrm.len() - 1];
+    }
+    Ok(Piece {
+        points,
+        normals: nrm,
+        closed: c.closed,
+        plane: None,
         kind: c.kind()?,
     })
 }

@@ -1,6 +1,6 @@
 //! Ground-truth surfaces of scenes: analytic ones (sphere, torus, cone frustum, paraboloid
-//! bowl) given by an implicit function whose gradient is the outward normal, and triangle
-//! meshes. Every surface can be tessellated (to cut plane sections), and a point of a section
+//! bowl) given by an implicit function whose gradient is the outward normal, flat faces with
+//! sharp edges (a box, a gable roof: issue 18), and triangle meshes. Every surface can be tessellated (to cut plane sections), and a point of a section
 //! can be snapped exactly onto the analytic surface while staying in the section's plane.
 
 use super::mesh::TriMesh;
@@ -33,7 +33,110 @@ pub enum Surface {
         a: f64,
         rim: f64,
     },
+    /// Flat faces meeting at sharp edges, on the boundary of a convex solid.
+    Faces(Box<Faces>),
     Mesh(Box<TriMesh>),
+}
+
+/// Flat faces of a convex solid: the solid is `n·x ≤ d` for every face plane `(n, d)` (`n`
+/// the unit outward normal), the surface the faces' triangles (all of a box; a gable roof's
+/// two slopes only).
+#[derive(Debug, Clone)]
+pub struct Faces {
+    pub planes: Vec<(Vector3<f64>, f64)>,
+    /// The faces as triangles (vertices shared along the edges, for sections).
+    pub mesh: TriMesh,
+}
+
+impl Faces {
+    /// The box of sizes `size` centred at `center`.
+    pub fn cuboid(center: Vector3<f64>, size: Vector3<f64>) -> Faces {
+        let h = size / 2.0;
+        let v: Vec<Vector3<f64>> = (0..8)
+            .map(|i| {
+                let s = |bit: usize| if i & bit == 0 { -1.0 } else { 1.0 };
+                center + Vector3::new(s(1) * h.x, s(2) * h.y, s(4) * h.z)
+            })
+            .collect();
+        // Each face as a quad around it (−x, +x, −y, +y, −z, +z).
+        let quads = [
+            [0, 2, 6, 4],
+            [1, 5, 7, 3],
+            [0, 4, 5, 1],
+            [2, 3, 7, 6],
+            [0, 1, 3, 2],
+            [4, 6, 7, 5],
+        ];
+        let mut planes = Vec::new();
+        for k in 0..3 {
+            for sign in [-1.0, 1.0] {
+                let mut n = Vector3::zeros();
+                n[k] = sign;
+                planes.push((n, n.dot(&center) + h[k]));
+            }
+        }
+        Faces {
+            planes,
+            mesh: quads_mesh(v, &quads, center),
+        }
+    }
+
+    /// A gable roof: two slopes meeting at a ridge along x at height `height` over y = 0,
+    /// their eaves at z = 0, y = ±width/2, from x = −length/2 to length/2.
+    pub fn gable(length: f64, width: f64, height: f64) -> Faces {
+        let (l, w) = (length / 2.0, width / 2.0);
+        let v = vec![
+            Vector3::new(-l, -w, 0.0),
+            Vector3::new(l, -w, 0.0),
+            Vector3::new(l, 0.0, height),
+            Vector3::new(-l, 0.0, height),
+            Vector3::new(-l, w, 0.0),
+            Vector3::new(l, w, 0.0),
+        ];
+        let planes = [-1.0, 1.0]
+            .iter()
+            .map(|&s| {
+                let n = Vector3::new(0.0, s * height, w).normalize();
+                (n, n.z * height)
+            })
+            .collect();
+        Faces {
+            planes,
+            mesh: quads_mesh(v, &[[0, 1, 2, 3], [3, 2, 5, 4]], -Vector3::z() * height),
+        }
+    }
+
+    /// The faces (indices into `planes`) containing `p`, within `tol`.
+    pub fn faces_at(&self, p: &Vector3<f64>, tol: f64) -> Vec<usize> {
+        (0..self.planes.len())
+            .filter(|&k| (self.planes[k].0.dot(p) - self.planes[k].1).abs() <= tol)
+            .collect()
+    }
+}
+
+/// A mesh of quads (each around its face) split into triangles turned counter-clockwise
+/// seen from outside (away from the point `inside`), with unit vertex normals.
+fn quads_mesh(v: Vec<Vector3<f64>>, quads: &[[u32; 4]], inside: Vector3<f64>) -> TriMesh {
+    let f = quads
+        .iter()
+        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+        .map(|t| {
+            let p = t.map(|i| v[i as usize]);
+            let n = (p[1] - p[0]).cross(&(p[2] - p[0]));
+            if n.dot(&((p[0] + p[1] + p[2]) / 3.0 - inside)) < 0.0 {
+                [t[0], t[2], t[1]]
+            } else {
+                t
+            }
+        })
+        .collect();
+    let mut m = TriMesh {
+        v,
+        f,
+        n: Vec::new(),
+    };
+    m.compute_normals();
+    m
 }
 
 impl Surface {
@@ -75,6 +178,11 @@ impl Surface {
                 let gn = g.norm();
                 Some((f / gn, g / gn))
             }
+            Surface::Faces(ref f) => f
+                .planes
+                .iter()
+                .map(|(n, d)| (n.dot(x) - d, *n))
+                .max_by(|a, b| a.0.total_cmp(&b.0)),
             Surface::Mesh(_) => None,
         }
     }
@@ -115,6 +223,7 @@ impl Surface {
     pub fn distance(&self, x: &Vector3<f64>) -> f64 {
         match self {
             Surface::Mesh(m) => mesh_distance(m, x),
+            Surface::Faces(f) => mesh_distance(&f.mesh, x),
             s => s.implicit(x).map(|(f, _)| f.abs()).unwrap_or(f64::INFINITY),
         }
     }
@@ -123,6 +232,7 @@ impl Surface {
     pub fn tessellate(&self) -> TriMesh {
         match self {
             Surface::Mesh(m) => (**m).clone(),
+            Surface::Faces(f) => f.mesh.clone(),
             Surface::Sphere { center, radius } => grid(
                 256,
                 128,

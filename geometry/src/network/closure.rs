@@ -532,6 +532,7 @@ mod tests {
                     h: vec![h; k - 1],
                     w: vec![1.0; n + 1],
                     outliers: 0,
+                    kinks: Vec::new(),
                 });
             }
         }
@@ -560,6 +561,7 @@ mod tests {
             h: vec![h; 3],
             w: vec![1.0; n + 1],
             outliers: 0,
+            kinks: Vec::new(),
         }];
         let r = detach_outlier_tags(&mut curves, |_, _| true);
         assert!(r.detached.is_empty() && r.refused.is_empty(), "{r:?}");

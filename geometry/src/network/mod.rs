@@ -5,11 +5,13 @@
 //!   detached from their node.
 //! - [`regression`]: the frames regressed on SO(3)ᴺ over the whole network.
 //! - [`poisson`]: positions of the whole network from its tangents, nodes shared.
+//! - [`crease`]: the other face of each crease curve, from the curves at its nodes.
 //!
 //! [`Reconstructor::run`] runs them over a scan, leaving out (with a warning) what cannot be
 //! used, and keeps the symbolic factorisations between runs.
 
 pub mod closure;
+pub mod crease;
 pub mod poisson;
 pub mod prefilter;
 pub mod regression;
@@ -17,7 +19,7 @@ pub mod regression;
 use crate::curve::Curve;
 use nalgebra::UnitQuaternion;
 use poisson::{PoissonSolver, Positions};
-use prefilter::{prefilter, PrefilterParams, UniformCurve};
+use prefilter::{prefilter_with_kinks, PrefilterParams, UniformCurve};
 use regression::{RegressionParams, RegressionReport, RegressionSolver};
 use std::collections::HashMap;
 use std::time::Instant;
@@ -79,6 +81,8 @@ pub enum NetworkWarning {
     PoissonFailed(crate::sparse_llt::SolveError),
     /// The network falls apart into parts with no node in common.
     InParts { components: usize },
+    /// A crease curve whose other face is unknown: surfaced as a smooth curve.
+    CreaseUnknown(crease::CreaseUnknown),
 }
 
 impl NetworkWarning {
@@ -91,6 +95,7 @@ impl NetworkWarning {
             NetworkWarning::TagRefused(_) => "tag_refused",
             NetworkWarning::PoissonFailed(_) => "poisson_failed",
             NetworkWarning::InParts { .. } => "network_in_parts",
+            NetworkWarning::CreaseUnknown(_) => "crease_other_face_unknown",
         }
     }
 
@@ -100,6 +105,7 @@ impl NetworkWarning {
             NetworkWarning::LeftOut(e) => Some(e.curve()),
             NetworkWarning::TagDetached(d) => Some(d.curve),
             NetworkWarning::TagRefused(r) => Some(r.curve),
+            NetworkWarning::CreaseUnknown(c) => Some(c.curve()),
             _ => None,
         }
     }
@@ -128,6 +134,7 @@ impl std::fmt::Display for NetworkWarning {
                 f,
                 "the network falls apart into {components} parts with no node in common: each is reconstructed on its own, their relative placement is arbitrary"
             ),
+            NetworkWarning::CreaseUnknown(c) => c.fmt(f),
         }
     }
 }
@@ -184,10 +191,12 @@ struct CurveKey {
     tags: Vec<(u32, u64, bool)>,
     segment_lengths: Vec<Option<u64>>,
     params: PrefilterParams,
+    /// Its nodes a crease passes through (where it may kink).
+    kink_nodes: Vec<u32>,
 }
 
 impl CurveKey {
-    fn of(c: &Curve, p: &PrefilterParams) -> Self {
+    fn of(c: &Curve, p: &PrefilterParams, kink_nodes: Vec<u32>) -> Self {
         CurveKey {
             samples: c.samples.len(),
             last: c
@@ -207,6 +216,7 @@ impl CurveKey {
                 .map(|l| l.map(f64::to_bits))
                 .collect(),
             params: *p,
+            kink_nodes,
         }
     }
 }
@@ -249,14 +259,28 @@ impl Reconstructor {
         self.prefiltered.retain(|k, _| live.contains(k));
         self.regressed.retain(|k, _| live.contains(k));
         self.prefiltered_last = 0;
+        // Curves may kink at the nodes a crease passes through.
+        let crease_nodes: std::collections::BTreeSet<u32> = curves
+            .iter()
+            .filter(|c| c.kind == crate::curve::CurveKind::Crease)
+            .flat_map(|c| c.tags.iter().map(|t| t.node))
+            .collect();
         for c in curves {
-            let key = CurveKey::of(c, &p.prefilter);
+            let mut kink_nodes: Vec<u32> = c
+                .tags
+                .iter()
+                .map(|t| t.node)
+                .filter(|n| crease_nodes.contains(n))
+                .collect();
+            kink_nodes.sort_unstable();
+            kink_nodes.dedup();
+            let key = CurveKey::of(c, &p.prefilter, kink_nodes);
             let fresh = !matches!(self.prefiltered.get(&c.index), Some((k, _)) if *k == key);
             if fresh {
                 self.prefiltered_last += 1;
                 self.regressed.remove(&c.index);
-                self.prefiltered
-                    .insert(c.index, (key, prefilter(c, &p.prefilter)));
+                let u = prefilter_with_kinks(c, &p.prefilter, &key.kink_nodes);
+                self.prefiltered.insert(c.index, (key, u));
             }
             match &self.prefiltered[&c.index].1 {
                 Ok(u) => uniform.push(u.clone()),
@@ -321,7 +345,7 @@ impl Reconstructor {
             }
         }
         let t2 = Instant::now();
-        let positions = match self.poisson.solve(&uniform) {
+        let mut positions = match self.poisson.solve(&uniform) {
             Ok(p) => p,
             Err(e) => {
                 tracing::error!("Poisson reconstruction failed: {e}");
@@ -329,6 +353,11 @@ impl Reconstructor {
                 return Err(Unreconstructed { warnings });
             }
         };
+        warnings.extend(
+            crease::other_faces(&mut positions)
+                .into_iter()
+                .map(NetworkWarning::CreaseUnknown),
+        );
         let t3 = Instant::now();
         if positions.components > 1 {
             warnings.push(NetworkWarning::InParts {
@@ -362,19 +391,28 @@ impl Reconstructor {
     }
 }
 
-/// Largest angle between normals of different curves at a shared node, degrees.
+/// Largest angle between normals of different curves at a shared node, degrees. At a node a
+/// crease passes through, the frames on its two faces are not compared: only pairs within
+/// [`regression::CREASE_PAIR_DEG`] count there (those the regression ties).
 pub fn max_node_normal_angle(p: &Positions) -> f64 {
-    let mut at: std::collections::BTreeMap<u32, Vec<nalgebra::Vector3<f64>>> = Default::default();
+    let mut at: std::collections::BTreeMap<u32, (bool, Vec<nalgebra::Vector3<f64>>)> =
+        Default::default();
     for c in &p.curves {
+        let crease = c.kind == crate::curve::CurveKind::Crease;
         for &(i, n) in &c.nodes {
-            at.entry(n).or_default().push(c.normals[i]);
+            let e = at.entry(n).or_default();
+            e.0 |= crease;
+            e.1.push(c.normals[i]);
         }
     }
     let mut worst: f64 = 0.0;
-    for ns in at.values() {
+    for (crease, ns) in at.values() {
         for a in 0..ns.len() {
             for b in a + 1..ns.len() {
-                worst = worst.max(ns[a].angle(&ns[b]).to_degrees());
+                let angle = ns[a].angle(&ns[b]).to_degrees();
+                if !crease || angle < regression::CREASE_PAIR_DEG {
+                    worst = worst.max(angle);
+                }
             }
         }
     }

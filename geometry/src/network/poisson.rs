@@ -19,6 +19,9 @@ pub struct CurvePositions {
     pub points: Vec<Vector3<f64>>,
     pub normals: Vec<Vector3<f64>>,
     pub tangents: Vec<Vector3<f64>>,
+    /// A crease's other face: its unit normals at the samples ([`super::crease`]); empty for
+    /// other kinds.
+    pub across: Vec<Vector3<f64>>,
     /// `(sample index, node)`.
     pub nodes: Vec<(usize, u32)>,
 }
@@ -93,7 +96,13 @@ impl PoissonSolver {
         for (ci, c) in curves.iter().enumerate() {
             for j in 0..c.q.len().saturating_sub(1) {
                 let h = c.edge_h(j);
-                let t = (tangents[ci][j] + tangents[ci][j + 1]) * 0.5;
+                // Into a kink, the frame arriving there.
+                let arriving = if c.kinked(j + 1) {
+                    c.arriving(j + 1) * Vector3::x()
+                } else {
+                    tangents[ci][j + 1]
+                };
+                let t = (tangents[ci][j] + arriving) * 0.5;
                 // Residual (x_b − x_a)/h − t, squared: weight 1/h² on (x_b − x_a − h t).
                 edges.push(Edge {
                     a: var_of[ci][j],
@@ -150,6 +159,7 @@ impl PoissonSolver {
                 points: var_of[ci].iter().map(|&v| x[v]).collect(),
                 normals: c.q.iter().map(|q| q * Vector3::z()).collect(),
                 tangents: tangents[ci].clone(),
+                across: Vec::new(),
                 nodes: c.nodes.clone(),
             })
             .collect();
@@ -194,6 +204,7 @@ mod tests {
             h: vec![h, h],
             w: vec![1.0; n + 1],
             outliers: 0,
+            kinks: Vec::new(),
         }
     }
 

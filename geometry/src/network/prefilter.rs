@@ -52,9 +52,31 @@ pub struct UniformCurve {
     pub w: Vec<f64>,
     /// Raw samples removed as outliers.
     pub outliers: usize,
+    /// Samples at a node where the curve's tangent jumps (a crease's corner, a curve crossing
+    /// a crease: [`KINK_DEG`]), with the frame arriving there (`q` holds the one leaving);
+    /// `0` for a closed curve whose loop closes at such a node (its last sample arrives).
+    pub kinks: Vec<(usize, UnitQuaternion<f64>)>,
 }
 
+/// At a node a crease passes through, a curve whose tangent turns by more than this (between
+/// the samples half a step to two steps before and after) has a kink there: each side is
+/// resampled from its own samples, degrees.
+pub const KINK_DEG: f64 = 15.0;
+
 impl UniformCurve {
+    /// The frame arriving at sample `j` (the one leaving it, `q[j]`, unless a kink is there).
+    pub fn arriving(&self, j: usize) -> UnitQuaternion<f64> {
+        self.kinks
+            .iter()
+            .find(|k| k.0 == j && j > 0)
+            .map_or(self.q[j], |k| k.1)
+    }
+
+    /// A kink at sample `j`.
+    pub fn kinked(&self, j: usize) -> bool {
+        self.kinks.iter().any(|k| k.0 == j)
+    }
+
     /// The step of the edge from sample `j` to `j + 1`.
     pub fn edge_h(&self, j: usize) -> f64 {
         let seg = self
@@ -127,6 +149,16 @@ fn quat(a: &[f64; 4]) -> UnitQuaternion<f64> {
 
 /// Resamples one curve.
 pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, PrefilterError> {
+    prefilter_with_kinks(c, p, &[])
+}
+
+/// Resamples one curve, allowing kinks ([`KINK_DEG`]) at the nodes `kink_nodes` (those a
+/// crease passes through).
+pub fn prefilter_with_kinks(
+    c: &Curve,
+    p: &PrefilterParams,
+    kink_nodes: &[u32],
+) -> Result<UniformCurve, PrefilterError> {
     if c.tags.len() < 2 {
         return Err(PrefilterError::TooFewNodes {
             curve: c.index,
@@ -258,10 +290,77 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
         nodes.push((d.len() - 1, w[1].node));
         hs.push(h);
     }
+    // Kinks: at the allowed nodes, the mean tangents half a step to two steps before and after.
+    let tangent_between = |a: f64, b: f64| -> Option<nalgebra::Vector3<f64>> {
+        let (lo, hi) = (
+            ds.partition_point(|&x| x < a),
+            ds.partition_point(|&x| x <= b),
+        );
+        let sum: nalgebra::Vector3<f64> = uniq[lo..hi]
+            .iter()
+            .map(|u| u.1 * nalgebra::Vector3::x())
+            .sum();
+        sum.try_normalize(1e-12)
+    };
+    let kink_cos = KINK_DEG.to_radians().cos();
+    let mut kink_at: Vec<usize> = Vec::new(); // sample indices
+    let closed = c.tags.first().map(|t| t.node) == c.tags.last().map(|t| t.node);
+    for (k, &(i, node)) in nodes.iter().enumerate() {
+        if !kink_nodes.contains(&node) {
+            continue;
+        }
+        let last_tag = k + 1 == nodes.len();
+        if last_tag {
+            continue;
+        }
+        let dn = d[i];
+        let hb = if k > 0 { hs[k - 1] } else { hs[hs.len() - 1] };
+        let ha = hs[k];
+        let before = if k > 0 {
+            tangent_between(dn - 2.0 * hb, dn - 0.5 * hb)
+        } else if closed {
+            let end = d[d.len() - 1];
+            tangent_between(end - 2.0 * hb, end - 0.5 * hb)
+        } else {
+            None
+        };
+        let after = tangent_between(dn + 0.5 * ha, dn + 2.0 * ha);
+        if let (Some(b), Some(a)) = (before, after) {
+            if b.dot(&a) < kink_cos {
+                kink_at.push(i);
+            }
+        }
+    }
+    // The distances each sample's kernel may use: between the kinks around it (the standing
+    // samples at a kink, turning from one way to the other, on neither side).
+    let eps = |j: usize| {
+        0.1 * hs[nodes
+            .iter()
+            .rposition(|&(i, _)| i <= j)
+            .unwrap_or(0)
+            .min(hs.len() - 1)]
+    };
+    let range_of = |j: usize, arriving: bool| -> (f64, f64) {
+        let mut lo = f64::NEG_INFINITY;
+        let mut hi = f64::INFINITY;
+        for &kk in &kink_at {
+            let dk = d[kk];
+            // (A loop closing at a kink, at sample 0, bounds only its first sample.)
+            if (kk < j || (kk == j && !arriving)) && (kk > 0 || j == 0) {
+                lo = lo.max(dk + eps(kk));
+            }
+            if kk > j || (kk == j && arriving) {
+                hi = hi.min(dk - eps(kk.saturating_sub(1)));
+            }
+        }
+        (lo, hi)
+    };
     // Gaussian-weighted q-method means.
     let mut q = Vec::with_capacity(d.len());
     let mut rel = Vec::with_capacity(d.len());
+    let mut kinks = Vec::new();
     let mut last = uniq[0].1;
+    let mut arriving_last = last;
     for (k, &t) in d.iter().enumerate() {
         let seg = nodes
             .iter()
@@ -269,10 +368,74 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
             .unwrap_or(0)
             .min(hs.len() - 1);
         let width = p.sigma * hs[seg];
+        // At an interior kink: the frame arriving first (from the samples before), then the
+        // one leaving.
+        if kink_at.contains(&k) && k > 0 {
+            let (lo_d, hi_d) = range_of(k, true);
+            let (m, _) = kernel_mean(
+                &uniq,
+                &ds,
+                &spacing,
+                t,
+                width,
+                length,
+                (lo_d, hi_d),
+                &arriving_last,
+            );
+            kinks.push((k, m));
+        }
+        let (lo_d, hi_d) = range_of(k, false);
+        let (mean, reliability) =
+            kernel_mean(&uniq, &ds, &spacing, t, width, length, (lo_d, hi_d), &last);
+        last = mean;
+        arriving_last = mean;
+        q.push(mean);
+        rel.push(reliability.clamp(0.0, 1.0));
+    }
+    if kink_at.contains(&0) && closed {
+        kinks.insert(0, (0, *q.last().expect("samples")));
+    }
+    Ok(UniformCurve {
+        index: c.index,
+        kind: c.kind,
+        d,
+        q,
+        nodes,
+        h: hs,
+        w: rel,
+        outliers,
+        kinks,
+    })
+}
+
+/// The Gaussian-weighted q-method mean of the raw samples around `t` (kernel width `width`)
+/// whose distances lie in `range` (all of them if none does), and its reliability; the
+/// window widens over gaps in the data.
+#[allow(clippy::too_many_arguments)]
+fn kernel_mean(
+    uniq: &[(f64, UnitQuaternion<f64>, f64)],
+    ds: &[f64],
+    spacing: &[f64],
+    t: f64,
+    width: f64,
+    length: f64,
+    range: (f64, f64),
+    last: &UnitQuaternion<f64>,
+) -> (UnitQuaternion<f64>, f64) {
+    let (r_lo, r_hi) = (
+        ds.partition_point(|&x| x < range.0),
+        ds.partition_point(|&x| x <= range.1),
+    );
+    let (r_lo, r_hi) = if r_lo < r_hi {
+        (r_lo, r_hi)
+    } else {
+        (0, ds.len())
+    };
+    {
         let mut radius = (3.0 * width).max(1e-9);
-        let (mean, reliability) = loop {
-            let lo = ds.partition_point(|&x| x < t - radius);
-            let hi = ds.partition_point(|&x| x <= t + radius);
+        loop {
+            let lo = ds.partition_point(|&x| x < t - radius).max(r_lo);
+            let hi = ds.partition_point(|&x| x <= t + radius).min(r_hi).max(lo);
             let mut ten = StructureTensor::new();
             let (mut kw, mut k) = (0.0, 0.0);
             // The kernel widens with the window (3σ = radius), so that a gap in the data is
@@ -287,26 +450,13 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
             }
             // A gap in the data: widen the window (and the kernel with it) until it holds
             // samples, up to the whole curve.
-            match ten.mean_near(&last) {
-                Some(m) if ten.weight() > 1e-12 => break (m, (kw / k) * (3.0 * width / radius)),
-                _ if radius > 2.0 * length + 1.0 => break (last, 0.0),
+            match ten.mean_near(last) {
+                Some(m) if ten.weight() > 1e-12 => return (m, (kw / k) * (3.0 * width / radius)),
+                _ if radius > 2.0 * length + 1.0 => return (*last, 0.0),
                 _ => radius *= 2.0,
             }
-        };
-        last = mean;
-        q.push(mean);
-        rel.push(reliability.clamp(0.0, 1.0));
+        }
     }
-    Ok(UniformCurve {
-        index: c.index,
-        kind: c.kind,
-        d,
-        q,
-        nodes,
-        h: hs,
-        w: rel,
-        outliers,
-    })
 }
 
 #[cfg(test)]

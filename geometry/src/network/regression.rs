@@ -6,6 +6,16 @@
 //! - `E₂ = (1/h³) Σ ‖skew(X_iᵀ(X_{i+1} + X_{i−1}))‖²_F` (bending),
 //! - `E_N = Σ ‖X_i e₃ − X̃_j e₃‖²` over every two frames of different curves at a node,
 //!
+//! A node on a crease (issue 18) has one normal per face: the crease curve's frame carries the
+//! face the device rested on, a curve arriving from the other face carries that face's, and a
+//! curve crossing the edge carries, after the pre-filter's Gaussian, a normal between the two.
+//! Tying them all would drag the crease's frames towards the mean of the faces (45° off on a
+//! box) and the error would spread along every curve at the node by the bending term. So at a
+//! node a crease passes through, `E_N` ties only the frames whose pre-filtered normals already
+//! agree within [`CREASE_PAIR_DEG`] (the same face, measured twice); the others keep their own
+//! normals, and the crease's other face is found after the positions
+//! ([`super::crease`]). Away from creases every pair is tied, as in the paper.
+//!
 //! sums periodic on closed curves (whose last sample is their first), by Levenberg–Marquardt
 //! on the manifold: updates `X ← X·exp(ω̂)`, the normal matrix (3×3 blocks, banded per curve
 //! plus the node couplings) factorised by sparse Cholesky with its symbolic factorisation
@@ -19,6 +29,12 @@ use super::prefilter::UniformCurve;
 use crate::sparse_llt::{CachedPattern, SpdPattern};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use std::collections::HashMap;
+
+/// At a node a crease curve passes through, two frames' normals are tied by `E_N` only when
+/// their pre-filtered normals already agree within this angle, degrees: the frames on the
+/// crease's two faces (and those of curves crossing it, whose normals the pre-filter smooths
+/// across the edge) keep their own normals.
+pub const CREASE_PAIR_DEG: f64 = 30.0;
 
 /// Regression parameters (documented defaults, chosen by measurement: BENCHMARKS.md).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -134,9 +150,16 @@ fn problem(curves: &[UniformCurve]) -> Problem {
     let mut edges = Vec::new();
     let mut triples = Vec::new();
     let mut at_node: HashMap<u32, Vec<usize>> = HashMap::new();
+    let crease_nodes: std::collections::HashSet<u32> = curves
+        .iter()
+        .filter(|c| c.kind == crate::curve::CurveKind::Crease)
+        .flat_map(|c| c.nodes.iter().map(|x| x.1))
+        .collect();
     for c in curves {
         let n = c.q.len();
-        let closed = n > 2 && c.nodes.first().map(|x| x.1) == c.nodes.last().map(|x| x.1);
+        // A loop that closes at a kink keeps its last frame (arriving) apart from its first.
+        let closed =
+            n > 2 && c.nodes.first().map(|x| x.1) == c.nodes.last().map(|x| x.1) && !c.kinked(0);
         let base = a.len();
         let m = if closed { n - 1 } else { n };
         let vars: Vec<usize> = (0..n)
@@ -163,6 +186,10 @@ fn problem(curves: &[UniformCurve]) -> Problem {
             } else {
                 (c.edge_h(j - 1) + c.edge_h(j)) / 2.0
             };
+            // No bending across a kink.
+            if c.kinked(j) {
+                continue;
+            }
             triples.push((prev, vars[j], vars[j + 1], h));
         }
         for &(i, nd) in &c.nodes {
@@ -177,10 +204,17 @@ fn problem(curves: &[UniformCurve]) -> Problem {
     let mut pairs = Vec::new();
     let mut keys: Vec<&u32> = at_node.keys().collect();
     keys.sort();
+    let agree = CREASE_PAIR_DEG.to_radians().cos();
     for k in keys {
         let vs = &at_node[k];
+        let crease = crease_nodes.contains(k);
         for i in 0..vs.len() {
             for j in i + 1..vs.len() {
+                // At a crease, only frames already on the same face are tied.
+                let (ni, nj) = (a[vs[i]].column(2), a[vs[j]].column(2));
+                if crease && ni.dot(&nj) < agree {
+                    continue;
+                }
                 pairs.push((vs[i], vs[j]));
             }
         }
@@ -649,6 +683,7 @@ mod tests {
                 h: vec![h],
                 w: vec![1.0; n + 1],
                 outliers: 0,
+                kinks: Vec::new(),
             },
             truth,
         )

@@ -31,7 +31,7 @@ fn curve(
         let (pts, nrm): (Vec<_>, Vec<_>) = (0..=m)
             .map(|k| f(t0 + (t1 - t0) * k as f64 / m as f64))
             .unzip();
-        net.push(idx, false, (a, b), pts, nrm);
+        net.push(idx, crate::curve::CurveKind::Interior, (a, b), pts, nrm);
     }
 }
 
@@ -161,6 +161,127 @@ pub fn torus_with_parallels(spacing: f64, v0: f64) -> NetworkSegments {
             let v = if top { v0 } else { v0 - PI };
             net.set_normal(node(i, top), torus_point(u, v).1);
         }
+    }
+    net
+}
+
+/// Distance from the surface of the box `[−h, h]` (`h` its half sizes), centred at the origin.
+pub fn box_distance(p: &Vector3<f64>, h: &Vector3<f64>) -> f64 {
+    let q = p.abs() - h;
+    let outside = q.sup(&Vector3::zeros()).norm();
+    let inside = q.max().min(0.0);
+    (outside + inside).abs()
+}
+
+/// The network of a box of sizes `size` centred at the origin (issue 18): its twelve edges
+/// as crease curves (each with both faces' normals: measured on one, `across` the other,
+/// alternating which), and one smooth curve across each face through its middle, ending at
+/// the middles of two opposite edges (the top, front, bottom and back curves in the plane
+/// x = 0, the ±x faces' in y = 0): 8 corners (nodes 0–7), 8 edge middles (8–15), 12
+/// patches. Node normals are the means of the faces around them. Samples every `spacing`.
+pub fn box_network(size: [f64; 3], spacing: f64) -> NetworkSegments {
+    use crate::curve::CurveKind;
+    let h = Vector3::from(size) / 2.0;
+    let corner = |i: u32| {
+        Vector3::new(
+            if i & 1 == 0 { -h.x } else { h.x },
+            if i & 2 == 0 { -h.y } else { h.y },
+            if i & 4 == 0 { -h.z } else { h.z },
+        )
+    };
+    // The outward normals of the faces containing a point of the surface.
+    let faces_at = |p: &Vector3<f64>| -> Vec<Vector3<f64>> {
+        (0..3)
+            .filter(|&k| (p[k].abs() - h[k]).abs() < 1e-12)
+            .map(|k| {
+                let mut n = Vector3::zeros();
+                n[k] = p[k].signum();
+                n
+            })
+            .collect()
+    };
+    let mut net = NetworkSegments::default();
+    let mut middles: Vec<Vector3<f64>> = Vec::new();
+    let mut idx = 0;
+    let mut add = |net: &mut NetworkSegments,
+                   kind: CurveKind,
+                   pts: &[(Vector3<f64>, u32)],
+                   normal: Vector3<f64>,
+                   across: Option<Vector3<f64>>| {
+        for w in pts.windows(2) {
+            let ((pa, a), (pb, b)) = (w[0], w[1]);
+            let m = (((pb - pa).norm() / spacing).round() as usize).max(2);
+            let points: Vec<Vector3<f64>> = (0..=m)
+                .map(|k| pa + (pb - pa) * (k as f64 / m as f64))
+                .collect();
+            let across = across.map_or_else(Vec::new, |n| vec![n; m + 1]);
+            net.push_crease(idx, kind, (a, b), points, vec![normal; m + 1], across);
+        }
+        idx += 1;
+    };
+    // Edges along axis k: from corner i (bit k clear) to i | bit k, with a middle node on the
+    // edges along x and y.
+    let mut edge = 0;
+    for k in 0..3 {
+        let bit = 1u32 << k;
+        for i in (0..8u32).filter(|i| i & bit == 0) {
+            let (pa, pb) = (corner(i), corner(i | bit));
+            let faces = faces_at(&((pa + pb) / 2.0));
+            let (rest, other) = if edge % 2 == 0 {
+                (faces[0], faces[1])
+            } else {
+                (faces[1], faces[0])
+            };
+            edge += 1;
+            let mut pts = vec![(pa, i)];
+            if k < 2 {
+                middles.push((pa + pb) / 2.0);
+                pts.push(((pa + pb) / 2.0, 7 + middles.len() as u32));
+            }
+            pts.push((pb, i | bit));
+            add(&mut net, CurveKind::Crease, &pts, rest, Some(other));
+        }
+    }
+    // One curve across each face, between the middles of two opposite edges.
+    let middle = |p: Vector3<f64>| -> u32 {
+        8 + middles
+            .iter()
+            .position(|m| (m - p).norm() < 1e-12)
+            .expect("an edge middle") as u32
+    };
+    for k in 0..3 {
+        for sign in [-1.0, 1.0] {
+            let mut n = Vector3::zeros();
+            n[k] = sign;
+            // Across the face: along the axis j, in the plane through the centre.
+            let (j, l) = match k {
+                0 => (2, 1),
+                1 => (2, 0),
+                _ => (1, 0),
+            };
+            let mut pa = n.component_mul(&h);
+            pa[j] = -h[j];
+            pa[l] = 0.0;
+            let mut pb = pa;
+            pb[j] = h[j];
+            add(
+                &mut net,
+                CurveKind::Interior,
+                &[(pa, middle(pa)), (pb, middle(pb))],
+                n,
+                None,
+            );
+        }
+    }
+    for i in 0..8 {
+        let p = corner(i);
+        net.set_normal(i, faces_at(&p).iter().sum::<Vector3<f64>>().normalize());
+    }
+    for (m, p) in middles.iter().enumerate() {
+        net.set_normal(
+            8 + m as u32,
+            faces_at(p).iter().sum::<Vector3<f64>>().normalize(),
+        );
     }
     net
 }

@@ -15,6 +15,7 @@
 //!
 //! ```
 //! use nalgebra::Vector3;
+//! use sfs_geometry::curve::CurveKind;
 //! use sfs_geometry::surface::cycles::{cycles, NetworkSegments};
 //! // A square in the plane z = 0 seen from +z: χ = 4 − 4 + 2 = 2.
 //! let p = |x: f64, y: f64| Vector3::new(x, y, 0.0);
@@ -22,7 +23,7 @@
 //! let pts = [p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)];
 //! for (k, (a, b)) in [(0u32, 1u32), (1, 2), (2, 3), (3, 0)].into_iter().enumerate() {
 //!     let line = vec![pts[a as usize], pts[b as usize]];
-//!     net.push(k, true, (a, b), line, vec![Vector3::z(); 2]);
+//!     net.push(k, CurveKind::Boundary, (a, b), line, vec![Vector3::z(); 2]);
 //! }
 //! for n in 0..4 {
 //!     net.set_normal(n, Vector3::z());
@@ -34,6 +35,7 @@
 //! ```
 
 use super::{Span, SurfaceProblem};
+use crate::curve::CurveKind;
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
 
@@ -43,17 +45,31 @@ pub struct Segment {
     /// Scan index of the curve and position of the segment in it (0 = first).
     pub curve: usize,
     pub k: usize,
-    pub boundary: bool,
+    /// What its curve means for the surface.
+    pub kind: CurveKind,
     /// Nodes at its start and end.
     pub a: u32,
     pub b: u32,
     /// Its points from `a` to `b` (at least two).
     pub points: Vec<Vector3<f64>>,
-    /// Unit surface normals at the points.
+    /// Unit surface normals at the points (of a crease: the face the device rested on).
     pub normals: Vec<Vector3<f64>>,
+    /// A crease's other face: its unit normals at the points (empty for other kinds, or a
+    /// crease whose other face is unknown, which is then surfaced as an interior curve).
+    pub across: Vec<Vector3<f64>>,
 }
 
 impl Segment {
+    /// Lies on the boundary of the surface.
+    pub fn boundary(&self) -> bool {
+        self.kind == CurveKind::Boundary
+    }
+
+    /// A sharp edge with both faces' normals: the surface is split along it.
+    pub fn crease(&self) -> bool {
+        self.kind == CurveKind::Crease && self.across.len() == self.points.len()
+    }
+
     /// Direction leaving its start (`at_end = false`) or its end, along the segment: from the
     /// end point to the first point at least 1 % of the segment's length away (robust to
     /// repeated points).
@@ -86,30 +102,46 @@ pub struct NetworkSegments {
 }
 
 impl NetworkSegments {
-    /// Adds the segment of curve `curve` from node `a` to node `b` through `points` with
-    /// surface `normals` (one per point).
+    /// Adds the segment of curve `curve` (of kind `kind`) from node `a` to node `b` through
+    /// `points` with surface `normals` (one per point).
     ///
     /// Interior points that coincide with the point before them (or with the end) are dropped,
     /// with their normals: a patch boundary needs distinct points.
     pub fn push(
         &mut self,
         curve: usize,
-        boundary: bool,
+        kind: CurveKind,
         (a, b): (u32, u32),
         points: Vec<Vector3<f64>>,
         normals: Vec<Vector3<f64>>,
     ) {
+        self.push_crease(curve, kind, (a, b), points, normals, Vec::new());
+    }
+
+    /// As [`push`](Self::push), with a crease's other face's normals `across` (one per point,
+    /// or none).
+    pub fn push_crease(
+        &mut self,
+        curve: usize,
+        kind: CurveKind,
+        (a, b): (u32, u32),
+        points: Vec<Vector3<f64>>,
+        normals: Vec<Vector3<f64>>,
+        across: Vec<Vector3<f64>>,
+    ) {
         let k = self.segments.iter().filter(|s| s.curve == curve).count();
-        let (points, normals) = distinct(points, normals);
-        self.segments.push(Segment {
+        let mut s = Segment {
             curve,
             k,
-            boundary,
+            kind,
             a,
             b,
             points,
             normals,
-        });
+            across,
+        };
+        s.keep(&distinct(&s.points));
+        self.segments.push(s);
     }
 
     /// A copy whose segments have distinct consecutive points (see [`push`](Self::push)),
@@ -117,12 +149,8 @@ impl NetworkSegments {
     pub fn cleaned(&self) -> Self {
         let mut out = self.clone();
         for s in &mut out.segments {
-            let (p, n) = distinct(
-                std::mem::take(&mut s.points),
-                std::mem::take(&mut s.normals),
-            );
-            s.points = p;
-            s.normals = n;
+            let keep = distinct(&s.points);
+            s.keep(&keep);
         }
         out
     }
@@ -152,11 +180,7 @@ impl NetworkSegments {
             }
             keep.push(m - 1);
             if keep.len() < m {
-                s.points = keep.iter().map(|&k| s.points[k]).collect();
-                s.normals = keep
-                    .iter()
-                    .filter_map(|&k| s.normals.get(k).copied())
-                    .collect();
+                s.keep(&keep);
             }
         }
         out
@@ -167,25 +191,36 @@ impl NetworkSegments {
     }
 
     /// The segments of reconstructed curves (`crate::network::poisson::Positions`), with node
-    /// normals averaged over the curves through each node.
+    /// normals averaged over the curves through each node (both faces of a crease: a box's
+    /// corner takes the mean of its three faces).
     pub fn from_positions(p: &crate::network::poisson::Positions) -> Self {
         let mut net = NetworkSegments::default();
         let mut sums: BTreeMap<u32, Vector3<f64>> = BTreeMap::new();
         for c in &p.curves {
+            let crease = c.across.len() == c.points.len();
             for w in c.nodes.windows(2) {
                 let ((i, a), (j, b)) = (w[0], w[1]);
                 if j > i {
-                    net.push(
+                    net.push_crease(
                         c.index,
-                        c.boundary(),
+                        c.kind,
                         (a, b),
                         c.points[i..=j].to_vec(),
                         c.normals[i..=j].to_vec(),
+                        if crease {
+                            c.across[i..=j].to_vec()
+                        } else {
+                            Vec::new()
+                        },
                     );
                 }
             }
             for &(i, n) in &c.nodes {
-                *sums.entry(n).or_insert_with(Vector3::zeros) += c.normals[i];
+                let sum = sums.entry(n).or_insert_with(Vector3::zeros);
+                *sum += c.normals[i];
+                if crease {
+                    *sum += c.across[i];
+                }
             }
         }
         for (n, s) in sums {
@@ -197,30 +232,45 @@ impl NetworkSegments {
     }
 }
 
-/// Drops interior points within a billionth of the segment's length of the previous kept
-/// point or of the last point.
-fn distinct(
-    points: Vec<Vector3<f64>>,
-    normals: Vec<Vector3<f64>>,
-) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
+impl Segment {
+    /// Keeps the points (and their normals) at the increasing indices `keep`.
+    fn keep(&mut self, keep: &[usize]) {
+        if keep.len() == self.points.len() {
+            return;
+        }
+        let pick = |v: &[Vector3<f64>]| -> Vec<Vector3<f64>> {
+            keep.iter().filter_map(|&k| v.get(k).copied()).collect()
+        };
+        let n = self.points.len();
+        if self.normals.len() == n {
+            self.normals = pick(&self.normals);
+        }
+        if self.across.len() == n {
+            self.across = pick(&self.across);
+        }
+        self.points = pick(&self.points);
+    }
+}
+
+/// The indices of the points to keep: interior points within a billionth of the segment's
+/// length of the previous kept point or of the last point are dropped.
+fn distinct(points: &[Vector3<f64>]) -> Vec<usize> {
     let n = points.len();
-    if n <= 2 || normals.len() != n {
-        return (points, normals);
+    if n <= 2 {
+        return (0..n).collect();
     }
     let len: f64 = points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
     let eps = 1e-9 * len.max(f64::MIN_POSITIVE);
     let last = points[n - 1];
-    let (mut p, mut q) = (vec![points[0]], vec![normals[0]]);
+    let mut keep = vec![0];
     for i in 1..n - 1 {
-        let prev = *p.last().expect("first kept");
+        let prev = points[*keep.last().expect("first kept")];
         if (points[i] - prev).norm() > eps && (points[i] - last).norm() > eps {
-            p.push(points[i]);
-            q.push(normals[i]);
+            keep.push(i);
         }
     }
-    p.push(last);
-    q.push(normals[n - 1]);
-    (p, q)
+    keep.push(n - 1);
+    keep
 }
 
 /// A segment traversed forwards (`a → b`) or backwards.
@@ -471,7 +521,12 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
     // the surface is on the other side; else a patch.
     let interior_at: BTreeMap<u32, bool> = at
         .iter()
-        .map(|(&n, l)| (n, l.iter().any(|(_, h)| !net.segments[h.segment].boundary)))
+        .map(|(&n, l)| {
+            (
+                n,
+                l.iter().any(|(_, h)| !net.segments[h.segment].boundary()),
+            )
+        })
         .collect();
     for f in faces {
         let twice = f
@@ -488,7 +543,7 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
             out.rejected.push(f);
             continue;
         }
-        let all_boundary = f.edges.iter().all(|h| net.segments[h.segment].boundary);
+        let all_boundary = f.edges.iter().all(|h| net.segments[h.segment].boundary());
         if all_boundary {
             let nodes = f.nodes(net);
             let touches_interior = nodes.iter().any(|n| interior_at[n]);
@@ -528,11 +583,15 @@ pub(crate) fn vector_area(poly: &[Vector3<f64>]) -> Vector3<f64> {
     area * 0.5
 }
 
-/// Sum of the surface normals along a face's boundary.
+/// Sum of the surface normals along a face's boundary (both faces of a crease: the face's
+/// own comes from every crease around it, the others' cancel on a box).
 fn boundary_normal(net: &NetworkSegments, f: &Cycle) -> Vector3<f64> {
     f.edges
         .iter()
-        .flat_map(|h| net.segments[h.segment].normals.iter())
+        .flat_map(|h| {
+            let s = &net.segments[h.segment];
+            s.normals.iter().chain(&s.across)
+        })
         .sum()
 }
 
@@ -546,7 +605,11 @@ mod tests {
     fn sphere_cube(boundary_top: bool) -> NetworkSegments {
         let mut net = crate::surface::analytic::sphere_cube(0.05);
         for s in &mut net.segments {
-            s.boundary = boundary_top && s.a >= 4 && s.b >= 4;
+            s.kind = if boundary_top && s.a >= 4 && s.b >= 4 {
+                CurveKind::Boundary
+            } else {
+                CurveKind::Interior
+            };
         }
         net
     }
@@ -600,7 +663,7 @@ mod tests {
         let p0 = net.segments[0].points[0];
         let p8 = (p0 + Vector3::new(0.0, 0.0, 0.3)).normalize();
         let pts = vec![p0, (p0 + p8).normalize(), p8];
-        net.push(99, false, (0, 8), pts.clone(), pts);
+        net.push(99, CurveKind::Interior, (0, 8), pts.clone(), pts);
         net.set_normal(8, p8);
         let c = cycles(&net);
         assert_eq!(c.patches.len(), 5, "{:?}", c.problems);

@@ -24,6 +24,7 @@
 //! the mesh is watertight along the curves.
 
 use super::cotmatrix::{cotmatrix, voronoi_areas, SparseRows};
+use super::creases;
 use super::cycles::{cycles, Cycles, NetworkSegments};
 use super::tessellate::{tessellate, Embedding};
 use super::SurfaceProblem;
@@ -93,6 +94,13 @@ pub struct Surfaced {
     /// `#F` triangles, counter-clockwise seen from the normals' side.
     pub triangles: Vec<[u32; 3]>,
     pub constrained: usize,
+    /// `#V`: the vertex each one is a copy of (itself for most). The surface is cut along
+    /// its creases, each side with its own vertices ([`creases`]); mapping every vertex to
+    /// its primary welds it whole again (same positions).
+    pub primary: Vec<usize>,
+    /// Nodes where three or more creases meet, and where one ends inside a face.
+    pub corners: Vec<u32>,
+    pub darts: Vec<u32>,
     pub cycles: Cycles,
     /// Patches that could not be tessellated (with the reason, naming the nodes), and any
     /// other problem: each also in `problems`.
@@ -112,6 +120,11 @@ pub struct SurfaceReport {
     pub skipped: usize,
     /// `V − E + F` of the network's cell complex (2 for a sphere-like network).
     pub euler: i64,
+    /// Nodes where three or more creases meet (corners) and where one ends (darts).
+    #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
+    pub corners: Vec<u32>,
+    #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
+    pub darts: Vec<u32>,
     pub vertices: usize,
     pub constrained: usize,
     pub triangles: usize,
@@ -130,6 +143,8 @@ impl Surfaced {
             rejected: self.cycles.rejected.len(),
             skipped: self.skipped,
             euler: self.cycles.euler,
+            corners: self.corners.clone(),
+            darts: self.darts.clone(),
             vertices: self.positions.len(),
             constrained: self.constrained,
             triangles: self.triangles.len(),
@@ -161,6 +176,11 @@ struct Assembly {
     positions: Vec<Vector3<f64>>,
     normals: Vec<Vector3<f64>>,
     constrained: usize,
+    /// `#V`: the vertex each one is a copy of along a crease (itself for most).
+    primary: Vec<usize>,
+    /// Crease corners and darts ([`creases::Split`]).
+    corners: Vec<u32>,
+    darts: Vec<u32>,
     triangles: Vec<[usize; 3]>,
     lc: SparseRows,
     mass: Vec<f64>,
@@ -209,16 +229,51 @@ fn assemble(
             normals.push(s.normals.get(k).copied().unwrap_or_else(Vector3::z));
         }
     }
+    // Split along the creases: every sector of a node but its first, and the other face of
+    // every crease segment, a vertex of its own (copies, constrained like their primary).
+    let split = creases::split(net, cyc);
+    let mut primary: Vec<usize> = (0..positions.len()).collect();
+    let mut sector_id: BTreeMap<(u32, usize), usize> = BTreeMap::new();
+    for (&node, list) in &split.sectors {
+        let first = node_id[&node];
+        normals[first] = list[0];
+        for (k, &n) in list.iter().enumerate().skip(1) {
+            sector_id.insert((node, k), positions.len());
+            positions.push(positions[first]);
+            normals.push(n);
+            primary.push(first);
+        }
+    }
+    let mut inner_across: BTreeMap<usize, usize> = BTreeMap::new();
+    for (si, s) in net.segments.iter().enumerate() {
+        if !s.crease() {
+            continue;
+        }
+        inner_across.insert(si, positions.len());
+        for k in 1..s.points.len().saturating_sub(1) {
+            positions.push(s.points[k]);
+            normals.push(s.across[k]);
+            primary.push(inner[si] + k - 1);
+        }
+    }
     let constrained = positions.len();
-    // Global id of point k of segment si.
-    let id = |si: usize, k: usize| -> usize {
+    // Global id of point k of segment si, seen from a patch: at the half-edge's start node
+    // (k its first point in the patch's order) the patch's sector there, inside the segment
+    // the face the patch takes.
+    let id = |si: usize, k: usize, sector: usize, across: bool| -> usize {
         let s = &net.segments[si];
-        if k == 0 {
-            node_id[&s.a]
+        let node = if k == 0 {
+            Some(s.a)
         } else if k + 1 == s.points.len() {
-            node_id[&s.b]
+            Some(s.b)
         } else {
-            inner[si] + k - 1
+            None
+        };
+        match node {
+            Some(v) if sector > 0 => sector_id[&(v, sector)],
+            Some(v) => node_id[&v],
+            None if across => inner_across[&si] + k - 1,
+            None => inner[si] + k - 1,
         }
     };
     // Each patch's boundary (global ids, points, normals), then the patches tessellated with
@@ -227,14 +282,21 @@ fn assemble(
     let loops: Vec<Loop> = cyc
         .patches
         .iter()
-        .map(|cyc| {
+        .enumerate()
+        .map(|(pi, cyc)| {
             let (mut ids, mut poly, mut pn) = (Vec::new(), Vec::new(), Vec::new());
-            for h in &cyc.edges {
+            for (e, h) in cyc.edges.iter().enumerate() {
                 let s = &net.segments[h.segment];
                 let m = s.points.len();
+                let across = split.takes_across[pi][e];
                 for j in 0..m - 1 {
                     let k = if h.forward { j } else { m - 1 - j };
-                    let g = id(h.segment, k);
+                    let sector = if j == 0 {
+                        split.corner_sector[pi][e]
+                    } else {
+                        0
+                    };
+                    let g = id(h.segment, k, sector, across);
                     ids.push(g);
                     poly.push(s.points[k]);
                     pn.push(normals[g]);
@@ -288,6 +350,7 @@ fn assemble(
         let mut g: Vec<usize> = ids.clone();
         for _ in mesh.boundary..mesh.uv.len() {
             g.push(positions.len());
+            primary.push(positions.len());
             positions.push(Vector3::zeros());
             normals.push(Vector3::zeros());
             mass.push(0.0);
@@ -308,6 +371,9 @@ fn assemble(
             positions,
             normals,
             constrained,
+            primary,
+            corners: split.corners,
+            darts: split.darts,
             triangles,
             lc,
             mass,
@@ -759,6 +825,9 @@ fn surface_with(
                 system.fit(&q, &b, &mut asm.positions, &data);
             }
         }
+        if matches!(system, System::Soft(_)) {
+            weld(&mut asm.positions, &asm.primary, c);
+        }
     }
     lap("solves", &mut tt);
     let (triangles, normals) = output(&asm, &nstar, edge, &mut problems)?;
@@ -768,6 +837,9 @@ fn surface_with(
         propagated: nstar,
         triangles,
         constrained: asm.constrained,
+        primary: asm.primary,
+        corners: asm.corners,
+        darts: asm.darts,
         cycles: cyc,
         skipped,
         problems,
@@ -948,6 +1020,24 @@ impl System {
                 soft.solve(Some(b), positions);
             }
             System::Free(solver) => solver.solve(q, b, positions),
+        }
+    }
+}
+
+/// Moves the copies of each vertex along a crease (constrained, `primary[i] < c`) to their
+/// mean: with soft constraints each side pulls its copy a little its own way.
+fn weld(positions: &mut [Vector3<f64>], primary: &[usize], c: usize) {
+    let mut groups: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+    for (i, &p) in primary.iter().enumerate().take(c) {
+        if p != i {
+            groups.entry(p).or_insert_with(|| vec![p]).push(i);
+        }
+    }
+    for members in groups.values() {
+        let mean =
+            members.iter().map(|&k| positions[k]).sum::<Vector3<f64>>() / members.len() as f64;
+        for &k in members {
+            positions[k] = mean;
         }
     }
 }

@@ -3,6 +3,8 @@
 //!
 //! - [`cycles`]: the faces of the network, traced from the node normals, and the checks of
 //!   the cell complex they form.
+//! - [`creases`]: the patches split along crease curves (each side its own normals; corners
+//!   and darts).
 //! - [`tessellate`]: each cycle triangulated in its plane (constrained Delaunay, spade), with
 //!   the boundary developed when the projection folds or shrinks it.
 //! - [`cotmatrix`]: the cotangent Laplacian and mixed Voronoi areas.
@@ -12,6 +14,7 @@
 
 pub mod analytic;
 pub mod cotmatrix;
+pub mod creases;
 pub mod cycles;
 pub mod fit;
 pub mod tessellate;
