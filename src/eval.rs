@@ -12,6 +12,7 @@ use crate::simulate::surface::{point_triangle_distance, Surface};
 use crate::simulate::truth::Truth;
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::Serialize;
+use sfs_geometry::curve::CurveKind;
 use std::collections::HashMap;
 
 /// Distances of one set of points.
@@ -47,8 +48,29 @@ pub struct Evaluation {
     pub registration: Registration,
     pub curves: Distances,
     pub surface: Option<Distances>,
+    /// Per crease curve, the angle between the surface's two faces across it against the
+    /// truth's (truth surfaces of flat faces only).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub creases: Vec<CreaseAngles>,
     /// Node position errors after registration, m, by node index.
     pub node_errors_m: std::collections::BTreeMap<String, f64>,
+}
+
+/// The dihedral angle along one crease curve: at its points (every centimetre, away from its
+/// nodes by a twentieth of the diagonal, where other faces meet), the angle between the
+/// area-weighted normals of the surface's triangles on either side of the curve within three
+/// mean edge lengths, against the angle between the truth's two faces there.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct CreaseAngles {
+    pub curve: usize,
+    pub points: usize,
+    /// Mean truth dihedral angle (between the faces' normals), degrees.
+    pub truth_deg: f64,
+    /// Mean dihedral angle of the surface, degrees.
+    pub surface_deg: f64,
+    /// Mean and largest |surface − truth|, degrees.
+    pub error_mean_deg: f64,
+    pub error_max_deg: f64,
 }
 
 /// A uniform grid of segments for nearest-segment queries.
@@ -359,6 +381,19 @@ pub fn evaluate(truth: &Truth, rec: &ReadNetwork) -> Result<Evaluation, EvalErro
         }
         _ => None,
     };
+    let creases = match (&rec.surface, truth.surface.build()) {
+        (Some(mesh), Ok(Surface::Faces(faces))) => {
+            // The truth's creases (also when the reconstruction made them smooth curves).
+            let creases: Vec<usize> = truth
+                .curves
+                .iter()
+                .filter(|c| c.kind() == CurveKind::Crease)
+                .map(|c| c.index)
+                .collect();
+            crease_angles(rec, &creases, mesh, &faces, (&r, &t), diag)
+        }
+        _ => Vec::new(),
+    };
     let node_errors_m = rec
         .nodes
         .iter()
@@ -381,8 +416,114 @@ pub fn evaluate(truth: &Truth, rec: &ReadNetwork) -> Result<Evaluation, EvalErro
         },
         curves: distances(&d, diag),
         surface,
+        creases,
         node_errors_m,
     })
+}
+
+/// The dihedral angles along the crease curves of `rec` and its curves `creases` (the
+/// truth's) ([`CreaseAngles`]), registered by `(r, t)` onto the truth of flat `faces`.
+fn crease_angles(
+    rec: &ReadNetwork,
+    creases: &[usize],
+    mesh: &crate::gltf_out::SurfaceMesh,
+    faces: &crate::simulate::surface::Faces,
+    (r, t): (&Rotation3<f64>, &Vector3<f64>),
+    diag: f64,
+) -> Vec<CreaseAngles> {
+    let pos: Vec<Vector3<f64>> = mesh.positions.iter().map(|p| r * p + t).collect();
+    let tris: Vec<(Vector3<f64>, Vector3<f64>)> = mesh
+        .triangles
+        .iter()
+        .map(|f| {
+            let [a, b, c] = f.map(|i| pos[i as usize]);
+            ((a + b + c) / 3.0, (b - a).cross(&(c - a)) / 2.0)
+        })
+        .collect();
+    let edge = {
+        let (mut sum, mut n) = (0.0, 0usize);
+        for f in &mesh.triangles {
+            for k in 0..3 {
+                sum += (pos[f[k] as usize] - pos[f[(k + 1) % 3] as usize]).norm();
+                n += 1;
+            }
+        }
+        sum / n.max(1) as f64
+    };
+    let radius = 3.0 * edge;
+    let nodes: Vec<Vector3<f64>> = rec.nodes.values().map(|p| r * p + t).collect();
+    let mut out = Vec::new();
+    for c in rec
+        .curves
+        .iter()
+        .filter(|c| c.kind == CurveKind::Crease || creases.contains(&c.index))
+    {
+        let pts: Vec<Vector3<f64>> = c.points.iter().map(|p| r * p + t).collect();
+        let (mut truth_sum, mut surf_sum, mut err_sum, mut err_max, mut count) =
+            (0.0, 0.0, 0.0, 0.0f64, 0usize);
+        let mut last: Option<Vector3<f64>> = None;
+        for j in 1..pts.len().saturating_sub(1) {
+            let p = pts[j];
+            if last.is_some_and(|q| (p - q).norm() < 0.01)
+                || nodes.iter().any(|n| (n - p).norm() < diag / 20.0)
+            {
+                continue;
+            }
+            let Some(tan) = (pts[j + 1] - pts[j - 1]).try_normalize(1e-12) else {
+                continue;
+            };
+            // The truth: the two face planes nearest the point.
+            let mut by: Vec<(f64, Vector3<f64>)> = faces
+                .planes
+                .iter()
+                .map(|(n, d)| ((n.dot(&p) - d).abs(), *n))
+                .collect();
+            by.sort_by(|a, b| a.0.total_cmp(&b.0));
+            if by.len() < 2 {
+                continue;
+            }
+            let truth_deg = by[0].1.angle(&by[1].1).to_degrees();
+            // The surface: triangles near the point, split by the side of the curve.
+            let near: Vec<&(Vector3<f64>, Vector3<f64>)> = tris
+                .iter()
+                .filter(|(cen, _)| (cen - p).norm() < radius)
+                .collect();
+            let mean: Vector3<f64> = near.iter().map(|(_, a)| *a).sum();
+            let Some(side) = mean.cross(&tan).try_normalize(1e-300) else {
+                continue;
+            };
+            let (mut left, mut right) = (Vector3::zeros(), Vector3::zeros());
+            for (cen, a) in near {
+                if (cen - p).dot(&side) > 0.0 {
+                    left += a;
+                } else {
+                    right += a;
+                }
+            }
+            if left.norm() == 0.0 || right.norm() == 0.0 {
+                continue;
+            }
+            let surf_deg = left.angle(&right).to_degrees();
+            truth_sum += truth_deg;
+            surf_sum += surf_deg;
+            err_sum += (surf_deg - truth_deg).abs();
+            err_max = err_max.max((surf_deg - truth_deg).abs());
+            count += 1;
+            last = Some(p);
+        }
+        if count > 0 {
+            let n = count as f64;
+            out.push(CreaseAngles {
+                curve: c.index,
+                points: count,
+                truth_deg: truth_sum / n,
+                surface_deg: surf_sum / n,
+                error_mean_deg: err_sum / n,
+                error_max_deg: err_max,
+            });
+        }
+    }
+    out
 }
 
 /// Distances of points to a surface; meshes through a triangle grid.

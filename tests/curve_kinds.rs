@@ -208,3 +208,94 @@ fn issue_18_curves_read_back_with_or_without_kind() {
         CurveKind::Interior
     );
 }
+
+/// Issue 18, point 7: the kinds survive the operator's undo and cancel and a session resumed
+/// after a kill. The box (six crease curves, six smooth ones) scanned by a Morphorider with
+/// the field profile: a wrong index undone with `U` on the first crease, the second crease
+/// started, cancelled with `C` and rescanned; replayed, and run live killed half way and
+/// resumed. Both write the truth's kinds, and a surface split along the creases with its
+/// eight corners.
+#[test]
+fn issue_18_kinds_survive_undo_cancel_and_resume() {
+    use std::io::Write;
+    use std::process::Stdio;
+    let dir = tmpdir("kinds-resume");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let scene = sfs::simulate::scene::load(&root.join("config/scenes/box.toml")).unwrap();
+    let sim = sfs::simulate::run(
+        &scene,
+        device_protocol::DeviceKind::Morphorider,
+        sfs::simulate::Profile::Field,
+        1,
+    );
+    let events = sim.truth.events.join("; ");
+    assert!(
+        events.contains("undone with U") && events.contains("cancelled with C"),
+        "{events}"
+    );
+    let truth: Vec<String> = sim
+        .truth
+        .curves
+        .iter()
+        .map(|c| c.kind().name().to_owned())
+        .collect();
+    assert_eq!(truth.iter().filter(|k| *k == "crease").count(), 6);
+    let cap = dir.join("box.bin");
+    std::fs::write(&cap, &sim.bytes).unwrap();
+    replay(&cap, &dir.join("replayed"), None);
+    assert_eq!(kinds_written(&dir.join("replayed")), truth);
+    // Live, killed half way through, resumed.
+    let session = dir.join("session");
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_sfs"))
+            .args(["--log", "off", "run", "--stdin"])
+            .args(args)
+            .arg(&session)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::null())
+            .spawn()
+            .unwrap()
+    };
+    let (first, rest) = sim.bytes.split_at(sim.bytes.len() / 2);
+    let mut child = run(&["--session"]);
+    let mut stdin = child.stdin.take().unwrap();
+    stdin.write_all(first).unwrap();
+    stdin.flush().unwrap();
+    wait_for(
+        "the first half captured",
+        std::time::Duration::from_secs(20),
+        || file_len(&session.join("capture.bin")) == first.len() as u64,
+    );
+    std::thread::sleep(std::time::Duration::from_millis(1200));
+    let _ = child.kill();
+    let _ = child.wait();
+    drop(stdin);
+    let mut child = run(&["--resume"]);
+    child.stdin.take().unwrap().write_all(rest).unwrap();
+    assert!(child.wait().unwrap().success());
+    assert_eq!(kinds_written(&session), truth);
+    // The surface is cut along the creases (a vertex per face), with the box's corners.
+    let glb =
+        sfs::gltf_out::read_glb(&std::fs::read(session.join("network.glb")).unwrap()).unwrap();
+    let surface = glb.surface.expect("a surface");
+    let mut keys: Vec<[u64; 3]> = surface
+        .positions
+        .iter()
+        .map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
+        .collect();
+    let n = keys.len();
+    keys.sort_unstable();
+    keys.dedup();
+    assert!(
+        n - keys.len() >= 100,
+        "{} vertices split of {n}",
+        n - keys.len()
+    );
+    let report = json(&session.join("report.json"));
+    assert_eq!(
+        report["surface"]["corners"].as_array().map(Vec::len),
+        Some(8),
+        "{}",
+        report["surface"]
+    );
+}

@@ -67,6 +67,7 @@
 //! max_vertices = 20000               # the default edge grows to keep about this many vertices
 //! reweight = 1                       # passes with cotangent weights from the 3D surface
 //! soft = 0.3                         # soft positional constraints of weight ω; 0: hard
+//! guide_weight = 0.1                 # the pull of guide curves (G), approximated
 //!
 //! [monitor]                          # instrumented structures (sensor arrays)
 //! epoch_hz = 5.0                     # shapes per second
@@ -505,6 +506,11 @@ mod tests {
                 "more than 10",
             ),
             ("[surface]\nsoft = -1.0\n", "surface.soft", "out of range"),
+            (
+                "[surface]\nguide_weight = -1.0\n",
+                "surface.guide_weight",
+                "out of range",
+            ),
             (
                 "[output]\nsnapshot = true\n",
                 "output.snapshot",

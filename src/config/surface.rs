@@ -13,6 +13,7 @@ pub struct SurfaceToml {
     pub max_vertices: Option<usize>,
     pub reweight: Option<usize>,
     pub soft: Option<f64>,
+    pub guide_weight: Option<f64>,
 }
 
 impl ConfigFile {
@@ -66,6 +67,16 @@ impl ConfigFile {
                 ));
             }
             p.soft = (w > 0.0).then_some(w);
+        }
+        if let Some(w) = s.guide_weight {
+            if !(w.is_finite() && (0.0..=1e6).contains(&w)) {
+                return Err(ConfigError::new(
+                    file,
+                    "surface.guide_weight",
+                    format!("{w} is out of range [0, 1e6]"),
+                ));
+            }
+            p.guide_weight = w;
         }
         Ok(Some(p))
     }

@@ -24,9 +24,14 @@
 //!
 //! Surfaces: `sphere` (`center`, `radius`), `torus` (`center`, `major`, `minor`, axis z),
 //! `frustum` (`z0`, `r0`, `z1`, `r1`, axis z), `paraboloid` (`a`, `rim`: z = ρ²/2a, normal up),
-//! `mesh` (`path` relative to the scene file, `fit_xy` = [width, depth] in metres or `scale`,
-//! `base_z`, `flip_normals`). A curve may also be `kind = "mesh-boundary"`: the mesh's boundary
-//! loop. Open arcs run `from` → `to` (the points are snapped onto the section; with two ways
+//! `box` (`center`, `size` = [x, y, z]), `gable` (a roof: `length` along its ridge on x,
+//! `width` from eave to eave, `height` of the ridge over the eaves), `mesh` (`path` relative
+//! to the scene file, `fit_xy` = [width, depth] in metres or `scale`, `base_z`,
+//! `flip_normals`). A curve may also be `kind = "mesh-boundary"`: the mesh's boundary loop;
+//! or, on a box or gable, `kind = "polyline"` through `points` (straight between them,
+//! `closed` back to the first), whose normal is its face's; along an edge, `rest` (a
+//! direction) picks the face the device rests on. The operator stops at a node where a curve
+//! turns sharply about the normal and turns the device in place. Open arcs run `from` → `to` (the points are snapped onto the section; with two ways
 //! round a loop, the one through `via`, else the shorter); open pieces without `from`/`to`
 //! run end to end. Nodes: every crossing of two curves and every end of an open curve.
 
@@ -480,12 +485,14 @@ fn build_surface(s: &SurfaceToml, base: &Path) -> Result<(Surface, SurfaceRef), 
                 },
             ));
         }
-        other => return Err((
-            "kind".into(),
-            format!(
+        other => {
+            return Err((
+                "kind".into(),
+                format!(
                 "unknown surface {other:?}: sphere, torus, frustum, paraboloid, box, gable or mesh"
             ),
-        )),
+            ))
+        }
     };
     Ok((
         r.build().map_err(|e| ("path".to_string(), e.to_string()))?,

@@ -57,7 +57,19 @@ pub struct SurfaceParams {
     /// soft too (the normals' data term has the same weight), so that one factorisation per
     /// pass serves all solves; the curves keep their measured normals for the guide.
     pub soft: Option<f64>,
+    /// The weight of the guide curves' samples (curves of kind guide: approximated, not
+    /// interpolated), relative as `soft`'s: `+ ω_g' Σ |v_g − v_g*|²` over their samples
+    /// between nodes (and likewise for their normals); their nodes, shared with the curves
+    /// they cross, are held as every node is. Default [`GUIDE_WEIGHT`].
+    pub guide_weight: f64,
 }
+
+/// Default [`SurfaceParams::guide_weight`]: a third of the scans' [`SurfaceParams::soft`]
+/// (0.3). On the unit sphere's three circles with one a guide rippled ±5 mm off the sphere
+/// (a 16 cm wave) the surface takes about half of the ripple (1.7 mm mean from the guide);
+/// a guide's errors of longer wavelength it follows, as the form it gives (test
+/// `issue_18_a_guide_curve_is_approximated_within_its_own_error`).
+pub const GUIDE_WEIGHT: f64 = 0.1;
 
 impl Default for SurfaceParams {
     fn default() -> Self {
@@ -67,6 +79,7 @@ impl Default for SurfaceParams {
             method: Method::NormalControl,
             reweight: 1,
             soft: None,
+            guide_weight: GUIDE_WEIGHT,
         }
     }
 }
@@ -101,6 +114,8 @@ pub struct Surfaced {
     /// Nodes where three or more creases meet, and where one ends inside a face.
     pub corners: Vec<u32>,
     pub darts: Vec<u32>,
+    /// How far the surface passes from each guide curve.
+    pub guides: Vec<GuideFit>,
     pub cycles: Cycles,
     /// Patches that could not be tessellated (with the reason, naming the nodes), and any
     /// other problem: each also in `problems`.
@@ -125,6 +140,9 @@ pub struct SurfaceReport {
     pub corners: Vec<u32>,
     #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
     pub darts: Vec<u32>,
+    /// How far the surface passes from each guide curve.
+    #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
+    pub guides: Vec<GuideFit>,
     pub vertices: usize,
     pub constrained: usize,
     pub triangles: usize,
@@ -145,6 +163,7 @@ impl Surfaced {
             euler: self.cycles.euler,
             corners: self.corners.clone(),
             darts: self.darts.clone(),
+            guides: self.guides.clone(),
             vertices: self.positions.len(),
             constrained: self.constrained,
             triangles: self.triangles.len(),
@@ -163,6 +182,18 @@ impl Surfaced {
     }
 }
 
+/// How far the surface passes from a guide curve: at each of its samples between nodes, the
+/// distance from the sample to the surface's vertex there (the surface passes at least that
+/// near), m.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct GuideFit {
+    pub curve: usize,
+    pub samples: usize,
+    pub mean_m: f64,
+    pub max_m: f64,
+}
+
 /// Why there is no surface at all.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SurfaceError {
@@ -176,6 +207,11 @@ struct Assembly {
     positions: Vec<Vector3<f64>>,
     normals: Vec<Vector3<f64>>,
     constrained: usize,
+    /// The guide curves' samples between nodes, after the constrained vertices: per guide
+    /// curve, its vertices.
+    guides: Vec<(usize, std::ops::Range<usize>)>,
+    /// Their count (`constrained..constrained + guided`).
+    guided: usize,
     /// `#V`: the vertex each one is a copy of along a crease (itself for most).
     primary: Vec<usize>,
     /// Crease corners and darts ([`creases::Split`]).
@@ -219,10 +255,14 @@ fn assemble(
             });
         }
     }
-    // Samples strictly inside each segment.
+    // Samples strictly inside each segment (guide curves' after the constrained vertices).
+    let guide = |s: &super::cycles::Segment| s.kind == crate::curve::CurveKind::Guide;
     let mut inner: Vec<usize> = Vec::with_capacity(net.segments.len());
     for s in &net.segments {
         inner.push(positions.len());
+        if guide(s) {
+            continue;
+        }
         let m = s.points.len();
         for k in 1..m.saturating_sub(1) {
             positions.push(s.points[k]);
@@ -257,6 +297,23 @@ fn assemble(
         }
     }
     let constrained = positions.len();
+    let mut guides: Vec<(usize, std::ops::Range<usize>)> = Vec::new();
+    for (si, s) in net.segments.iter().enumerate() {
+        if !guide(s) {
+            continue;
+        }
+        inner[si] = positions.len();
+        for k in 1..s.points.len().saturating_sub(1) {
+            positions.push(s.points[k]);
+            normals.push(s.normals.get(k).copied().unwrap_or_else(Vector3::z));
+            primary.push(primary.len());
+        }
+        match guides.last_mut() {
+            Some((c, r)) if *c == s.curve && r.end == inner[si] => r.end = positions.len(),
+            _ => guides.push((s.curve, inner[si]..positions.len())),
+        }
+    }
+    let guided = positions.len() - constrained;
     // Global id of point k of segment si, seen from a patch: at the half-edge's start node
     // (k its first point in the patch's order) the patch's sector there, inside the segment
     // the face the patch takes.
@@ -319,7 +376,7 @@ fn assemble(
     });
     let mut triangles = Vec::new();
     let mut trip = Vec::new();
-    let mut mass = vec![0.0; constrained];
+    let mut mass = vec![0.0; positions.len()];
     let mut skipped = 0;
     for ((cyc, (ids, _, _)), result) in cyc.patches.iter().zip(&loops).zip(meshes) {
         let (mesh, l, areas) = match result {
@@ -371,6 +428,8 @@ fn assemble(
             positions,
             normals,
             constrained,
+            guides,
+            guided,
             primary,
             corners: split.corners,
             darts: split.darts,
@@ -457,24 +516,34 @@ fn normal_matrix(lc: &SparseRows, m: &[f64], rows: &[bool]) -> SparseRows {
     SparseRows { rows: out }
 }
 
-/// Soft positional constraints: `(Q + ω' D) X = B + ω' D X*` over every vertex, `D`
-/// selecting the `c` constrained ones and `X*` their data (see [`SurfaceParams::soft`]).
+/// The weights of the data terms: `omega` (relative) on the first `c` vertices, `omega_g` on
+/// the `g` after them (the guide curves' samples), each times the mean diagonal of `q` over
+/// its rows so that they are dimensionless. `#(c + g)` weights.
+fn data_weights(q: &SparseRows, c: usize, g: usize, omega: f64, omega_g: f64) -> Vec<f64> {
+    let mean = |r: std::ops::Range<usize>| {
+        let n = r.len().max(1) as f64;
+        r.map(|i| q.get(i, i)).sum::<f64>() / n
+    };
+    let (w, wg) = (omega * mean(0..c), omega_g * mean(c..c + g));
+    (0..c + g).map(|i| if i < c { w } else { wg }).collect()
+}
+
+/// Soft positional constraints: `(Q + W) X = B + W X*` over every vertex, `W` the diagonal of
+/// the data weights of the first vertices (the curves' samples, then the guide curves') and
+/// `X*` their data (see [`SurfaceParams::soft`]).
 struct SoftSolver {
-    c: usize,
-    w: f64,
+    weights: Vec<f64>,
     factor: crate::sparse_llt::SpdFactor,
 }
 
 impl SoftSolver {
     fn with_pattern(
         q: &SparseRows,
-        c: usize,
-        omega: f64,
+        weights: Vec<f64>,
         cache: &mut CachedPattern,
     ) -> Result<Self, SolveError> {
         let n = q.n();
-        let diag_mean = (0..c).map(|i| q.get(i, i)).sum::<f64>() / c.max(1) as f64;
-        let w = omega * diag_mean;
+        let w = |i: usize| weights.get(i).copied().unwrap_or(0.0);
         let mut entries = Vec::new();
         let mut vals = Vec::new();
         for i in 0..n {
@@ -482,29 +551,28 @@ impl SoftSolver {
             for &(j, v) in &q.rows[i] {
                 if j <= i {
                     entries.push((i, j));
-                    vals.push(if i == j && i < c { v + w } else { v });
+                    vals.push(if i == j { v + w(i) } else { v });
                     has_diag |= i == j;
                 }
             }
             if !has_diag {
                 entries.push((i, i));
-                vals.push(if i < c { w } else { 0.0 });
+                vals.push(w(i));
             }
         }
         let factor = cache.factor(n, entries, &vals)?;
-        Ok(SoftSolver { c, w, factor })
+        Ok(SoftSolver { weights, factor })
     }
 
     /// Two propagations at once (`b = 0`), as [`solve`](Self::solve).
     fn solve_pair(&self, x: &mut [Vector3<f64>], y: &mut [Vector3<f64>]) {
         let mut rhs: Vec<[f64; 6]> = (0..x.len())
-            .map(|i| {
-                if i < self.c {
-                    let (r, s) = (x[i] * self.w, y[i] * self.w);
+            .map(|i| match self.weights.get(i) {
+                Some(&w) => {
+                    let (r, s) = (x[i] * w, y[i] * w);
                     [r.x, r.y, r.z, s.x, s.y, s.z]
-                } else {
-                    [0.0; 6]
                 }
+                None => [0.0; 6],
             })
             .collect();
         self.factor.solve(&mut rhs);
@@ -514,14 +582,14 @@ impl SoftSolver {
         }
     }
 
-    /// `x ← (Q + ω'D)⁻¹ (b + ω' D data)`, `data` the first `c` entries of `x` on entry
-    /// (`b = 0` when `None`).
+    /// `x ← (Q + W)⁻¹ (b + W data)`, `data` the first entries of `x` on entry (`b = 0` when
+    /// `None`).
     fn solve(&self, b: Option<&[Vector3<f64>]>, x: &mut [Vector3<f64>]) {
         let mut rhs: Vec<[f64; 3]> = (0..x.len())
             .map(|i| {
                 let mut r = b.map_or(Vector3::zeros(), |b| b[i]);
-                if i < self.c {
-                    r += x[i] * self.w;
+                if let Some(&w) = self.weights.get(i) {
+                    r += x[i] * w;
                 }
                 [r.x, r.y, r.z]
             })
@@ -533,29 +601,42 @@ impl SoftSolver {
     }
 }
 
-/// Solves `Q_ff X_f = B_f − Q_fc X_c` for the free vertices (indices `c..`), in place in `x`.
+/// Solves `(Q_ff + W_g) X_f = B_f − Q_fc X_c + W_g X*_g` for the free vertices (indices
+/// `c..`), in place in `x`: `W_g` the data weights of the guide curves' samples (the first
+/// free vertices), `X*_g` their data, read from `x` on entry.
 struct FreeSolver {
     c: usize,
+    /// Weights of the guide samples `c..c + guide.len()`.
+    guide: Vec<f64>,
     factor: crate::sparse_llt::SpdFactor,
 }
 
 impl FreeSolver {
-    /// Factorises the free block of `q`, reusing the symbolic factorisation in `cache` when
-    /// the pattern is the same (a new pass of weights over the same triangles).
+    /// Factorises the free block of `q` (plus the guide weights), reusing the symbolic
+    /// factorisation in `cache` when the pattern is the same (a new pass of weights over the
+    /// same triangles).
     fn with_pattern(
         q: &SparseRows,
         c: usize,
+        guide: Vec<f64>,
         cache: &mut CachedPattern,
     ) -> Result<Self, SolveError> {
         let nf = q.n() - c;
         let mut entries = Vec::new();
         let mut vals = Vec::new();
         for i in c..q.n() {
+            let wg = guide.get(i - c).copied().unwrap_or(0.0);
+            let mut has_diag = false;
             for &(j, w) in &q.rows[i] {
                 if j >= c && j <= i {
                     entries.push((i - c, j - c));
-                    vals.push(w);
+                    vals.push(if i == j { w + wg } else { w });
+                    has_diag |= i == j;
                 }
+            }
+            if !has_diag && wg > 0.0 {
+                entries.push((i - c, i - c));
+                vals.push(wg);
             }
         }
         let count = entries.len();
@@ -568,6 +649,7 @@ impl FreeSolver {
         }
         Ok(FreeSolver {
             c,
+            guide,
             factor: pat.factor(&vals)?,
         })
     }
@@ -577,7 +659,8 @@ impl FreeSolver {
         let c = self.c;
         let mut rhs: Vec<[f64; 6]> = (c..q.n())
             .map(|i| {
-                let (mut r, mut s) = (Vector3::zeros(), Vector3::zeros());
+                let wg = self.guide.get(i - c).copied().unwrap_or(0.0);
+                let (mut r, mut s) = (x[i] * wg, y[i] * wg);
                 for &(j, w) in &q.rows[i] {
                     if j < c {
                         r -= x[j] * w;
@@ -598,7 +681,8 @@ impl FreeSolver {
         let c = self.c;
         let mut rhs: Vec<[f64; 3]> = (c..q.n())
             .map(|i| {
-                let mut r = b[i];
+                let wg = self.guide.get(i - c).copied().unwrap_or(0.0);
+                let mut r = b[i] + x[i] * wg;
                 for &(j, w) in &q.rows[i] {
                     if j < c {
                         r -= x[j] * w;
@@ -773,7 +857,8 @@ fn surface_with(
     let rows = energy_rows(&asm);
     let zero = vec![Vector3::zeros(); nv];
     let mut nstar = asm.normals.clone();
-    let data: Vec<Vector3<f64>> = asm.positions[..c].to_vec();
+    // The curves' samples, then the guide curves'.
+    let data: Vec<Vector3<f64>> = asm.positions[..c + asm.guided].to_vec();
     for pass in 0..=p.reweight {
         if pass > 0 {
             // The weights from the surface just computed instead of the planar triangulations.
@@ -783,7 +868,7 @@ fn surface_with(
         lap("weights", &mut tt);
         let q = normal_matrix(&asm.lc, &asm.mass, &rows);
         lap("normal matrix", &mut tt);
-        let system = System::precompute(&q, c, p, pattern, soft_pattern)?;
+        let system = System::precompute(&q, c, asm.guided, p, pattern, soft_pattern)?;
         lap("factorisation", &mut tt);
         // 1. Biharmonic positions (the first pass, and the comparison methods) and normals.
         system.propagate(&q, pass, p.method, &mut asm, &mut nstar, &data, &zero);
@@ -807,7 +892,13 @@ fn surface_with(
                 }
                 let q3 = SparseRows::from_triplets(nv, t);
                 let mut own = CachedPattern::default();
-                FreeSolver::with_pattern(&q3, c, &mut own)?.solve(&q3, &zero, &mut asm.positions);
+                let guide = data_weights(&q3, c, asm.guided, 0.0, p.guide_weight)[c..].to_vec();
+                asm.positions[..data.len()].copy_from_slice(&data);
+                FreeSolver::with_pattern(&q3, c, guide, &mut own)?.solve(
+                    &q3,
+                    &zero,
+                    &mut asm.positions,
+                );
             }
             Method::NormalControl => {
                 let h = mean_curvature_vectors(&asm.positions, &nstar, &asm.triangles);
@@ -830,6 +921,22 @@ fn surface_with(
         }
     }
     lap("solves", &mut tt);
+    let guides: Vec<GuideFit> = asm
+        .guides
+        .iter()
+        .map(|(curve, r)| {
+            let d: Vec<f64> = r
+                .clone()
+                .map(|i| (asm.positions[i] - data[i]).norm())
+                .collect();
+            GuideFit {
+                curve: *curve,
+                samples: d.len(),
+                mean_m: d.iter().sum::<f64>() / d.len().max(1) as f64,
+                max_m: d.iter().copied().fold(0.0, f64::max),
+            }
+        })
+        .collect();
     let (triangles, normals) = output(&asm, &nstar, edge, &mut problems)?;
     Ok(Surfaced {
         positions: asm.positions,
@@ -837,6 +944,7 @@ fn surface_with(
         propagated: nstar,
         triangles,
         constrained: asm.constrained,
+        guides,
         primary: asm.primary,
         corners: asm.corners,
         darts: asm.darts,
@@ -947,15 +1055,23 @@ impl System {
     fn precompute(
         q: &SparseRows,
         c: usize,
+        g: usize,
         p: &SurfaceParams,
         pattern: &mut CachedPattern,
         soft_pattern: &mut CachedPattern,
     ) -> Result<System, SolveError> {
         Ok(match (p.soft, p.method) {
-            (Some(omega), Method::NormalControl) => {
-                System::Soft(SoftSolver::with_pattern(q, c, omega, soft_pattern)?)
-            }
-            _ => System::Free(FreeSolver::with_pattern(q, c, pattern)?),
+            (Some(omega), Method::NormalControl) => System::Soft(SoftSolver::with_pattern(
+                q,
+                data_weights(q, c, g, omega, p.guide_weight),
+                soft_pattern,
+            )?),
+            _ => System::Free(FreeSolver::with_pattern(
+                q,
+                c,
+                data_weights(q, c, g, 0.0, p.guide_weight)[c..].to_vec(),
+                pattern,
+            )?),
         })
     }
 
@@ -978,6 +1094,7 @@ impl System {
         match self {
             System::Free(solver) => {
                 if pass == 0 || method != Method::NormalControl {
+                    asm.positions[..data.len()].copy_from_slice(data);
                     solver.solve_pair(q, &mut asm.positions, nstar);
                 } else {
                     solver.solve(q, zero, nstar);
@@ -985,7 +1102,7 @@ impl System {
             }
             System::Soft(soft) => {
                 if pass == 0 {
-                    asm.positions[..c].copy_from_slice(data);
+                    asm.positions[..data.len()].copy_from_slice(data);
                     soft.solve_pair(&mut asm.positions, nstar);
                 } else {
                     soft.solve(None, nstar);
@@ -1019,7 +1136,11 @@ impl System {
                 positions[..data.len()].copy_from_slice(data);
                 soft.solve(Some(b), positions);
             }
-            System::Free(solver) => solver.solve(q, b, positions),
+            System::Free(solver) => {
+                // The guides' data (the constrained vertices never move).
+                positions[..data.len()].copy_from_slice(data);
+                solver.solve(q, b, positions)
+            }
         }
     }
 }
@@ -1101,6 +1222,59 @@ fn output(
 mod tests {
     use super::*;
     use crate::surface::cotmatrix::tests::icosphere;
+
+    /// Issue 18, point 3: a guide curve is approximated. The unit sphere's three great circles,
+    /// one of them a guide measured with a ripple of ±5 mm off the sphere (a 16 cm wave): the
+    /// surface passes within the guide's own error of it, nearer the sphere than the guide (an
+    /// interior curve is interpolated, ripple and all). Both constraint modes.
+    #[test]
+    fn issue_18_a_guide_curve_is_approximated_within_its_own_error() {
+        let mut net = crate::surface::analytic::sphere_circles(0.02);
+        let mut wave_max: f64 = 0.0;
+        for s in net.segments.iter_mut().filter(|s| s.curve == 0) {
+            s.kind = crate::curve::CurveKind::Guide;
+            let m = s.points.len();
+            for k in 1..m - 1 {
+                let u = k as f64 / (m - 1) as f64;
+                let off = 0.005 * (20.0 * std::f64::consts::PI * u).sin();
+                s.points[k] *= 1.0 + off;
+                wave_max = wave_max.max(off.abs());
+            }
+        }
+        for soft in [None, Some(0.3)] {
+            let p = SurfaceParams {
+                soft,
+                ..SurfaceParams::default()
+            };
+            let surf = surface(&net, &p).expect("a surface");
+            assert!(surf.problems.is_empty(), "{:?}", surf.problems);
+            assert_eq!(surf.guides.len(), 1);
+            let g = &surf.guides[0];
+            assert_eq!(g.curve, 0);
+            assert!(
+                g.max_m <= wave_max,
+                "{soft:?}: {g:?} off a guide {wave_max} off"
+            );
+            assert!(g.mean_m > 0.1 * wave_max, "{soft:?}: {g:?}: interpolated");
+            // Nearer the sphere than the guide's samples.
+            let c = surf.constrained;
+            let r = c..c + g.samples;
+            let off = |i: usize| (surf.positions[i].norm() - 1.0).abs();
+            let surf_off = r.clone().map(off).sum::<f64>() / g.samples as f64;
+            let guide_off: f64 = net
+                .segments
+                .iter()
+                .filter(|s| s.curve == 0)
+                .flat_map(|s| s.points[1..s.points.len() - 1].iter())
+                .map(|p| (p.norm() - 1.0).abs())
+                .sum::<f64>()
+                / g.samples as f64;
+            assert!(
+                surf_off < 0.8 * guide_off,
+                "{soft:?}: the surface is {surf_off:.4} off the sphere there, the guide {guide_off:.4}"
+            );
+        }
+    }
 
     #[test]
     fn formula_one_estimates_the_laplacian_on_the_sphere() {
