@@ -118,3 +118,68 @@ fn unusable_curves_are_left_out_with_a_reason_and_parts_placed_separately() {
             .all(|v: &Vector3<f64>| v.iter().all(|x| x.is_finite())));
     }
 }
+
+/// Issue 18: the box and the roof from exact frames, through the daemon's pipeline (network,
+/// surface with the scans' soft constraints, glb read back): flat faces and sharp edges with
+/// the kinds, a pillow without them.
+#[test]
+fn issue_18_box_and_roof_from_exact_frames() {
+    for (name, curves_max, surface_max) in [("box", 0.01, 0.005), ("roof", 0.02, 0.01)] {
+        let Some((s, t)) = load(name) else {
+            panic!("scene {name} not found");
+        };
+        let run = |smooth: bool| {
+            let mut scan = s.exact_scan();
+            if smooth {
+                for c in &mut scan.curves {
+                    c.kind = sfs_geometry::curve::CurveKind::Interior;
+                }
+            }
+            let surface = sfs_geometry::surface::fit::SurfaceParams {
+                soft: sfs::pipeline::SCAN_SOFTNESS,
+                ..Default::default()
+            };
+            let products = sfs::pipeline::Pipeline::new().run(
+                &scan.curves,
+                &NetworkParams::default(),
+                Some(&surface),
+            );
+            let rec = sfs::gltf_out::read_glb(&products.glb.expect("a glb")).unwrap();
+            sfs::eval::evaluate(&t, &rec).unwrap()
+        };
+        let e = run(false);
+        let surf = e.surface.clone().expect("a surface");
+        let worst = e
+            .creases
+            .iter()
+            .map(|c| c.error_max_deg)
+            .fold(0.0, f64::max);
+        eprintln!(
+            "{name}: curves {:.4} %, surface {:.4} / {:.4} %, dihedral error ≤ {worst:.2}° over {} creases",
+            e.curves.mean_pct,
+            surf.mean_pct,
+            surf.max_pct,
+            e.creases.len()
+        );
+        assert!(
+            e.curves.mean_pct <= curves_max,
+            "{name}: curves {}",
+            e.curves.mean_pct
+        );
+        assert!(
+            surf.mean_pct <= surface_max,
+            "{name}: surface {}",
+            surf.mean_pct
+        );
+        assert!(
+            !e.creases.is_empty() && worst <= 1.0,
+            "{name}: {:?}",
+            e.creases
+        );
+        let smooth = run(true);
+        assert!(
+            smooth.surface.unwrap().mean_pct > 10.0 * surf.mean_pct,
+            "{name}: as smooth as with creases"
+        );
+    }
+}

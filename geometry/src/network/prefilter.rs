@@ -360,7 +360,6 @@ pub fn prefilter_with_kinks(
     let mut rel = Vec::with_capacity(d.len());
     let mut kinks = Vec::new();
     let mut last = uniq[0].1;
-    let mut arriving_last = last;
     for (k, &t) in d.iter().enumerate() {
         let seg = nodes
             .iter()
@@ -372,23 +371,13 @@ pub fn prefilter_with_kinks(
         // one leaving.
         if kink_at.contains(&k) && k > 0 {
             let (lo_d, hi_d) = range_of(k, true);
-            let (m, _) = kernel_mean(
-                &uniq,
-                &ds,
-                &spacing,
-                t,
-                width,
-                length,
-                (lo_d, hi_d),
-                &arriving_last,
-            );
+            let (m, _) = kernel_mean(&uniq, &ds, &spacing, t, width, length, (lo_d, hi_d), &last);
             kinks.push((k, m));
         }
         let (lo_d, hi_d) = range_of(k, false);
         let (mean, reliability) =
             kernel_mean(&uniq, &ds, &spacing, t, width, length, (lo_d, hi_d), &last);
         last = mean;
-        arriving_last = mean;
         q.push(mean);
         rel.push(reliability.clamp(0.0, 1.0));
     }
@@ -431,30 +420,28 @@ fn kernel_mean(
     } else {
         (0, ds.len())
     };
-    {
-        let mut radius = (3.0 * width).max(1e-9);
-        loop {
-            let lo = ds.partition_point(|&x| x < t - radius).max(r_lo);
-            let hi = ds.partition_point(|&x| x <= t + radius).min(r_hi).max(lo);
-            let mut ten = StructureTensor::new();
-            let (mut kw, mut k) = (0.0, 0.0);
-            // The kernel widens with the window (3σ = radius), so that a gap in the data is
-            // bridged by the nearest samples rather than by weights that underflow.
-            let kernel_width = (radius / 3.0).max(1e-12);
-            for (u, dd) in uniq[lo..hi].iter().zip(&spacing[lo..hi]) {
-                let z = (t - u.0) / kernel_width;
-                let kernel = dd.max(1e-12) * (-0.5 * z * z).exp();
-                ten.add(&u.1, u.2 * kernel);
-                kw += u.2 * kernel;
-                k += kernel;
-            }
-            // A gap in the data: widen the window (and the kernel with it) until it holds
-            // samples, up to the whole curve.
-            match ten.mean_near(last) {
-                Some(m) if ten.weight() > 1e-12 => return (m, (kw / k) * (3.0 * width / radius)),
-                _ if radius > 2.0 * length + 1.0 => return (*last, 0.0),
-                _ => radius *= 2.0,
-            }
+    let mut radius = (3.0 * width).max(1e-9);
+    loop {
+        let lo = ds.partition_point(|&x| x < t - radius).max(r_lo);
+        let hi = ds.partition_point(|&x| x <= t + radius).min(r_hi).max(lo);
+        let mut ten = StructureTensor::new();
+        let (mut kw, mut k) = (0.0, 0.0);
+        // The kernel widens with the window (3σ = radius), so that a gap in the data is
+        // bridged by the nearest samples rather than by weights that underflow.
+        let kernel_width = (radius / 3.0).max(1e-12);
+        for (u, dd) in uniq[lo..hi].iter().zip(&spacing[lo..hi]) {
+            let z = (t - u.0) / kernel_width;
+            let kernel = dd.max(1e-12) * (-0.5 * z * z).exp();
+            ten.add(&u.1, u.2 * kernel);
+            kw += u.2 * kernel;
+            k += kernel;
+        }
+        // A gap in the data: widen the window (and the kernel with it) until it holds
+        // samples, up to the whole curve.
+        match ten.mean_near(last) {
+            Some(m) if ten.weight() > 1e-12 => return (m, (kw / k) * (3.0 * width / radius)),
+            _ if radius > 2.0 * length + 1.0 => return (*last, 0.0),
+            _ => radius *= 2.0,
         }
     }
 }
@@ -518,6 +505,63 @@ mod tests {
         } else {
             2e-4
         }
+    }
+
+    /// Issue 18: a corner at a node a crease passes through. The frame heads along x up to
+    /// node 1 (0.5 m), stands there turning 90° about z (a box's corner: the device turned in
+    /// place), then heads along y. Allowed a kink there, the node keeps both frames exactly
+    /// and the samples either side are their side's; not allowed, they blend across it.
+    #[test]
+    fn issue_18_a_kink_at_a_crease_node_keeps_both_frames() {
+        let mut c = curve(1000, |u| u);
+        let turn = |a: f64| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a);
+        let mut s = Samples::default();
+        let mut push = |t: f64, d: f64, q: UnitQuaternion<f64>| {
+            s.t.push(t);
+            s.d.push(d);
+            s.q.push([q.w, q.i, q.j, q.k]);
+            s.flags.push(0);
+            s.w.push(1.0);
+        };
+        for i in 0..=500 {
+            push(i as f64, i as f64 / 1000.0, turn(0.0));
+        }
+        for i in 1..50 {
+            push(
+                500.0 + i as f64 / 50.0,
+                0.5,
+                turn(std::f64::consts::FRAC_PI_2 * i as f64 / 50.0),
+            );
+        }
+        for i in 500..=1000 {
+            push(
+                501.0 + i as f64,
+                i as f64 / 1000.0,
+                turn(std::f64::consts::FRAC_PI_2),
+            );
+        }
+        c.samples = s;
+        let p = PrefilterParams::default();
+        let u = prefilter_with_kinks(&c, &p, &[1]).unwrap();
+        let (node, _) = u.nodes[1];
+        assert_eq!(u.kinks.len(), 1);
+        assert_eq!(u.kinks[0].0, node);
+        assert!(
+            u.arriving(node).angle_to(&turn(0.0)) < 1e-9,
+            "{:?}",
+            u.arriving(node)
+        );
+        assert!(u.q[node].angle_to(&turn(std::f64::consts::FRAC_PI_2)) < 1e-9);
+        assert!(u.q[node - 1].angle_to(&turn(0.0)) < 1e-9);
+        assert!(u.q[node + 1].angle_to(&turn(std::f64::consts::FRAC_PI_2)) < 1e-9);
+        // Without the kink the node's frame is a blend of both ways.
+        let smooth = prefilter(&c, &p).unwrap();
+        assert!(smooth.kinks.is_empty());
+        let a = smooth.q[node].angle_to(&turn(0.0)).to_degrees();
+        assert!((20.0..70.0).contains(&a), "{a}°");
+        // A node with no turn is no kink.
+        let straight = prefilter_with_kinks(&curve(1000, |u| u), &p, &[1]).unwrap();
+        assert!(straight.kinks.is_empty());
     }
 
     #[test]
