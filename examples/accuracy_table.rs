@@ -20,10 +20,13 @@
 
 use device_protocol::DeviceKind;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
-use sfs::simulate::{self, device::SampleTruth, scene, Fault, Mistakes, Profile};
-use sfs_geometry::curve::Curve;
+use sfs::simulate::{self, scene, Fault, Mistakes, Profile};
 use sfs_geometry::network::{NetworkParams, Reconstructor};
 use std::path::PathBuf;
+
+#[path = "shared/mod.rs"]
+mod shared;
+use shared::list;
 
 const SCENES: &[&str] = &[
     "sphere-cube",
@@ -34,16 +37,6 @@ const SCENES: &[&str] = &[
     "lilium",
     "bumpy-cube",
 ];
-
-fn list(args: &[String], flag: &str, default: &str) -> Vec<String> {
-    args.iter()
-        .position(|a| a == flag)
-        .and_then(|i| args.get(i + 1))
-        .map_or(default, |s| s.as_str())
-        .split(',')
-        .map(str::to_owned)
-        .collect()
-}
 
 /// A variant of a cell: faults of the field profile turned off, true orientations or
 /// distances put in.
@@ -75,50 +68,6 @@ impl Variant {
     }
 }
 
-/// Puts the simulator's true orientations (`q`) and distances (`d`) into the acquired curves,
-/// sample by sample (matched by session time; samples without a match keep their estimate).
-/// Returns how many samples found no match.
-fn put_truth(curves: &mut [Curve], truth: &SampleTruth, q: bool, d: bool) -> usize {
-    let near = |t: f64| -> Option<usize> {
-        let ts = &truth.session_t;
-        let i = ts.partition_point(|&x| x < t);
-        [i.wrapping_sub(1), i]
-            .into_iter()
-            .filter(|&j| j < ts.len())
-            .min_by(|&a, &b| (ts[a] - t).abs().total_cmp(&(ts[b] - t).abs()))
-            .filter(|&j| (ts[j] - t).abs() < 1e-4)
-    };
-    let mut missed = 0;
-    for c in curves {
-        let s0 = c
-            .tags
-            .first()
-            .and_then(|tag| near(tag.t))
-            .map(|j| truth.s[j]);
-        for i in 0..c.samples.len() {
-            let Some(j) = near(c.samples.t[i]) else {
-                missed += 1;
-                continue;
-            };
-            if q {
-                let tq = truth.q[j];
-                c.samples.q[i] = [tq.w, tq.i, tq.j, tq.k];
-            }
-            if let (true, Some(s0)) = (d, s0) {
-                c.samples.d[i] = truth.s[j] - s0;
-            }
-        }
-        if let (true, Some(s0)) = (d, s0) {
-            for tag in &mut c.tags {
-                if let Some(j) = near(tag.t) {
-                    tag.d = truth.s[j] - s0;
-                }
-            }
-        }
-    }
-    missed
-}
-
 /// The acquisition and network settings: `--config FILE`'s, or the defaults.
 fn config(args: &[String]) -> (AcquisitionConfig, NetworkParams) {
     match args.iter().position(|a| a == "--config") {
@@ -147,7 +96,7 @@ fn variant(
     let sim = simulate::run_without(&s, device, profile, seed, &Mistakes::default(), &v.without);
     let mut scan = Acquisition::scan_bytes(&sim.bytes, settings.0.clone());
     if v.true_q || v.true_d {
-        let missed = put_truth(&mut scan.curves, &sim.samples, v.true_q, v.true_d);
+        let missed = sim.samples.put_into(&mut scan.curves, v.true_q, v.true_d);
         if missed > 0 {
             eprintln!(
                 "{name} {} seed {seed}: {missed} samples without truth",

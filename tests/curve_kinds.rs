@@ -218,7 +218,6 @@ fn issue_18_curves_read_back_with_or_without_kind() {
 #[test]
 fn issue_18_kinds_survive_undo_cancel_and_resume() {
     use std::io::Write;
-    use std::process::Stdio;
     let dir = tmpdir("kinds-resume");
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let scene = sfs::simulate::scene::load(&root.join("config/scenes/box.toml")).unwrap();
@@ -246,16 +245,7 @@ fn issue_18_kinds_survive_undo_cancel_and_resume() {
     assert_eq!(kinds_written(&dir.join("replayed")), truth);
     // Live, killed half way through, resumed.
     let session = dir.join("session");
-    let run = |args: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_sfs"))
-            .args(["--log", "off", "run", "--stdin"])
-            .args(args)
-            .arg(&session)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::null())
-            .spawn()
-            .unwrap()
-    };
+    let run = |args: &[&str]| run_stdin(args, &session);
     let (first, rest) = sim.bytes.split_at(sim.bytes.len() / 2);
     let mut child = run(&["--session"]);
     let mut stdin = child.stdin.take().unwrap();

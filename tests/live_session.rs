@@ -132,16 +132,7 @@ fn issue7_sigkill_then_resume_gives_the_same_network() {
     let (bytes, _) = simulated("cone", &dir);
     let (first, rest) = bytes.split_at(bytes.len() / 2);
     let session = dir.join("session");
-    let run = |args: &[&str]| {
-        sfs()
-            .args(["--log", "off", "run", "--stdin"])
-            .args(args)
-            .arg(&session)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::null())
-            .spawn()
-            .unwrap()
-    };
+    let run = |args: &[&str]| run_stdin(args, &session);
     let mut child = run(&["--session"]);
     let mut stdin = child.stdin.take().unwrap();
     stdin.write_all(first).unwrap();

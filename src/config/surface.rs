@@ -57,26 +57,25 @@ impl ConfigFile {
             }
             p.reweight = r;
         }
+        // A data weight: in [0, 1e6].
+        let weight = |w: f64, key: &str, zero: &str| {
+            if w.is_finite() && (0.0..=1e6).contains(&w) {
+                Ok(w)
+            } else {
+                Err(ConfigError::new(
+                    file,
+                    format!("surface.{key}"),
+                    format!("{w} is out of range [0, 1e6]{zero}"),
+                ))
+            }
+        };
         p.soft = crate::pipeline::SCAN_SOFTNESS;
         if let Some(w) = s.soft {
-            if !(w.is_finite() && (0.0..=1e6).contains(&w)) {
-                return Err(ConfigError::new(
-                    file,
-                    "surface.soft",
-                    format!("{w} is out of range [0, 1e6] (0: hard constraints)"),
-                ));
-            }
+            let w = weight(w, "soft", " (0: hard constraints)")?;
             p.soft = (w > 0.0).then_some(w);
         }
         if let Some(w) = s.guide_weight {
-            if !(w.is_finite() && (0.0..=1e6).contains(&w)) {
-                return Err(ConfigError::new(
-                    file,
-                    "surface.guide_weight",
-                    format!("{w} is out of range [0, 1e6]"),
-                ));
-            }
-            p.guide_weight = w;
+            p.guide_weight = weight(w, "guide_weight", "")?;
         }
         Ok(Some(p))
     }

@@ -219,6 +219,54 @@ pub struct SampleTruth {
     pub samples_dropped: u64,
 }
 
+impl SampleTruth {
+    /// Puts this truth into acquired curves, sample by sample (matched by session time, within
+    /// 0.1 ms): the true orientations (`q`) and/or the true distances from each curve's first
+    /// tag (`d`, its tags' too), for studies of where an error comes from; returns the samples
+    /// it found no truth for.
+    pub fn put_into(&self, curves: &mut [sfs_geometry::curve::Curve], q: bool, d: bool) -> usize {
+        let truth = self;
+        let near = |t: f64| -> Option<usize> {
+            let ts = &truth.session_t;
+            let i = ts.partition_point(|&x| x < t);
+            [i.wrapping_sub(1), i]
+                .into_iter()
+                .filter(|&j| j < ts.len())
+                .min_by(|&a, &b| (ts[a] - t).abs().total_cmp(&(ts[b] - t).abs()))
+                .filter(|&j| (ts[j] - t).abs() < 1e-4)
+        };
+        let mut missed = 0;
+        for c in curves {
+            let s0 = c
+                .tags
+                .first()
+                .and_then(|tag| near(tag.t))
+                .map(|j| truth.s[j]);
+            for i in 0..c.samples.len() {
+                let Some(j) = near(c.samples.t[i]) else {
+                    missed += 1;
+                    continue;
+                };
+                if q {
+                    let tq = truth.q[j];
+                    c.samples.q[i] = [tq.w, tq.i, tq.j, tq.k];
+                }
+                if let (true, Some(s0)) = (d, s0) {
+                    c.samples.d[i] = truth.s[j] - s0;
+                }
+            }
+            if let (true, Some(s0)) = (d, s0) {
+                for tag in &mut c.tags {
+                    if let Some(j) = near(tag.t) {
+                        tag.d = truth.s[j] - s0;
+                    }
+                }
+            }
+        }
+        missed
+    }
+}
+
 /// Writes packets with sequence numbers, periodic HELLO and STATUS, and link faults.
 struct Emitter {
     out: Vec<u8>,

@@ -248,3 +248,16 @@ pub fn assert_same_files(a: &std::path::Path, b: &std::path::Path, files: &[&str
         );
     }
 }
+
+/// `sfs run --stdin ARGS SESSION` (`--session` or `--resume`), logs off, its standard input
+/// piped.
+pub fn run_stdin(args: &[&str], session: &std::path::Path) -> std::process::Child {
+    std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "off", "run", "--stdin"])
+        .args(args)
+        .arg(session)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap()
+}

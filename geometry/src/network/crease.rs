@@ -30,6 +30,7 @@
 use super::poisson::{CurvePositions, Positions};
 use crate::curve::CurveKind;
 use nalgebra::Vector3;
+use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
 /// A direction within this angle of face `A`'s plane lies in face `A`, degrees.
@@ -80,11 +81,22 @@ impl std::fmt::Display for CreaseUnknown {
 /// none, and why.
 pub fn other_faces(p: &mut Positions) -> Vec<CreaseUnknown> {
     let mut out = Vec::new();
+    if p.curves.iter().all(|c| c.kind != CurveKind::Crease) {
+        return out;
+    }
+    let arcs: Vec<Vec<f64>> = p.curves.iter().map(|d| arclen(&d.points)).collect();
+    // Where each node is tagged: (curve, tag).
+    let mut at: NodeTags = BTreeMap::new();
+    for (dj, d) in p.curves.iter().enumerate() {
+        for (k, &(_, node)) in d.nodes.iter().enumerate() {
+            at.entry(node).or_default().push((dj, k));
+        }
+    }
     for ci in 0..p.curves.len() {
         if p.curves[ci].kind != CurveKind::Crease {
             continue;
         }
-        match other_face(&p.curves, ci) {
+        match other_face(&p.curves, &arcs, &at, ci) {
             Ok(across) => p.curves[ci].across = across,
             Err(e) => {
                 p.curves[ci].across.clear();
@@ -160,12 +172,21 @@ struct EndVotes {
     into_b: Option<(f64, f64)>,
 }
 
-fn other_face(curves: &[CurvePositions], ci: usize) -> Result<Vec<Vector3<f64>>, CreaseUnknown> {
+/// Per node, where it is tagged: (curve, tag).
+type NodeTags = BTreeMap<u32, Vec<(usize, usize)>>;
+
+/// The other face of crease `ci` of `curves` (`arcs`: every curve's arc lengths; `at`: where
+/// each node is tagged).
+fn other_face(
+    curves: &[CurvePositions],
+    arcs: &[Vec<f64>],
+    at: &NodeTags,
+    ci: usize,
+) -> Result<Vec<Vector3<f64>>, CreaseUnknown> {
     let c = &curves[ci];
     let curve = c.index;
     let n = c.points.len();
-    let s = arclen(&c.points);
-    let arcs: Vec<Vec<f64>> = curves.iter().map(|d| arclen(&d.points)).collect();
+    let s = &arcs[ci];
     let in_face = IN_FACE_DEG.to_radians().sin();
     let off_line = OFF_LINE_DEG.to_radians().sin();
     // Per segment, per end: the votes.
@@ -179,10 +200,10 @@ fn other_face(curves: &[CurvePositions], ci: usize) -> Result<Vec<Vector3<f64>>,
             .enumerate()
         {
             // The crease's frame near this end, T along the curve's travel.
-            let Some(t) = window_mean(c, &s, i, dir, stop, |j| c.tangents[j]) else {
+            let Some(t) = window_mean(c, s, i, dir, stop, |j| c.tangents[j]) else {
                 continue;
             };
-            let nn = window_mean(c, &s, i, dir, stop, |j| c.normals[j]).unwrap_or(c.normals[i]);
+            let nn = window_mean(c, s, i, dir, stop, |j| c.normals[j]).unwrap_or(c.normals[i]);
             let Some(t) = t.try_normalize(1e-12) else {
                 continue;
             };
@@ -192,41 +213,38 @@ fn other_face(curves: &[CurvePositions], ci: usize) -> Result<Vec<Vector3<f64>>,
             let bb = nn.cross(&t);
             let mut into = (0.0, 0.0);
             // Every direction leaving the node along a curve, but this end's own.
-            for (dj, d) in curves.iter().enumerate() {
-                for (k, &(di, dn)) in d.nodes.iter().enumerate() {
-                    if dn != node {
+            for &(dj, k) in at.get(&node).map_or(&[][..], |v| v.as_slice()) {
+                let d = &curves[dj];
+                let di = d.nodes[k].0;
+                for ddir in [1isize, -1] {
+                    // Along its segment to the next (or previous) tag of d.
+                    let stop_k = if ddir > 0 {
+                        d.nodes.get(k + 1)
+                    } else {
+                        k.checked_sub(1).and_then(|k| d.nodes.get(k))
+                    };
+                    let Some(&(dstop, _)) = stop_k else { continue };
+                    if dj == ci && di == i && dstop == stop {
+                        continue; // this very end
+                    }
+                    let Some(wv) = window_mean(d, &arcs[dj], di, ddir, dstop, |j| {
+                        d.tangents[j] * ddir as f64
+                    }) else {
+                        continue;
+                    };
+                    let Some(wv) = wv.try_normalize(1e-12) else {
+                        continue;
+                    };
+                    let (wb, wn) = (wv.dot(&bb), wv.dot(&nn));
+                    let rho = wb.hypot(wn);
+                    if rho < off_line {
                         continue;
                     }
-                    for ddir in [1isize, -1] {
-                        // Along its segment to the next (or previous) tag of d.
-                        let stop_k = if ddir > 0 {
-                            d.nodes.get(k + 1)
-                        } else {
-                            k.checked_sub(1).and_then(|k| d.nodes.get(k))
-                        };
-                        let Some(&(dstop, _)) = stop_k else { continue };
-                        if dj == ci && di == i && dstop == stop {
-                            continue; // this very end
-                        }
-                        let Some(wv) = window_mean(d, &arcs[dj], di, ddir, dstop, |j| {
-                            d.tangents[j] * ddir as f64
-                        }) else {
-                            continue;
-                        };
-                        let Some(wv) = wv.try_normalize(1e-12) else {
-                            continue;
-                        };
-                        let (wb, wn) = (wv.dot(&bb), wv.dot(&nn));
-                        let rho = wb.hypot(wn);
-                        if rho < off_line {
-                            continue;
-                        }
-                        if wn.abs() < in_face * rho {
-                            votes[e].side += wb.signum() * rho;
-                        } else {
-                            into.0 += wb;
-                            into.1 += wn;
-                        }
+                    if wn.abs() < in_face * rho {
+                        votes[e].side += wb.signum() * rho;
+                    } else {
+                        into.0 += wb;
+                        into.1 += wn;
                     }
                 }
             }

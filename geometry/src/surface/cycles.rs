@@ -70,6 +70,24 @@ impl Segment {
         self.kind == CurveKind::Crease && self.across.len() == self.points.len()
     }
 
+    /// Keeps the points (and their normals) at the increasing indices `keep`.
+    fn keep(&mut self, keep: &[usize]) {
+        if keep.len() == self.points.len() {
+            return;
+        }
+        let pick = |v: &[Vector3<f64>]| -> Vec<Vector3<f64>> {
+            keep.iter().filter_map(|&k| v.get(k).copied()).collect()
+        };
+        let n = self.points.len();
+        if self.normals.len() == n {
+            self.normals = pick(&self.normals);
+        }
+        if self.across.len() == n {
+            self.across = pick(&self.across);
+        }
+        self.points = pick(&self.points);
+    }
+
     /// Direction leaving its start (`at_end = false`) or its end, along the segment: from the
     /// end point to the first point at least 1 % of the segment's length away (robust to
     /// repeated points).
@@ -229,26 +247,6 @@ impl NetworkSegments {
             }
         }
         net
-    }
-}
-
-impl Segment {
-    /// Keeps the points (and their normals) at the increasing indices `keep`.
-    fn keep(&mut self, keep: &[usize]) {
-        if keep.len() == self.points.len() {
-            return;
-        }
-        let pick = |v: &[Vector3<f64>]| -> Vec<Vector3<f64>> {
-            keep.iter().filter_map(|&k| v.get(k).copied()).collect()
-        };
-        let n = self.points.len();
-        if self.normals.len() == n {
-            self.normals = pick(&self.normals);
-        }
-        if self.across.len() == n {
-            self.across = pick(&self.across);
-        }
-        self.points = pick(&self.points);
     }
 }
 
