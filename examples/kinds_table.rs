@@ -6,7 +6,11 @@
 //! surface (% of the diagonal) and the dihedral angle across each crease against the truth's.
 //!
 //! `cargo run --release --example kinds_table -- [--seeds 1,2,3] [--scenes box,roof]
-//! [--devices morphorider,phone]`
+//! [--devices morphorider,phone] [--guide N]`
+//!
+//! `--guide N`: instead, curve N of each scene made a guide curve (as `[curves] kinds` would),
+//! its own error (its points to the truth network, `sfs eval`'s `curves_by_kind`) against the
+//! surface's distance from it (`report.json`'s `surface.guides`).
 
 use device_protocol::DeviceKind;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
@@ -30,7 +34,22 @@ struct Score {
     curves_mean: f64,
 }
 
-fn score(name: &str, device: DeviceKind, seed: u64, smooth: bool) -> Result<Score, String> {
+/// A guide curve's own error and the surface's distance from it, mean and max, mm.
+#[derive(Debug, Default, Clone, Copy)]
+struct GuideScore {
+    own_mean: f64,
+    own_max: f64,
+    surface_mean: f64,
+    surface_max: f64,
+}
+
+fn score(
+    name: &str,
+    device: DeviceKind,
+    seed: u64,
+    smooth: bool,
+    guide: Option<usize>,
+) -> Result<(Score, GuideScore), String> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
     let s = scene::load(&scene::find(name, &dir)).map_err(|e| e.to_string())?;
     let sim = simulate::run(&s, device, Profile::Default, seed);
@@ -38,6 +57,10 @@ fn score(name: &str, device: DeviceKind, seed: u64, smooth: bool) -> Result<Scor
     // Diagnostic: the simulator's true distances put in.
     if std::env::var("SFS_TRUE_D").is_ok() {
         sim.samples.put_into(&mut scan.curves, false, true);
+    }
+    if let Some(g) = guide {
+        let c = scan.curves.get_mut(g).ok_or("no such curve")?;
+        c.kind = CurveKind::Guide;
     }
     if smooth {
         for c in &mut scan.curves {
@@ -52,12 +75,26 @@ fn score(name: &str, device: DeviceKind, seed: u64, smooth: bool) -> Result<Scor
     };
     let products =
         sfs::pipeline::Pipeline::new().run(&scan.curves, &NetworkParams::default(), Some(&surface));
+    let fit = products
+        .surface
+        .as_ref()
+        .and_then(|s| s.guides.first().cloned());
     let glb = products.glb.ok_or("no glb")?;
     let rec = sfs::gltf_out::read_glb(&glb).map_err(|e| e.to_string())?;
     let e = sfs::eval::evaluate(&sim.truth, &rec).map_err(|e| e.to_string())?;
     let surf = e.surface.ok_or("no surface")?;
     let n = e.creases.len().max(1) as f64;
-    Ok(Score {
+    let own = e.curves_by_kind.iter().find(|c| Some(c.curve) == guide);
+    let g = match (own, fit) {
+        (Some(own), Some(fit)) => GuideScore {
+            own_mean: own.distances.mean_m * 1e3,
+            own_max: own.distances.max_m * 1e3,
+            surface_mean: fit.mean_m * 1e3,
+            surface_max: fit.max_m * 1e3,
+        },
+        _ => GuideScore::default(),
+    };
+    let score = Score {
         surface_mean: surf.mean_pct,
         surface_max: surf.max_pct,
         dihedral_mean: e.creases.iter().map(|c| c.error_mean_deg).sum::<f64>() / n,
@@ -67,7 +104,8 @@ fn score(name: &str, device: DeviceKind, seed: u64, smooth: bool) -> Result<Scor
             .map(|c| c.error_max_deg)
             .fold(0.0, f64::max),
         curves_mean: e.curves.mean_pct,
-    })
+    };
+    Ok((score, g))
 }
 
 fn main() {
@@ -84,13 +122,40 @@ fn main() {
             _ => DeviceKind::Morphorider,
         })
         .collect();
+    if let Some(g) = args
+        .iter()
+        .position(|a| a == "--guide")
+        .and_then(|i| args.get(i + 1))
+    {
+        let g: usize = g.parse().expect("a curve index");
+        println!("| scene | device | seed | curve {g} as a guide: its own error mean / max, mm | the surface from it: mean / max, mm |");
+        println!("|---|---|---|---|---|");
+        for name in &scenes {
+            for &device in &devices {
+                for &seed in &seeds {
+                    match score(name, device, seed, false, Some(g)) {
+                        Ok((_, s)) => println!(
+                            "| {name} | {} | {seed} | {:.2} / {:.2} | {:.2} / {:.2} |",
+                            device.name(),
+                            s.own_mean,
+                            s.own_max,
+                            s.surface_mean,
+                            s.surface_max
+                        ),
+                        Err(e) => eprintln!("{name} {} seed {seed}: {e}", device.name()),
+                    }
+                }
+            }
+        }
+        return;
+    }
     println!("| scene | device | seed | curves mean % | smooth: surface mean / max % | dihedral error mean / max ° | kinds: surface mean / max % | dihedral error mean / max ° |");
     println!("|---|---|---|---|---|---|---|---|");
     for name in &scenes {
         for &device in &devices {
             for &seed in &seeds {
-                let cell = |smooth| match score(name, device, seed, smooth) {
-                    Ok(s) => s,
+                let cell = |smooth| match score(name, device, seed, smooth, None) {
+                    Ok((s, _)) => s,
                     Err(e) => {
                         eprintln!("{name} {} seed {seed}: {e}", device.name());
                         Score::default()

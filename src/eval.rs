@@ -27,6 +27,14 @@ pub struct Distances {
     pub max_pct: f64,
 }
 
+/// The distances of one curve's points to the truth network.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct CurveDistances {
+    pub curve: usize,
+    pub kind: CurveKind,
+    pub distances: Distances,
+}
+
 /// The rigid registration found.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Registration {
@@ -47,6 +55,11 @@ pub struct Evaluation {
     pub bbox_diagonal_m: f64,
     pub registration: Registration,
     pub curves: Distances,
+    /// The same per curve (by scan index), for the curves of a kind other than boundary or
+    /// interior (creases, guides: a guide's own error, against which the surface's distance
+    /// from it in `report.json` is read).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub curves_by_kind: Vec<CurveDistances>,
     pub surface: Option<Distances>,
     /// Per crease curve, the angle between the surface's two faces across it against the
     /// truth's (truth surfaces of flat faces only).
@@ -369,6 +382,19 @@ pub fn evaluate(truth: &Truth, rec: &ReadNetwork) -> Result<Evaluation, EvalErro
     };
     let (r, t, _, iterations) = icp(&sample, &grid, start.0, start.1, 100, diag);
     let d: Vec<f64> = pts.iter().map(|p| grid.nearest(&(r * p + t)).1).collect();
+    let mut curves_by_kind = Vec::new();
+    let mut start = 0;
+    for c in &rec.curves {
+        let range = start..start + c.points.len();
+        start = range.end;
+        if matches!(c.kind, CurveKind::Crease | CurveKind::Guide) {
+            curves_by_kind.push(CurveDistances {
+                curve: c.index,
+                kind: c.kind,
+                distances: distances(&d[range], diag),
+            });
+        }
+    }
     let surface = match &rec.surface {
         Some(s) if !s.positions.is_empty() => {
             let surf = truth.surface.build().map_err(EvalError::Surface)?;
@@ -415,6 +441,7 @@ pub fn evaluate(truth: &Truth, rec: &ReadNetwork) -> Result<Evaluation, EvalErro
             icp_iterations: iterations,
         },
         curves: distances(&d, diag),
+        curves_by_kind,
         surface,
         creases,
         node_errors_m,
