@@ -176,7 +176,10 @@ fn resolve_run(a: &RunArgs, config: Option<&Path>) -> Result<(SourceSpec, Settin
     } else {
         return Err(cli_err(
             "--serial",
-            "give --serial PATH, --stdin or --config FILE",
+            match config {
+                Some(_) => "the configuration has no [source]: give --serial PATH or --stdin",
+                None => "give --serial PATH, --stdin or --config FILE",
+            },
         ));
     };
     if let SourceSpec::Serial(s) = &mut spec {

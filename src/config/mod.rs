@@ -149,8 +149,8 @@ impl ConfigError {
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ConfigFile {
-    #[serde(default)]
-    source: source::SourceToml,
+    /// None: the file names no source (`sfs replay` and `sfs run --serial/--stdin` give one).
+    source: Option<source::SourceToml>,
     #[serde(default)]
     calibration: acquisition::CalibrationToml,
     #[serde(default)]
@@ -210,9 +210,11 @@ pub fn from_text(text: &str, path: &Path) -> Result<Settings, ConfigError> {
         )
     })?;
     let base = path.parent().unwrap_or(Path::new(""));
-    if let Some(p) = &mut cfg.source.path {
-        if p.is_relative() && cfg.source.kind != "serial" {
-            *p = base.join(&*p);
+    if let Some(src) = &mut cfg.source {
+        if let Some(p) = &mut src.path {
+            if p.is_relative() && src.kind != "serial" {
+                *p = base.join(&*p);
+            }
         }
     }
     cfg.settings(path)
@@ -232,17 +234,18 @@ pub fn load_kept(path: &Path) -> Result<Settings, ConfigError> {
 impl ConfigFile {
     /// Every section resolved, once.
     fn settings(&self, file: &Path) -> Result<Settings, ConfigError> {
-        let source = self.source_spec(file)?;
+        let source = self.source.as_ref().map(|s| s.spec(file)).transpose()?;
+        let raw = self.source.clone().unwrap_or_default();
         let mut acquisition = self.acquisition_config(file)?;
         acquisition.kinds = self.curve_kinds(file)?;
         let network = self.network_params(file)?;
         let surface = self.surface_params(file)?;
         let monitor = self.monitor_config(file, surface, &network)?;
         let settings = Settings {
-            source: Some(source),
+            source,
             serial: SerialSettings {
-                baud: self.source.baud,
-                watchdog: Duration::from_millis(self.source.watchdog_ms),
+                baud: raw.baud,
+                watchdog: Duration::from_millis(raw.watchdog_ms),
             },
             acquisition,
             network,
@@ -326,6 +329,10 @@ mod tests {
         let s = parse("[source]\nkind = \"stdin\"\n").unwrap();
         assert!(matches!(s.source, Some(SourceSpec::Stdin)));
         let s = Settings { source: None, ..s };
+        assert_eq!(format!("{s:?}"), format!("{:?}", Settings::default()));
+        // Without a [source] (replay, --serial or --stdin give one): no source, the defaults.
+        let s = parse("").unwrap();
+        assert!(s.source.is_none());
         assert_eq!(format!("{s:?}"), format!("{:?}", Settings::default()));
     }
 

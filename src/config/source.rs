@@ -1,6 +1,6 @@
 //! `[source]`: where the bytes come from.
 
-use super::{ConfigError, ConfigFile};
+use super::ConfigError;
 use crate::settings::{DEFAULT_BAUD, DEFAULT_WATCHDOG_MS};
 use crate::source::{Pace, SerialSpec, SourceSpec};
 use serde::Deserialize;
@@ -48,10 +48,10 @@ fn default_pace() -> String {
     "fast".into()
 }
 
-impl ConfigFile {
-    /// The source this configuration describes.
-    pub(super) fn source_spec(&self, file: &Path) -> Result<SourceSpec, ConfigError> {
-        let s = &self.source;
+impl SourceToml {
+    /// The source this `[source]` describes.
+    pub(super) fn spec(&self, file: &Path) -> Result<SourceSpec, ConfigError> {
+        let s = self;
         let err =
             |key: &str, reason: String| ConfigError::new(file, format!("source.{key}"), reason);
         let need_path = || {
