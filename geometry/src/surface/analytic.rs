@@ -285,3 +285,43 @@ pub fn box_network(size: [f64; 3], spacing: f64) -> NetworkSegments {
     }
     net
 }
+
+/// The unit sphere's latitude–longitude network: `meridians` half great circles from the
+/// south pole (node 0) to the north pole (node 1) and `parallels` closed circles between,
+/// crossing at nodes `2 + meridian · parallels + parallel`; `meridians · (parallels + 1)`
+/// patches, normals radial, samples every `spacing`. For the scaling tables (network size).
+pub fn sphere_grid(meridians: usize, parallels: usize, spacing: f64) -> NetworkSegments {
+    let mut net = NetworkSegments::default();
+    let node = |m: usize, p: usize| (2 + m * parallels + p) as u32;
+    let lat = |p: usize| -PI / 2.0 + PI * (p + 1) as f64 / (parallels + 1) as f64;
+    let point = |lon: f64, la: f64| {
+        let v = Vector3::new(la.cos() * lon.cos(), la.cos() * lon.sin(), la.sin());
+        (v, v)
+    };
+    for m in 0..meridians {
+        let lon = TAU * m as f64 / meridians as f64;
+        let f = move |t: f64| point(lon, -PI / 2.0 + PI * t);
+        let mut nodes = vec![(0.0, 0u32)];
+        for p in 0..parallels {
+            nodes.push(((lat(p) + PI / 2.0) / PI, node(m, p)));
+        }
+        nodes.push((1.0, 1));
+        curve(&mut net, m, &f, &nodes, PI, spacing);
+    }
+    for p in 0..parallels {
+        let la = lat(p);
+        let f = move |t: f64| point(TAU * t, la);
+        let nodes: Vec<(f64, u32)> = (0..=meridians)
+            .map(|m| (m as f64 / meridians as f64, node(m % meridians, p)))
+            .collect();
+        curve(&mut net, meridians + p, &f, &nodes, TAU * la.cos(), spacing);
+    }
+    net.set_normal(0, -Vector3::z());
+    net.set_normal(1, Vector3::z());
+    for m in 0..meridians {
+        for p in 0..parallels {
+            net.set_normal(node(m, p), point(TAU * m as f64 / meridians as f64, lat(p)).0);
+        }
+    }
+    net
+}
