@@ -48,7 +48,15 @@ fn main() {
     println!("|---|---|---|");
     let mut cold_v = Vec::new();
     let mut warm_v = Vec::new();
-    for target in [2_000.0, 5_000.0, 10_000.0, 20_000.0, 50_000.0, 100_000.0, 200_000.0f64] {
+    for target in [
+        2_000.0,
+        5_000.0,
+        10_000.0,
+        20_000.0,
+        50_000.0,
+        100_000.0,
+        200_000.0f64,
+    ] {
         let s = 0.02 * (16_000.0 / target).sqrt();
         let p = SurfaceParams {
             edge: Some(1.35 * s),

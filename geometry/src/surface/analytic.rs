@@ -320,7 +320,10 @@ pub fn sphere_grid(meridians: usize, parallels: usize, spacing: f64) -> NetworkS
     net.set_normal(1, Vector3::z());
     for m in 0..meridians {
         for p in 0..parallels {
-            net.set_normal(node(m, p), point(TAU * m as f64 / meridians as f64, lat(p)).0);
+            net.set_normal(
+                node(m, p),
+                point(TAU * m as f64 / meridians as f64, lat(p)).0,
+            );
         }
     }
     net
