@@ -28,6 +28,19 @@ fn time(net: &NetworkSegments, p: &SurfaceParams, runs: usize) -> (f64, f64, usi
     (cold, warm, nv)
 }
 
+/// The process's peak resident size so far (`VmHWM`), bytes (0 where /proc is not there).
+fn peak_rss() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|k| k.parse::<f64>().ok())
+        })
+        .map_or(0.0, |kb| kb * 1024.0)
+}
+
 /// The exponent `b` of `y = a xᵇ`, least squares in log–log.
 fn exponent(xy: &[(f64, f64)]) -> f64 {
     let n = xy.len() as f64;
@@ -44,8 +57,11 @@ fn main() {
     let csv_path = std::env::args().nth(1);
     let mut csv = String::from("series,x,vertices,cold_ms,warm_ms\n");
     // Surface size: the cube network at a spacing for each target count (10 k at 0.02).
-    println!("| vertices | from scratch, cold | from scratch, warm |");
-    println!("|---|---|---|");
+    // The sizes grow, so each one's peak resident size is the process's peak after it.
+    println!(
+        "| vertices | from scratch, cold | from scratch, warm | peak resident size per vertex |"
+    );
+    println!("|---|---|---|---|");
     let mut cold_v = Vec::new();
     let mut warm_v = Vec::new();
     for target in [
@@ -65,13 +81,14 @@ fn main() {
         };
         let runs = if target <= 20_000.0 { 3 } else { 1 };
         let (cold, warm, nv) = time(&sphere_cube(s), &p, runs);
-        println!("| {nv} | {cold:.1} ms | {warm:.1} ms |");
+        let per_vertex = peak_rss() / nv as f64 / 1e3;
+        println!("| {nv} | {cold:.1} ms | {warm:.1} ms | {per_vertex:.1} kB |");
         csv += &format!("vertices,{nv},{nv},{cold:.3},{warm:.3}\n");
         cold_v.push((nv as f64, cold));
         warm_v.push((nv as f64, warm));
     }
     println!(
-        "| exponent | {:.2} | {:.2} |",
+        "| exponent | {:.2} | {:.2} | |",
         exponent(&cold_v),
         exponent(&warm_v)
     );
