@@ -51,19 +51,45 @@ fn exponent(xy: &[(f64, f64)]) -> f64 {
     sxy / sxx
 }
 
+/// One column of the table: per row its x (vertices or curves), vertex count, cold and warm
+/// times (ms).
+struct Series {
+    name: &'static str,
+    rows: Vec<(f64, usize, f64, f64)>,
+}
+
+impl Series {
+    /// Its rows as CSV lines.
+    fn csv(&self) -> String {
+        self.rows
+            .iter()
+            .map(|(x, nv, cold, warm)| format!("{},{x},{nv},{cold:.3},{warm:.3}\n", self.name))
+            .collect()
+    }
+
+    /// The fitted exponents of the cold and warm times against x.
+    fn exponents(&self) -> (f64, f64) {
+        let pick = |f: fn(&(f64, usize, f64, f64)) -> f64| -> Vec<(f64, f64)> {
+            self.rows.iter().map(|r| (r.0, f(r))).collect()
+        };
+        (exponent(&pick(|r| r.2)), exponent(&pick(|r| r.3)))
+    }
+}
+
 fn main() {
     // As the daemon runs (faer's parallel factorisation is slower on this machine's 2 cores).
     sfs_geometry::sparse_llt::single_threaded();
     let csv_path = std::env::args().nth(1);
-    let mut csv = String::from("series,x,vertices,cold_ms,warm_ms\n");
     // Surface size: the cube network at a spacing for each target count (10 k at 0.02).
     // The sizes grow, so each one's peak resident size is the process's peak after it.
     println!(
         "| vertices | from scratch, cold | from scratch, warm | peak resident size per vertex |"
     );
     println!("|---|---|---|---|");
-    let mut cold_v = Vec::new();
-    let mut warm_v = Vec::new();
+    let mut by_size = Series {
+        name: "vertices",
+        rows: Vec::new(),
+    };
     for target in [
         2_000.0,
         5_000.0,
@@ -83,34 +109,31 @@ fn main() {
         let (cold, warm, nv) = time(&sphere_cube(s), &p, runs);
         let per_vertex = peak_rss() / nv as f64 / 1e3;
         println!("| {nv} | {cold:.1} ms | {warm:.1} ms | {per_vertex:.1} kB |");
-        csv += &format!("vertices,{nv},{nv},{cold:.3},{warm:.3}\n");
-        cold_v.push((nv as f64, cold));
-        warm_v.push((nv as f64, warm));
+        by_size.rows.push((nv as f64, nv, cold, warm));
     }
-    println!(
-        "| exponent | {:.2} | {:.2} | |",
-        exponent(&cold_v),
-        exponent(&warm_v)
-    );
+    let (cold, warm) = by_size.exponents();
+    println!("| exponent | {cold:.2} | {warm:.2} | |");
     // Network size: the grid at the default edge and budget.
     println!();
     println!("| curves | vertices | from scratch, cold | from scratch, warm |");
     println!("|---|---|---|---|");
-    let mut cold_c = Vec::new();
-    let mut warm_c = Vec::new();
+    let mut by_curves = Series {
+        name: "curves",
+        rows: Vec::new(),
+    };
     for curves in [5usize, 10, 20, 50, 100] {
         let meridians = curves.div_ceil(2);
         let net = sphere_grid(meridians, curves - meridians, 0.01);
         let (cold, warm, nv) = time(&net, &SurfaceParams::default(), 3);
         println!("| {curves} | {nv} | {cold:.1} ms | {warm:.1} ms |");
-        csv += &format!("curves,{curves},{nv},{cold:.3},{warm:.3}\n");
-        cold_c.push((curves as f64, cold));
-        warm_c.push((curves as f64, warm));
+        by_curves.rows.push((curves as f64, nv, cold, warm));
     }
-    println!(
-        "| exponent | | {:.2} | {:.2} |",
-        exponent(&cold_c),
-        exponent(&warm_c)
+    let (cold, warm) = by_curves.exponents();
+    println!("| exponent | | {cold:.2} | {warm:.2} |");
+    let csv = format!(
+        "series,x,vertices,cold_ms,warm_ms\n{}{}",
+        by_size.csv(),
+        by_curves.csv()
     );
     if let Some(path) = csv_path {
         std::fs::write(&path, csv).expect("the CSV written");
