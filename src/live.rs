@@ -6,17 +6,24 @@
 //! pipeline ──(curve ended or changed, with the session's counters)──▶ Mailbox
 //!                         (one pending update at most; later curves merge into it)
 //! worker: take ▶ Reconstructor (cached pre-filter, symbolic factorisations kept) ▶
-//!         Surfacer (symbolic factorisation kept) ▶
-//!         network.glb and report.json replaced atomically ▶ one status line per curve
+//!         Surfacer (faces kept: a provisional surface) ▶
+//!         network.glb and report.json replaced atomically ▶ one status line per curve ▶
+//!         while no curve waits: the surface settled (exact) ▶ network.glb and report.json again
 //! ```
 //!
 //! Coalescing: a curve that ends while a reconstruction runs is merged into the pending
 //! update, so the worker always works on the latest state and nothing queues up. Closing the
 //! mailbox ([`Live::finish`]) lets the worker bring in what is still pending and hands the last
-//! reconstruction back to the session for its final outputs. Every update is a pure function
-//! of the curves (the caches change the time, not the bits: the regression is not
-//! warm-started, which measured no fewer iterations), so the same bytes in give the same
-//! files out whatever the timing was.
+//! reconstruction back to the session for its final outputs.
+//!
+//! Provisional and settled (issue 19): an update's surface keeps the faces of the last one
+//! whose rims moved less than `[surface] reuse_tolerance` edges, and is made in one pass
+//! ([`sfs_geometry::surface::fit::SurfaceParams::reuse_tolerance`]): the operator sees it at
+//! once; as soon as no curve waits, the worker surfaces the same network again exactly and
+//! replaces it (`report.json`: `surface.provisional` until then, `live.settled`). A settled
+//! update is a pure function of the curves (the caches change the time, not the bits: the
+//! regression is not warm-started, which measured no fewer iterations), and the last update
+//! is always settled, so the same bytes in give the same files out whatever the timing was.
 
 use crate::link::LinkStats;
 use crate::pipeline::{Pipeline, Products, REPORT_FILE};
@@ -145,6 +152,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
     let mut scan = Scan::default();
     let mut pipeline = Pipeline::new();
     let mut update_ms = Vec::new();
+    let mut settle_ms = Vec::new();
     let mut report = LiveReport::default();
     let mut last = None;
     loop {
@@ -169,7 +177,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
             }
         }
         let t0 = Instant::now();
-        let products = pipeline.run(&scan.curves, &settings.network, settings.surface.as_ref());
+        let mut products = pipeline.run(&scan.curves, &settings.network, settings.surface.as_ref());
         let compute_ms = t0.elapsed().as_secs_f64() * 1e3;
         if let Err(e) = products.write_glb(&settings.out_dir) {
             tracing::error!("live update: {e}");
@@ -186,38 +194,42 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
         report.latencies.extend(lat.iter().map(|l| l.1));
         report.latency_ms = Percentiles::of(&report.latencies);
         report.update_ms = Percentiles::of(&update_ms);
-        // The view first: a page fetches the new network while the rest is written.
-        if let Some(v) = &settings.view {
-            v.network(&products, &report, scan.curves.len(), &posted);
-            v.reconstruction_warnings(&products.warnings);
-        }
-        crate::memory::release_free_memory();
-        (report.rss_mb, report.peak_rss_mb) = crate::memory::rss_mb();
-        if settings.snapshots {
-            for (i, _) in &lat {
-                if let Err(e) = products.write_snapshot(&settings.out_dir, *i) {
-                    tracing::warn!("snapshot of curve {i}: {e}");
+        publish(
+            &settings,
+            &scan,
+            &products,
+            &mut report,
+            &snapshot,
+            &posted,
+            &lat,
+        );
+        status_lines(&scan, &products, &lat, compute_ms);
+        // A provisional surface is settled at once while no curve waits (the operator sees the
+        // quick one meanwhile), so the last update is always exact.
+        if let Some(sp) = &settings.surface {
+            let idle = lock(&shared.mail).curves.is_empty();
+            let t0 = Instant::now();
+            if idle && pipeline.settle(&mut products, sp) {
+                let ms = t0.elapsed().as_secs_f64() * 1e3;
+                if let Err(e) = products.write_glb(&settings.out_dir) {
+                    tracing::error!("live update: {e}");
+                } else {
+                    report.settled += 1;
+                    settle_ms.push(ms);
+                    report.settle_ms = Percentiles::of(&settle_ms);
+                    publish(
+                        &settings,
+                        &scan,
+                        &products,
+                        &mut report,
+                        &snapshot,
+                        &[],
+                        &lat,
+                    );
+                    tracing::debug!("surface settled in {ms:.1} ms");
                 }
             }
         }
-        let mut live_report = crate::report::Report::assemble(
-            crate::report::Progress {
-                source: &settings.source,
-                ended: "running",
-                started: settings.started,
-                link: &snapshot.link,
-                curves: &scan.curves,
-                counts: &snapshot.counts,
-                warnings: &snapshot.warnings,
-            },
-            &products,
-        );
-        live_report.live = Some(report.clone());
-        let path = settings.out_dir.join(REPORT_FILE);
-        if let Err(e) = live_report.write(&path) {
-            tracing::error!("live update: cannot write {}: {e}", path.display());
-        }
-        status_lines(&scan, &products, &lat, compute_ms);
         last = Some(products);
     }
     report.latency_ms = Percentiles::of(&report.latencies);
@@ -226,6 +238,50 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
         report,
         products: last,
         curves: scan.curves.len(),
+    }
+}
+
+/// Tells the view, writes the snapshots and the live `report.json` of an update (`posted`:
+/// the curves it brought in, for the view; `lat`: their latencies, for the snapshots).
+fn publish(
+    settings: &LiveSettings,
+    scan: &Scan,
+    products: &Products,
+    report: &mut LiveReport,
+    snapshot: &Snapshot,
+    posted: &[(usize, Instant)],
+    lat: &[(usize, f64)],
+) {
+    // The view first: a page fetches the new network while the rest is written.
+    if let Some(v) = &settings.view {
+        v.network(products, report, scan.curves.len(), posted);
+        v.reconstruction_warnings(&products.warnings);
+    }
+    crate::memory::release_free_memory();
+    (report.rss_mb, report.peak_rss_mb) = crate::memory::rss_mb();
+    if settings.snapshots {
+        for (i, _) in lat {
+            if let Err(e) = products.write_snapshot(&settings.out_dir, *i) {
+                tracing::warn!("snapshot of curve {i}: {e}");
+            }
+        }
+    }
+    let mut live_report = crate::report::Report::assemble(
+        crate::report::Progress {
+            source: &settings.source,
+            ended: "running",
+            started: settings.started,
+            link: &snapshot.link,
+            curves: &scan.curves,
+            counts: &snapshot.counts,
+            warnings: &snapshot.warnings,
+        },
+        products,
+    );
+    live_report.live = Some(report.clone());
+    let path = settings.out_dir.join(REPORT_FILE);
+    if let Err(e) = live_report.write(&path) {
+        tracing::error!("live update: cannot write {}: {e}", path.display());
     }
 }
 

@@ -34,6 +34,12 @@ pub const SNAPSHOT_DIR: &str = "snapshots";
 /// more there: 0.077 % at 0.01). BENCHMARKS.md, "Soft constraints".
 pub const SCAN_SOFTNESS: Option<f64> = Some(0.3);
 
+/// Default `[surface] reuse_tolerance` (target edges): a live update keeps the faces whose
+/// rims moved less than half an edge since they were built and is provisional until the
+/// worker settles it (`sfs_geometry::surface::fit::SurfaceParams::reuse_tolerance`; BENCHMARKS.md,
+/// issue 19). Replays surface once, from scratch, whatever it is.
+pub const LIVE_REUSE_TOLERANCE: f64 = 0.5;
+
 /// What one reconstruction of a scan produced (network, surface, the glb bytes), before it is
 /// written: shared by the live updates and the session's final outputs.
 #[derive(Debug, Default)]
@@ -113,6 +119,42 @@ impl Pipeline {
         };
         out.warnings
             .extend(net.warnings.iter().cloned().map(Warning::Network));
+        for (k, p) in &net.positions.nodes {
+            out.nodes.insert(k.to_string(), crate::gltf_out::to_gltf(p));
+        }
+        out.network = Some(net);
+        self.surface_into(&mut out, surface);
+        out
+    }
+
+    /// Makes the exact surface of products whose surface is provisional (a live update that
+    /// kept faces, [`SurfaceParams::reuse_tolerance`]): the same network surfaced again with
+    /// no tolerance, as a run from scratch would; the surface's warnings and the glb
+    /// replaced. Whether there was anything to settle.
+    pub fn settle(&mut self, out: &mut Products, surface: &SurfaceParams) -> bool {
+        if !out.surface.as_ref().is_some_and(|s| s.provisional) {
+            return false;
+        }
+        out.warnings.retain(|w| {
+            !matches!(
+                w,
+                Warning::Surface(_) | Warning::NoSurface(_) | Warning::GlbNotWritten(_)
+            )
+        });
+        let exact = SurfaceParams {
+            reuse_tolerance: 0.0,
+            ..*surface
+        };
+        self.surface_into(out, Some(&exact));
+        true
+    }
+
+    /// The surface of the network in `out` (when `surface` is given) and the glb of both.
+    fn surface_into(&mut self, out: &mut Products, surface: Option<&SurfaceParams>) {
+        let Some(net) = &out.network else {
+            return;
+        };
+        out.surface = None;
         let surfaced = surface.and_then(|sp| {
             let (result, ms) = surface_of(&net.positions, sp, &mut self.surfacer);
             out.surface_ms = ms;
@@ -130,6 +172,7 @@ impl Pipeline {
                 }
             }
         });
+        out.glb = None;
         match glb(&net.positions, surfaced.as_ref()) {
             Ok(bytes) => out.glb = Some(bytes),
             Err(e) => {
@@ -137,11 +180,6 @@ impl Pipeline {
                 out.warnings.push(Warning::GlbNotWritten(e));
             }
         }
-        for (k, p) in &net.positions.nodes {
-            out.nodes.insert(k.to_string(), crate::gltf_out::to_gltf(p));
-        }
-        out.network = Some(net);
-        out
     }
 }
 

@@ -83,6 +83,10 @@ pub struct LiveReport {
     pub latency_ms: Percentiles,
     /// Reconstruction (network and surface) time per update, ms.
     pub update_ms: Percentiles,
+    /// Provisional surfaces (faces kept, `[surface] reuse_tolerance`) made exact while the
+    /// worker was idle, and the time each took, ms (issue 19).
+    pub settled: usize,
+    pub settle_ms: Percentiles,
     /// Resident memory after the last update, and its peak, MB (Linux `/proc/self/status`).
     pub rss_mb: Option<f64>,
     pub peak_rss_mb: Option<f64>,

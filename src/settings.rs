@@ -60,7 +60,8 @@ impl Default for SerialSettings {
 
 impl Default for Settings {
     /// Documented defaults; the surface is made, with soft constraints
-    /// ([`crate::pipeline::SCAN_SOFTNESS`]).
+    /// ([`crate::pipeline::SCAN_SOFTNESS`]) and live updates that keep the faces they can
+    /// ([`crate::pipeline::LIVE_REUSE_TOLERANCE`]).
     fn default() -> Self {
         Settings {
             source: None,
@@ -69,6 +70,7 @@ impl Default for Settings {
             network: NetworkParams::default(),
             surface: Some(SurfaceParams {
                 soft: crate::pipeline::SCAN_SOFTNESS,
+                reuse_tolerance: crate::pipeline::LIVE_REUSE_TOLERANCE,
                 ..Default::default()
             }),
             live: true,

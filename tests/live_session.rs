@@ -93,9 +93,14 @@ fn issue7_pty_session_updates_after_every_curve_and_scores_within_target() {
     )
     .curves
     .len();
+    // The last live update, settled (issue 19: a provisional surface first, then the exact
+    // one while no curve waits).
     wait_for("the last live update", Duration::from_secs(30), || {
-        session.join("report.json").exists()
-            && report(&session)["curves"].as_array().map(|a| a.len()) == Some(expected_curves)
+        session.join("report.json").exists() && {
+            let r = report(&session);
+            r["curves"].as_array().map(|a| a.len()) == Some(expected_curves)
+                && r["surface"]["provisional"].is_null()
+        }
     });
     let live = report(&session);
     assert_eq!(live["ended"], "running");
@@ -116,6 +121,8 @@ fn issue7_pty_session_updates_after_every_curve_and_scores_within_target() {
     assert_eq!(r["ended"], "shutdown");
     assert_eq!(r["live"]["curves_posted"], expected_curves as u64);
     assert!(r["live"]["updates"].as_u64().unwrap() >= 1);
+    // Every update but the first kept faces and was settled.
+    assert!(r["live"]["settled"].as_u64().unwrap() >= 1, "{}", r["live"]);
     assert_eq!(r["live"]["latency_ms"]["n"], expected_curves as u64);
     // Issue 5's target for the Morphorider, default profile: ≤ 0.10 % of the diagonal.
     let e = eval(&truth, &session.join("network.glb"));

@@ -948,6 +948,10 @@ fn the_panel_is_surfaced_in_the_latest_shape() {
     assert_eq!(report.failed, 0);
     assert_eq!(report.surfaces_failed, 0);
     assert_eq!(report.surfaces, lines.len() as u64 / 10);
+    // Issue 19, point 5: the same faces and weights at every epoch: the first epoch's two
+    // passes are the only factorisations, every later surface back-substitutions.
+    assert!(report.surfaces > 3);
+    assert_eq!(report.surface_factorisations, 2);
     // The epoch of the last latest.glb, and the truth then: the bulge at the centre (sensor 5
     // of curve 1, the middle line along x), the anchor (curve 0's first sensor).
     let k = lines.len() / 10 * 10 - 1;

@@ -1,31 +1,69 @@
-//! The scaling table of BENCHMARKS.md (issue 19, point 4): the time to surface a network from
-//! scratch, against the surface's size (the unit sphere's cube network, 2 k … 200 k vertices)
-//! and against the network's size (the unit sphere's latitude–longitude network, 5 … 100
-//! curves, the default vertex budget), cold (symbolic factorisations computed) and warm (kept
-//! from the previous surface of the same network), with the exponent of a power law fitted
-//! to each column. Writes the rows as CSV to the path given (for `benches/scaling_plot.py`).
+//! The scaling table of BENCHMARKS.md (issue 19, point 4): the time to surface a network
+//! from scratch and to update the surface after one more curve, against the surface's size
+//! (the unit sphere's latitude–longitude network of 6 meridians and 5 parallels, 2 k … 200 k
+//! vertices) and against the network's size (the same network with 5 … 100 curves, the
+//! default vertex budget), with the exponent of a power law fitted to each column. Writes the
+//! rows as CSV to the path given (for `benches/scaling_plot.py`).
+//!
+//! Columns (ms, best of `runs`):
+//! - `cold`: from scratch, symbolic factorisations computed;
+//! - `warm`: from scratch again with the factorisations' patterns kept (the same network);
+//! - `exact`: the update after meridian 1 is added to the network without it, exact policy
+//!   (`reuse_tolerance` 0: faces kept only when bit for bit the same, at the same edge; the
+//!   surface a run from scratch gives; at the default edge, which the budget changes with the
+//!   network, none is);
+//! - `provisional`: the same update with `reuse_tolerance` 0.5 (one pass, the kept faces'
+//!   weights from the last surface);
+//! - `again`: the same network once more with the tolerance (the system unchanged: the
+//!   factorisation kept, back-substitutions only: a monitored structure's epochs).
 //!
 //! `cargo run --release -p sfs-geometry --example scaling [-- target/scaling.csv]`
 
-use sfs_geometry::surface::analytic::{sphere_cube, sphere_grid};
+use sfs_geometry::surface::analytic::sphere_grid;
 use sfs_geometry::surface::cycles::NetworkSegments;
 use sfs_geometry::surface::fit::{SurfaceParams, Surfacer};
 use std::time::Instant;
 
-/// Cold and warm wall time (ms, the best of `runs`) and the vertex count.
-fn time(net: &NetworkSegments, p: &SurfaceParams, runs: usize) -> (f64, f64, usize) {
-    let (mut cold, mut warm, mut nv) = (f64::MAX, f64::MAX, 0);
+const COLUMNS: [&str; 5] = ["cold", "warm", "exact", "provisional", "again"];
+
+/// Wall time of `f`, ms.
+fn ms<T>(f: impl FnOnce() -> T) -> (f64, T) {
+    let t0 = Instant::now();
+    let out = f();
+    (t0.elapsed().as_secs_f64() * 1e3, out)
+}
+
+/// One row: the vertex count, faces touched by the new curve (of all), and the columns' times.
+fn row(net: &NetworkSegments, p: &SurfaceParams, runs: usize) -> (usize, String, [f64; 5]) {
+    let mut without = net.clone();
+    without.segments.retain(|s| s.curve != 1);
+    let mut best = [f64::MAX; 5];
+    let (mut nv, mut touched) = (0, String::new());
     for _ in 0..runs {
         let mut s = Surfacer::new();
-        let t0 = Instant::now();
-        let out = s.run(net, p).expect("a surface");
-        cold = cold.min(t0.elapsed().as_secs_f64() * 1e3);
+        let (cold, out) = ms(|| s.run(net, p).expect("a surface"));
+        let (warm, _) = ms(|| s.run(net, p).expect("a surface"));
         nv = out.positions.len();
-        let t0 = Instant::now();
-        s.run(net, p).expect("a surface");
-        warm = warm.min(t0.elapsed().as_secs_f64() * 1e3);
+        let mut s = Surfacer::new();
+        s.run(&without, p).expect("a surface");
+        let (exact, _) = ms(|| s.run(net, p).expect("a surface"));
+        let q = SurfaceParams {
+            reuse_tolerance: 0.5,
+            ..*p
+        };
+        let mut s = Surfacer::new();
+        s.run(&without, &q).expect("a surface");
+        let (provisional, out) = ms(|| s.run(net, &q).expect("a surface"));
+        let faces = out.cycles.patches.len();
+        touched = format!("{} of {faces}", faces - out.faces_kept);
+        // The new faces take their weights from that surface: once more, then the same.
+        s.run(net, &q).expect("a surface");
+        let (again, _) = ms(|| s.run(net, &q).expect("a surface"));
+        for (b, t) in best.iter_mut().zip([cold, warm, exact, provisional, again]) {
+            *b = b.min(t);
+        }
     }
-    (cold, warm, nv)
+    (nv, touched, best)
 }
 
 /// The process's peak resident size so far (`VmHWM`), bytes (0 where /proc is not there).
@@ -51,11 +89,11 @@ fn exponent(xy: &[(f64, f64)]) -> f64 {
     sxy / sxx
 }
 
-/// One column of the table: per row its x (vertices or curves), vertex count, cold and warm
-/// times (ms).
+/// One sweep of the table: per row its x (vertices or curves), vertex count and the
+/// columns' times (ms).
 struct Series {
     name: &'static str,
-    rows: Vec<(f64, usize, f64, f64)>,
+    rows: Vec<(f64, usize, [f64; 5])>,
 }
 
 impl Series {
@@ -63,29 +101,37 @@ impl Series {
     fn csv(&self) -> String {
         self.rows
             .iter()
-            .map(|(x, nv, cold, warm)| format!("{},{x},{nv},{cold:.3},{warm:.3}\n", self.name))
+            .map(|(x, nv, t)| {
+                let cols: Vec<String> = t.iter().map(|v| format!("{v:.3}")).collect();
+                format!("{},{x},{nv},{}\n", self.name, cols.join(","))
+            })
             .collect()
     }
 
-    /// The fitted exponents of the cold and warm times against x.
-    fn exponents(&self) -> (f64, f64) {
-        let pick = |f: fn(&(f64, usize, f64, f64)) -> f64| -> Vec<(f64, f64)> {
-            self.rows.iter().map(|r| (r.0, f(r))).collect()
-        };
-        (exponent(&pick(|r| r.2)), exponent(&pick(|r| r.3)))
+    /// The fitted exponent of each column against x.
+    fn exponents(&self) -> Vec<f64> {
+        (0..COLUMNS.len())
+            .map(|c| exponent(&self.rows.iter().map(|r| (r.0, r.2[c])).collect::<Vec<_>>()))
+            .collect()
     }
+}
+
+fn cells(t: &[f64]) -> String {
+    t.iter()
+        .map(|v| format!("{v:.1} ms"))
+        .collect::<Vec<_>>()
+        .join(" | ")
 }
 
 fn main() {
     // As the daemon runs (faer's parallel factorisation is slower on this machine's 2 cores).
     sfs_geometry::sparse_llt::single_threaded();
     let csv_path = std::env::args().nth(1);
-    // Surface size: the cube network at a spacing for each target count (10 k at 0.02).
-    // The sizes grow, so each one's peak resident size is the process's peak after it.
-    println!(
-        "| vertices | from scratch, cold | from scratch, warm | peak resident size per vertex |"
-    );
-    println!("|---|---|---|---|");
+    let header = COLUMNS.join(" | ");
+    // Surface size: the grid at an edge for each target count. The sizes grow, so each one's
+    // peak resident size is the process's peak after it.
+    println!("| vertices | faces touched | {header} | peak resident size per vertex |");
+    println!("|---|---|---|---|---|---|---|---|");
     let mut by_size = Series {
         name: "vertices",
         rows: Vec::new(),
@@ -99,24 +145,29 @@ fn main() {
         100_000.0,
         200_000.0f64,
     ] {
-        let s = 0.02 * (16_000.0 / target).sqrt();
+        // The unit sphere's area over a lattice of edge e: 4π / (√3/2 e²) vertices.
+        let edge = (4.0 * std::f64::consts::PI / (3f64.sqrt() / 2.0 * target)).sqrt();
         let p = SurfaceParams {
-            edge: Some(1.35 * s),
+            edge: Some(edge),
             max_vertices: usize::MAX,
             ..SurfaceParams::default()
         };
         let runs = if target <= 20_000.0 { 3 } else { 1 };
-        let (cold, warm, nv) = time(&sphere_cube(s), &p, runs);
+        let (nv, touched, t) = row(&sphere_grid(6, 5, 0.5 * edge), &p, runs);
         let per_vertex = peak_rss() / nv as f64 / 1e3;
-        println!("| {nv} | {cold:.1} ms | {warm:.1} ms | {per_vertex:.1} kB |");
-        by_size.rows.push((nv as f64, nv, cold, warm));
+        println!("| {nv} | {touched} | {} | {per_vertex:.1} kB |", cells(&t));
+        by_size.rows.push((nv as f64, nv, t));
     }
-    let (cold, warm) = by_size.exponents();
-    println!("| exponent | {cold:.2} | {warm:.2} | |");
+    let e: Vec<String> = by_size
+        .exponents()
+        .iter()
+        .map(|b| format!("{b:.2}"))
+        .collect();
+    println!("| exponent | | {} | |", e.join(" | "));
     // Network size: the grid at the default edge and budget.
     println!();
-    println!("| curves | vertices | from scratch, cold | from scratch, warm |");
-    println!("|---|---|---|---|");
+    println!("| curves | vertices | faces touched | {header} |");
+    println!("|---|---|---|---|---|---|---|---|");
     let mut by_curves = Series {
         name: "curves",
         rows: Vec::new(),
@@ -124,14 +175,20 @@ fn main() {
     for curves in [5usize, 10, 20, 50, 100] {
         let meridians = curves.div_ceil(2);
         let net = sphere_grid(meridians, curves - meridians, 0.01);
-        let (cold, warm, nv) = time(&net, &SurfaceParams::default(), 3);
-        println!("| {curves} | {nv} | {cold:.1} ms | {warm:.1} ms |");
-        by_curves.rows.push((curves as f64, nv, cold, warm));
+        let (nv, touched, t) = row(&net, &SurfaceParams::default(), 3);
+        println!("| {curves} | {nv} | {touched} | {} |", cells(&t));
+        by_curves.rows.push((curves as f64, nv, t));
     }
-    let (cold, warm) = by_curves.exponents();
-    println!("| exponent | | {cold:.2} | {warm:.2} |");
+    let e: Vec<String> = by_curves
+        .exponents()
+        .iter()
+        .map(|b| format!("{b:.2}"))
+        .collect();
+    println!("| exponent | | | {} |", e.join(" | "));
+    let names: Vec<String> = COLUMNS.iter().map(|c| format!("{c}_ms")).collect();
     let csv = format!(
-        "series,x,vertices,cold_ms,warm_ms\n{}{}",
+        "series,x,vertices,{}\n{}{}",
+        names.join(","),
         by_size.csv(),
         by_curves.csv()
     );

@@ -156,6 +156,21 @@ pub struct CachedPattern {
     /// The entries of the cached pattern.
     entries: Vec<(usize, usize)>,
     symbolic_count: usize,
+    /// The last numeric factorisation and its values, when asked to keep it
+    /// ([`factor_kept`](Self::factor_kept)).
+    last: Option<(Vec<f64>, Arc<SpdFactor>)>,
+    numeric_count: usize,
+}
+
+impl std::fmt::Debug for SpdFactor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "SpdFactor {{ n: {}, fill: {} }}",
+            self.n,
+            self.values.len()
+        )
+    }
 }
 
 impl CachedPattern {
@@ -170,6 +185,7 @@ impl CachedPattern {
         let same = matches!(&self.cached, Some(p) if p.n == n && self.entries == entries);
         if !same {
             self.cached = None;
+            self.last = None;
             let pattern = SpdPattern::new(n, &entries)?;
             self.symbolic_count += 1;
             self.entries = entries;
@@ -186,7 +202,51 @@ impl CachedPattern {
         entries: Vec<(usize, usize)>,
         values: &[f64],
     ) -> Result<SpdFactor, SolveError> {
+        self.numeric_count += 1;
         self.pattern(n, entries)?.0.factor(values)
+    }
+
+    /// As [`factor`](Self::factor), but the numeric factorisation is kept, and when the
+    /// pattern and the values are those of the kept one it is returned as it is (the same
+    /// system again: only back-substitutions to do). `keep = false` drops the kept one.
+    ///
+    /// ```
+    /// use sfs_geometry::sparse_llt::CachedPattern;
+    /// let mut cache = CachedPattern::default();
+    /// let entries = vec![(0, 0), (1, 0), (1, 1)];
+    /// let a = cache.factor_kept(2, entries.clone(), &[4.0, 1.0, 3.0], true).unwrap();
+    /// let b = cache.factor_kept(2, entries.clone(), &[4.0, 1.0, 3.0], true).unwrap();
+    /// assert!(std::sync::Arc::ptr_eq(&a, &b));
+    /// assert_eq!(cache.numeric_count(), 1);
+    /// cache.factor_kept(2, entries, &[4.0, 1.0, 5.0], true).unwrap();
+    /// assert_eq!(cache.numeric_count(), 2);
+    /// ```
+    pub fn factor_kept(
+        &mut self,
+        n: usize,
+        entries: Vec<(usize, usize)>,
+        values: &[f64],
+        keep: bool,
+    ) -> Result<Arc<SpdFactor>, SolveError> {
+        self.pattern(n, entries)?;
+        if let Some((v, f)) = &self.last {
+            if keep && v.as_slice() == values {
+                return Ok(f.clone());
+            }
+        }
+        self.last = None;
+        let pattern = self.cached.as_ref().expect("set by pattern()");
+        let f = Arc::new(pattern.factor(values)?);
+        self.numeric_count += 1;
+        if keep {
+            self.last = Some((values.to_vec(), f.clone()));
+        }
+        Ok(f)
+    }
+
+    /// Numeric factorisations computed so far.
+    pub fn numeric_count(&self) -> usize {
+        self.numeric_count
     }
 
     /// Symbolic factorisations computed so far (1 while the pattern never changed).
@@ -196,6 +256,11 @@ impl CachedPattern {
 }
 
 impl SpdFactor {
+    /// Stored values of the Cholesky factor.
+    pub fn fill(&self) -> usize {
+        self.values.len()
+    }
+
     /// Solves in place for `K` right-hand sides given row by row (`b[i][k]`).
     pub fn solve<const K: usize>(&self, b: &mut [[f64; K]]) {
         assert_eq!(b.len(), self.n);

@@ -68,6 +68,9 @@
 //! reweight = 1                       # passes with cotangent weights from the 3D surface
 //! soft = 0.3                         # soft positional constraints of weight ω; 0: hard
 //! guide_weight = 0.1                 # the pull of guide curves (G), approximated
+//! reuse_tolerance = 0.5              # live: faces kept while their rims moved less than this
+//!                                    #   many edges; each update provisional at once, then
+//!                                    #   settled exactly when idle (0: every update exact)
 //!
 //! [monitor]                          # instrumented structures (sensor arrays)
 //! epoch_hz = 5.0                     # shapes per second
@@ -519,6 +522,11 @@ mod tests {
                 "out of range",
             ),
             (
+                "[surface]\nreuse_tolerance = -0.5\n",
+                "surface.reuse_tolerance",
+                "not a tolerance",
+            ),
+            (
                 "[output]\nsnapshot = true\n",
                 "output.snapshot",
                 "unknown field",
@@ -536,6 +544,9 @@ mod tests {
         .unwrap();
         let s = ok.surface.unwrap();
         assert_eq!((s.max_vertices, s.soft), (5000, None));
+        assert_eq!(s.reuse_tolerance, crate::pipeline::LIVE_REUSE_TOLERANCE);
+        let inf = parse(&format!("{base}[surface]\nreuse_tolerance = inf\n")).unwrap();
+        assert_eq!(inf.surface.unwrap().reuse_tolerance, f64::INFINITY);
         assert!(ok.snapshots);
     }
 

@@ -190,7 +190,15 @@ impl ConfigFile {
                 )
             })?),
             _ => None,
-        };
+        }
+        .map(|mut sp| {
+            // A monitored structure's cycles never change: every face is kept from the first
+            // epoch, whose weights stay (back-substitutions only), unless a tolerance is set.
+            if self.surface.reuse_tolerance.is_none() {
+                sp.reuse_tolerance = f64::INFINITY;
+            }
+            sp
+        });
         let regression = match m.regression {
             Some(true) => Some(network.regression),
             _ => None,

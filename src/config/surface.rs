@@ -14,6 +14,7 @@ pub struct SurfaceToml {
     pub reweight: Option<usize>,
     pub soft: Option<f64>,
     pub guide_weight: Option<f64>,
+    pub reuse_tolerance: Option<f64>,
 }
 
 impl ConfigFile {
@@ -76,6 +77,17 @@ impl ConfigFile {
         }
         if let Some(w) = s.guide_weight {
             p.guide_weight = weight(w, "guide_weight", "")?;
+        }
+        p.reuse_tolerance = crate::pipeline::LIVE_REUSE_TOLERANCE;
+        if let Some(t) = s.reuse_tolerance {
+            if t.is_nan() || t < 0.0 {
+                return Err(ConfigError::new(
+                    file,
+                    "surface.reuse_tolerance",
+                    format!("{t} is not a tolerance (0, a positive number of edges, or inf)"),
+                ));
+            }
+            p.reuse_tolerance = t;
         }
         Ok(Some(p))
     }

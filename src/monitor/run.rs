@@ -127,6 +127,10 @@ pub struct MonitorReport {
     pub surfaces: u64,
     pub surfaces_failed: u64,
     pub surface_ms: Option<f64>,
+    /// Numeric factorisations the surfaces took (issue 19: the structure's faces and weights
+    /// are kept from the first epoch, whose two passes are the only ones; every later surface
+    /// is back-substitutions).
+    pub surface_factorisations: usize,
 }
 
 /// How a monitor starts in its directory.
@@ -760,6 +764,7 @@ impl Monitor {
                 Ok(s) => {
                     self.report.surfaces += 1;
                     self.report.surface_ms = Some(ms);
+                    self.report.surface_factorisations = self.surfacer.numeric_factorisations();
                     Some(s)
                 }
                 Err(e) => {

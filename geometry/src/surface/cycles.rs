@@ -178,27 +178,44 @@ impl NetworkSegments {
     /// surface whose triangles are much larger than the network's sampling. Deterministic per
     /// segment, so the patches on both sides still share every boundary vertex.
     pub fn decimated(&self, step: f64) -> Self {
-        let mut out = self.clone();
-        for s in &mut out.segments {
-            let m = s.points.len();
-            if m <= 2 {
-                continue;
-            }
-            let total: f64 = s.points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
-            let mut keep = vec![0];
-            let (mut run, mut along) = (0.0, 0.0);
-            for k in 1..m - 1 {
-                let l = (s.points[k] - s.points[k - 1]).norm();
-                run += l;
-                along += l;
-                if run >= step && total - along >= 0.5 * step {
-                    keep.push(k);
-                    run = 0.0;
+        self.keeping(&self.decimation(step))
+    }
+
+    /// Per segment, the samples [`decimated`](Self::decimated) keeps (indices, both ends
+    /// included).
+    pub fn decimation(&self, step: f64) -> Vec<Vec<usize>> {
+        self.segments
+            .iter()
+            .map(|s| {
+                let m = s.points.len();
+                if m <= 2 {
+                    return (0..m).collect();
                 }
-            }
-            keep.push(m - 1);
-            if keep.len() < m {
-                s.keep(&keep);
+                let total: f64 = s.points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+                let mut keep = vec![0];
+                let (mut run, mut along) = (0.0, 0.0);
+                for k in 1..m - 1 {
+                    let l = (s.points[k] - s.points[k - 1]).norm();
+                    run += l;
+                    along += l;
+                    if run >= step && total - along >= 0.5 * step {
+                        keep.push(k);
+                        run = 0.0;
+                    }
+                }
+                keep.push(m - 1);
+                keep
+            })
+            .collect()
+    }
+
+    /// A copy whose segments keep the samples `keep` lists for them (one list per segment,
+    /// increasing indices, both ends included).
+    pub fn keeping(&self, keep: &[Vec<usize>]) -> Self {
+        let mut out = self.clone();
+        for (s, k) in out.segments.iter_mut().zip(keep) {
+            if k.len() < s.points.len() {
+                s.keep(k);
             }
         }
         out

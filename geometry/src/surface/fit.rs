@@ -26,11 +26,13 @@
 use super::cotmatrix::{cotmatrix, voronoi_areas, SparseRows};
 use super::creases;
 use super::cycles::{cycles, Cycles, NetworkSegments};
+use super::faces::{Face, FaceKey, Faces, Weights};
 use super::tessellate::{tessellate, Embedding};
 use super::SurfaceProblem;
 use crate::sparse_llt::{CachedPattern, SolveError};
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 /// Settings of the surfacer.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -62,6 +64,14 @@ pub struct SurfaceParams {
     /// between nodes (and likewise for their normals); their nodes, shared with the curves
     /// they cross, are held as every node is. Default [`GUIDE_WEIGHT`].
     pub guide_weight: f64,
+    /// Which faces of the previous surface a [`Surfacer`] reuses (issue 19, [`super::faces`]),
+    /// in target edges: `0` (default) only faces whose boundary is bit for bit the same (the
+    /// surface is then the one a run from scratch gives); `τ > 0` also faces whose boundary
+    /// samples moved less than `τ` edges since they were built, and the surface is then
+    /// *provisional*: one pass, the kept faces weighted as in the last surface, the new ones
+    /// from their planar tessellation (see [`Surfaced::provisional`]). `f64::INFINITY`: every
+    /// face whose cycle is unchanged (a monitored structure, whose cycles never change).
+    pub reuse_tolerance: f64,
 }
 
 /// Default [`SurfaceParams::guide_weight`]: a third of the scans' [`SurfaceParams::soft`]
@@ -80,6 +90,7 @@ impl Default for SurfaceParams {
             reweight: 1,
             soft: None,
             guide_weight: GUIDE_WEIGHT,
+            reuse_tolerance: 0.0,
         }
     }
 }
@@ -121,6 +132,11 @@ pub struct Surfaced {
     /// other problem: each also in `problems`.
     pub skipped: usize,
     pub problems: Vec<SurfaceProblem>,
+    /// Faces whose tessellation was kept from the previous surface ([`super::faces`]).
+    pub faces_kept: usize,
+    /// One pass from the weights of the previous surface ([`SurfaceParams::reuse_tolerance`]
+    /// above 0): not the surface a run from scratch gives, which a later exact run settles.
+    pub provisional: bool,
 }
 
 /// What the surfacer did, for `report.json`.
@@ -149,6 +165,11 @@ pub struct SurfaceReport {
     /// Serialised as their texts.
     #[cfg_attr(feature = "serde", serde(serialize_with = "crate::serialize_texts"))]
     pub problems: Vec<SurfaceProblem>,
+    /// Faces whose tessellation was kept from the previous surface.
+    pub faces_kept: usize,
+    /// A provisional surface (see [`Surfaced::provisional`]).
+    #[cfg_attr(feature = "serde", serde(skip_serializing_if = "std::ops::Not::not"))]
+    pub provisional: bool,
     pub time_ms: f64,
 }
 
@@ -168,6 +189,8 @@ impl Surfaced {
             constrained: self.constrained,
             triangles: self.triangles.len(),
             problems: self.problems.clone(),
+            faces_kept: self.faces_kept,
+            provisional: self.provisional,
             time_ms,
         }
     }
@@ -220,6 +243,67 @@ struct Assembly {
     triangles: Vec<[usize; 3]>,
     lc: SparseRows,
     mass: Vec<f64>,
+    /// The tessellated patches, in patch order.
+    pieces: Vec<Piece>,
+}
+
+/// One tessellated patch of the assembly.
+struct Piece {
+    /// Local → global ids: the boundary loop first (the patch's order), then its own free
+    /// vertices.
+    g: Vec<usize>,
+    key: FaceKey,
+    face: Face,
+    /// Kept from the previous surface.
+    kept: bool,
+    /// Built from this boundary, or kept from the same one bit for bit (what a run from
+    /// scratch would have built).
+    exact: bool,
+}
+
+/// `Σ` over the pieces of their weights (`pick`: which of each piece's weights) into global
+/// `#V by #V` cotangent rows and `#V` areas.
+fn sum_weights<'a>(
+    nv: usize,
+    pieces: impl Iterator<Item = (&'a [usize], &'a Weights)>,
+) -> (SparseRows, Vec<f64>) {
+    let mut trip = Vec::new();
+    let mut mass = vec![0.0; nv];
+    for (g, w) in pieces {
+        for (i, row) in w.l.rows.iter().enumerate() {
+            for &(j, x) in row {
+                trip.push((g[i], g[j], x));
+            }
+        }
+        for (i, a) in w.areas.iter().enumerate() {
+            mass[g[i]] += a;
+        }
+    }
+    (SparseRows::from_triplets(nv, trip), mass)
+}
+
+/// The weights of the part of the surface at `positions` of each of the pieces `which` (on
+/// worker threads).
+fn surface_weights(
+    pieces: &[Piece],
+    which: &[usize],
+    positions: &[Vector3<f64>],
+) -> Vec<Arc<Weights>> {
+    parallel_map(which, |&i| {
+        let pc = &pieces[i];
+        let pts: Vec<Vector3<f64>> = pc.g.iter().map(|&i| positions[i]).collect();
+        Arc::new(Weights {
+            l: cotmatrix(&pts, &pc.face.mesh.triangles),
+            areas: voronoi_areas(&pts, &pc.face.mesh.triangles),
+        })
+    })
+}
+
+/// The kept faces and the policy of their reuse ([`SurfaceParams::reuse_tolerance`], in
+/// target edges), for one run.
+struct Reuse<'a> {
+    faces: &'a mut Faces,
+    tolerance: f64,
 }
 
 /// Builds the constrained vertices (nodes, then the samples inside segments), tessellates every
@@ -229,6 +313,7 @@ fn assemble(
     cyc: &Cycles,
     edge: f64,
     problems: &mut Vec<SurfaceProblem>,
+    reuse: &mut Reuse,
 ) -> (Assembly, usize) {
     let mut positions = Vec::new();
     let mut normals = Vec::new();
@@ -362,41 +447,87 @@ fn assemble(
             (ids, poly, pn)
         })
         .collect();
-    let meshes = parallel_map(&loops, |(_, poly, pn)| {
+    // Each patch's cycle as the kept faces know it; a kept face that fits is reused, the
+    // others are tessellated on worker threads.
+    let keys: Vec<FaceKey> = cyc
+        .patches
+        .iter()
+        .enumerate()
+        .map(|(pi, c)| {
+            c.edges
+                .iter()
+                .enumerate()
+                .map(|(e, h)| {
+                    let s = &net.segments[h.segment];
+                    (
+                        s.curve,
+                        s.a,
+                        s.b,
+                        h.forward,
+                        s.points.len(),
+                        split.takes_across[pi][e],
+                        split.corner_sector[pi][e],
+                    )
+                })
+                .collect()
+        })
+        .collect();
+    let tol_m = reuse.tolerance * edge;
+    let mut reused: Vec<Option<Face>> = keys
+        .iter()
+        .zip(&loops)
+        .map(|(key, (_, poly, pn))| reuse.faces.take(key, poly, pn, edge, tol_m))
+        .collect();
+    let misses: Vec<usize> = (0..loops.len()).filter(|&i| reused[i].is_none()).collect();
+    let mut built = parallel_map(&misses, |&pi| {
+        let (_, poly, pn) = &loops[pi];
         tessellate(poly, pn, edge).map(|mesh| {
             let uv: Vec<Vector3<f64>> = mesh
                 .uv
                 .iter()
                 .map(|p| Vector3::new(p[0], p[1], 0.0))
                 .collect();
-            let l = cotmatrix(&uv, &mesh.triangles);
-            let areas = voronoi_areas(&uv, &mesh.triangles);
-            (mesh, l, areas)
-        })
-    });
-    let mut triangles = Vec::new();
-    let mut trip = Vec::new();
-    let mut mass = vec![0.0; positions.len()];
-    let mut skipped = 0;
-    for ((cyc, (ids, _, _)), result) in cyc.patches.iter().zip(&loops).zip(meshes) {
-        let (mesh, l, areas) = match result {
-            Ok(m) => m,
-            Err(e) => {
-                problems.push(SurfaceProblem::NotTessellated {
-                    nodes: cyc.nodes(net),
-                    reason: e,
-                });
-                skipped += 1;
-                continue;
+            let planar = Weights {
+                l: cotmatrix(&uv, &mesh.triangles),
+                areas: voronoi_areas(&uv, &mesh.triangles),
+            };
+            Face {
+                poly: poly.clone(),
+                normals: pn.clone(),
+                mesh: Arc::new(mesh),
+                planar: Arc::new(planar),
+                surface: None,
             }
+        })
+    })
+    .into_iter();
+    let mut triangles = Vec::new();
+    let mut pieces = Vec::new();
+    let mut skipped = 0;
+    for (pi, ((cyc, (ids, _, _)), key)) in cyc.patches.iter().zip(&loops).zip(keys).enumerate() {
+        let (face, kept) = match reused[pi].take() {
+            Some(f) => (f, true),
+            None => match built.next().expect("one per miss") {
+                Ok(f) => (f, false),
+                Err(e) => {
+                    problems.push(SurfaceProblem::NotTessellated {
+                        nodes: cyc.nodes(net),
+                        reason: e,
+                    });
+                    skipped += 1;
+                    continue;
+                }
+            },
         };
+        let mesh = &face.mesh;
         tracing::debug!(
-            "patch {:?}: {} boundary points, {} vertices, {} triangles, {:?}, edge {edge:.4}",
+            "patch {:?}: {} boundary points, {} vertices, {} triangles, {:?}, edge {edge:.4}{}",
             cyc.nodes(net),
             mesh.boundary,
             mesh.uv.len(),
             mesh.triangles.len(),
-            mesh.embedding
+            mesh.embedding,
+            if kept { ", kept" } else { "" }
         );
         if mesh.embedding == Embedding::Circle {
             problems.push(SurfaceProblem::OnDisk {
@@ -410,19 +541,21 @@ fn assemble(
             primary.push(positions.len());
             positions.push(Vector3::zeros());
             normals.push(Vector3::zeros());
-            mass.push(0.0);
-        }
-        for (i, row) in l.rows.iter().enumerate() {
-            for &(j, w) in row {
-                trip.push((g[i], g[j], w));
-            }
-        }
-        for (i, a) in areas.into_iter().enumerate() {
-            mass[g[i]] += a;
         }
         triangles.extend(mesh.triangles.iter().map(|t| t.map(|i| g[i])));
+        let exact = !kept || (face.poly == loops[pi].1 && face.normals == loops[pi].2);
+        pieces.push(Piece {
+            g,
+            key,
+            face,
+            kept,
+            exact,
+        });
     }
-    let lc = SparseRows::from_triplets(positions.len(), trip);
+    let (lc, mass) = sum_weights(
+        positions.len(),
+        pieces.iter().map(|pc| (pc.g.as_slice(), &*pc.face.planar)),
+    );
     (
         Assembly {
             positions,
@@ -436,6 +569,7 @@ fn assemble(
             triangles,
             lc,
             mass,
+            pieces,
         },
         skipped,
     )
@@ -533,7 +667,7 @@ fn data_weights(q: &SparseRows, c: usize, g: usize, omega: f64, omega_g: f64) ->
 /// `X*` their data (see [`SurfaceParams::soft`]).
 struct SoftSolver {
     weights: Vec<f64>,
-    factor: crate::sparse_llt::SpdFactor,
+    factor: Arc<crate::sparse_llt::SpdFactor>,
 }
 
 impl SoftSolver {
@@ -541,6 +675,7 @@ impl SoftSolver {
         q: &SparseRows,
         weights: Vec<f64>,
         cache: &mut CachedPattern,
+        keep: bool,
     ) -> Result<Self, SolveError> {
         let n = q.n();
         let w = |i: usize| weights.get(i).copied().unwrap_or(0.0);
@@ -560,7 +695,7 @@ impl SoftSolver {
                 vals.push(w(i));
             }
         }
-        let factor = cache.factor(n, entries, &vals)?;
+        let factor = cache.factor_kept(n, entries, &vals, keep)?;
         Ok(SoftSolver { weights, factor })
     }
 
@@ -608,7 +743,7 @@ struct FreeSolver {
     c: usize,
     /// Weights of the guide samples `c..c + guide.len()`.
     guide: Vec<f64>,
-    factor: crate::sparse_llt::SpdFactor,
+    factor: Arc<crate::sparse_llt::SpdFactor>,
 }
 
 impl FreeSolver {
@@ -620,6 +755,7 @@ impl FreeSolver {
         c: usize,
         guide: Vec<f64>,
         cache: &mut CachedPattern,
+        keep: bool,
     ) -> Result<Self, SolveError> {
         let nf = q.n() - c;
         let mut entries = Vec::new();
@@ -640,18 +776,18 @@ impl FreeSolver {
             }
         }
         let count = entries.len();
-        let (pat, fresh) = cache.pattern(nf, entries)?;
-        if fresh {
+        let (symbolic, numeric) = (cache.symbolic_count(), cache.numeric_count());
+        let factor = cache.factor_kept(nf, entries, &vals, keep)?;
+        if cache.symbolic_count() > symbolic {
             tracing::debug!(
                 "surface: symbolic factorisation of {nf} free unknowns, {count} entries, fill {}",
-                pat.fill()
+                factor.fill()
             );
         }
-        Ok(FreeSolver {
-            c,
-            guide,
-            factor: pat.factor(&vals)?,
-        })
+        if cache.numeric_count() == numeric {
+            tracing::debug!("surface: the same system again, its factorisation kept");
+        }
+        Ok(FreeSolver { c, guide, factor })
     }
 
     /// Two biharmonic fields at once (`b = 0`, one pass over the factor for both).
@@ -808,11 +944,17 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
 pub struct Surfacer {
     pattern: CachedPattern,
     soft_pattern: CachedPattern,
+    faces: Faces,
 }
 
 impl Surfacer {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Numeric factorisations computed so far (one per pass that changed the system).
+    pub fn numeric_factorisations(&self) -> usize {
+        self.pattern.numeric_count() + self.soft_pattern.numeric_count()
     }
 
     /// Surfaces the network (see the module docs and [`surface`]).
@@ -821,7 +963,13 @@ impl Surfacer {
         net: &NetworkSegments,
         p: &SurfaceParams,
     ) -> Result<Surfaced, SurfaceError> {
-        surface_with(net, p, &mut self.pattern, &mut self.soft_pattern)
+        surface_with(
+            net,
+            p,
+            &mut self.pattern,
+            &mut self.soft_pattern,
+            &mut self.faces,
+        )
     }
 }
 
@@ -836,6 +984,7 @@ fn surface_with(
     p: &SurfaceParams,
     pattern: &mut CachedPattern,
     soft_pattern: &mut CachedPattern,
+    faces: &mut Faces,
 ) -> Result<Surfaced, SurfaceError> {
     let Tessellation {
         mut asm,
@@ -843,7 +992,8 @@ fn surface_with(
         cycles: cyc,
         mut problems,
         edge,
-    } = tessellation(net, p);
+        exact: exact_rims,
+    } = tessellation(net, p, faces);
     let lap = |what: &str, t: &mut std::time::Instant| {
         tracing::debug!("surface: {what} {:.1} ms", t.elapsed().as_secs_f64() * 1e3);
         *t = std::time::Instant::now();
@@ -859,11 +1009,43 @@ fn surface_with(
     let mut nstar = asm.normals.clone();
     // The curves' samples, then the guide curves'.
     let data: Vec<Vector3<f64>> = asm.positions[..c + asm.guided].to_vec();
-    for pass in 0..=p.reweight {
+    // Provisional: one pass, the kept faces weighted as in the last surface (their reweighting
+    // already done), the new ones from their planar tessellation.
+    let single = p.reuse_tolerance > 0.0
+        && p.method == Method::NormalControl
+        && p.reweight > 0
+        && asm.pieces.iter().any(|pc| pc.face.surface.is_some());
+    // Not the surface a run from scratch gives: one pass, or rims, edge or faces held.
+    let provisional = single || !exact_rims || asm.pieces.iter().any(|pc| !pc.exact);
+    // Per piece, the 3D weights its last pass was solved with (none: planar).
+    let mut used: Vec<Option<Arc<Weights>>> = asm
+        .pieces
+        .iter()
+        .map(|pc| pc.face.surface.clone().filter(|_| single))
+        .collect();
+    if single {
+        (asm.lc, asm.mass) = sum_weights(
+            nv,
+            asm.pieces.iter().zip(&used).map(|(pc, w)| {
+                let w = w.as_deref().unwrap_or(&pc.face.planar);
+                (pc.g.as_slice(), w)
+            }),
+        );
+    }
+    let passes = if single { 0 } else { p.reweight };
+    for pass in 0..=passes {
         if pass > 0 {
             // The weights from the surface just computed instead of the planar triangulations.
-            asm.lc = cotmatrix(&asm.positions, &asm.triangles);
-            asm.mass = voronoi_areas(&asm.positions, &asm.triangles);
+            let all: Vec<usize> = (0..asm.pieces.len()).collect();
+            let w = surface_weights(&asm.pieces, &all, &asm.positions);
+            (asm.lc, asm.mass) = sum_weights(
+                nv,
+                asm.pieces
+                    .iter()
+                    .zip(&w)
+                    .map(|(pc, w)| (pc.g.as_slice(), &**w)),
+            );
+            used = w.into_iter().map(Some).collect();
         }
         lap("weights", &mut tt);
         let q = normal_matrix(&asm.lc, &asm.mass, &rows);
@@ -894,7 +1076,7 @@ fn surface_with(
                 let mut own = CachedPattern::default();
                 let guide = data_weights(&q3, c, asm.guided, 0.0, p.guide_weight)[c..].to_vec();
                 asm.positions[..data.len()].copy_from_slice(&data);
-                FreeSolver::with_pattern(&q3, c, guide, &mut own)?.solve(
+                FreeSolver::with_pattern(&q3, c, guide, &mut own, false)?.solve(
                     &q3,
                     &zero,
                     &mut asm.positions,
@@ -938,6 +1120,27 @@ fn surface_with(
         })
         .collect();
     let (triangles, normals) = output(&asm, &nstar, edge, &mut problems)?;
+    // The faces kept for the next surface, each with the 3D weights its last pass was
+    // solved with (so that the same network again is the same system: back-substitutions
+    // only), or those of this surface where it had none (a provisional surface's new faces).
+    let planar: Vec<usize> = (0..used.len()).filter(|&i| used[i].is_none()).collect();
+    let mut fresh = surface_weights(&asm.pieces, &planar, &asm.positions).into_iter();
+    for &i in &planar {
+        used[i] = fresh.next();
+    }
+    let faces_kept = asm.pieces.iter().filter(|pc| pc.kept).count();
+    tracing::debug!(
+        "surface: {faces_kept} of {} faces kept{}",
+        asm.pieces.len(),
+        if provisional { ", provisional" } else { "" }
+    );
+    faces.by_key.clear();
+    faces.edge = Some(edge);
+    for (pc, w) in std::mem::take(&mut asm.pieces).into_iter().zip(used) {
+        let mut face = pc.face;
+        face.surface = w;
+        faces.by_key.insert(pc.key, face);
+    }
     Ok(Surfaced {
         positions: asm.positions,
         normals,
@@ -951,6 +1154,8 @@ fn surface_with(
         cycles: cyc,
         skipped,
         problems,
+        faces_kept,
+        provisional,
     })
 }
 
@@ -962,32 +1167,65 @@ struct Tessellation {
     problems: Vec<SurfaceProblem>,
     /// The target edge, m.
     edge: f64,
+    /// The edge and the rims' samples are those a run from scratch takes (not held from the
+    /// last surface).
+    exact: bool,
 }
 
 /// The cycles of the cleaned network tessellated at the target edge (the configured one, or
 /// the default within the vertex budget), their rims decimated to half an edge.
-fn tessellation(net: &NetworkSegments, p: &SurfaceParams) -> Tessellation {
+fn tessellation(net: &NetworkSegments, p: &SurfaceParams, faces: &mut Faces) -> Tessellation {
     let net = &net.cleaned();
     let cyc = cycles(net);
     let mut problems = cyc.problems.clone();
-    let edge = p
+    let mut edge = p
         .edge
         .unwrap_or_else(|| default_edge(net).max(budget_edge(net, &cyc, p.max_vertices)));
+    // Reusing faces, the kept edge holds while the budget's stays within a quarter of it (a
+    // grown network would otherwise be tessellated anew at every curve).
+    let mut exact = true;
+    if let (true, None, Some(kept)) = (p.reuse_tolerance > 0.0, p.edge, faces.edge) {
+        if (0.8..=1.25).contains(&(edge / kept)) {
+            exact &= edge == kept;
+            edge = kept;
+        }
+    }
     // Boundary vertices about half an edge apart at least: a network sampled far more finely
     // than the surface would otherwise fill each patch's rim with a band of graded triangles.
-    let decimated = net.decimated(BOUNDARY_STEP * edge);
+    // Reusing faces, a segment keeps the samples it kept last time (its decimation would
+    // otherwise change with any motion, and with it the faces along it).
+    let mut keep = net.decimation(BOUNDARY_STEP * edge);
+    if p.reuse_tolerance > 0.0 && faces.edge == Some(edge) {
+        for (s, k) in net.segments.iter().zip(&mut keep) {
+            if let Some(kept) = faces.samples.get(&(s.curve, s.a, s.b, s.points.len())) {
+                exact &= k == kept;
+                k.clone_from(kept);
+            }
+        }
+    }
+    faces.samples = net
+        .segments
+        .iter()
+        .zip(&keep)
+        .map(|(s, k)| ((s.curve, s.a, s.b, s.points.len()), k.clone()))
+        .collect();
+    let decimated = net.keeping(&keep);
+    let mut reuse = Reuse {
+        faces,
+        tolerance: p.reuse_tolerance,
+    };
     let net = &decimated;
     let t0 = std::time::Instant::now();
-    let (mut asm, mut skipped) = assemble(net, &cyc, edge, &mut problems);
+    let (mut asm, mut skipped) = assemble(net, &cyc, edge, &mut problems, &mut reuse);
     // The budget's area is an estimate (a developed patch can take more room in the plane
     // than on the surface): over it by a quarter, tessellate once more at the edge the count
     // asks for.
     let nv = asm.positions.len() as f64;
     if p.edge.is_none() && nv > 1.25 * p.max_vertices as f64 {
-        let edge = edge * (nv / p.max_vertices as f64).sqrt();
+        edge *= (nv / p.max_vertices as f64).sqrt();
         tracing::debug!("surface: {nv} vertices over the budget; edge {edge:.4}");
         problems = cyc.problems.clone();
-        (asm, skipped) = assemble(net, &cyc, edge, &mut problems);
+        (asm, skipped) = assemble(net, &cyc, edge, &mut problems, &mut reuse);
     }
     tracing::debug!(
         "surface: cycles + tessellation + planar weights {:.1} ms",
@@ -999,6 +1237,7 @@ fn tessellation(net: &NetworkSegments, p: &SurfaceParams) -> Tessellation {
         cycles: cyc,
         problems,
         edge,
+        exact,
     }
 }
 
@@ -1051,7 +1290,9 @@ enum System {
 
 impl System {
     /// Factorises the normal matrix `q` (`#V` by `#V`, the first `c` vertices constrained),
-    /// reusing the symbolic factorisations in the caches.
+    /// reusing the symbolic factorisations in the caches, and with faces reused
+    /// ([`SurfaceParams::reuse_tolerance`] > 0) the numeric one when the system is the last
+    /// one again (a monitored structure: back-substitutions only).
     fn precompute(
         q: &SparseRows,
         c: usize,
@@ -1065,12 +1306,14 @@ impl System {
                 q,
                 data_weights(q, c, g, omega, p.guide_weight),
                 soft_pattern,
+                p.reuse_tolerance > 0.0,
             )?),
             _ => System::Free(FreeSolver::with_pattern(
                 q,
                 c,
                 data_weights(q, c, g, 0.0, p.guide_weight)[c..].to_vec(),
                 pattern,
+                p.reuse_tolerance > 0.0,
             )?),
         })
     }

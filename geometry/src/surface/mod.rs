@@ -16,6 +16,7 @@ pub mod analytic;
 pub mod cotmatrix;
 pub mod creases;
 pub mod cycles;
+pub mod faces;
 pub mod fit;
 pub mod tessellate;
 
