@@ -135,16 +135,13 @@ impl Pipeline {
         if !out.surface.as_ref().is_some_and(|s| s.provisional) {
             return false;
         }
+        let exact = exact(surface);
         out.warnings.retain(|w| {
             !matches!(
                 w,
                 Warning::Surface(_) | Warning::NoSurface(_) | Warning::GlbNotWritten(_)
             )
         });
-        let exact = SurfaceParams {
-            reuse_tolerance: 0.0,
-            ..*surface
-        };
         self.surface_into(out, Some(&exact));
         true
     }
@@ -180,6 +177,15 @@ impl Pipeline {
                 out.warnings.push(Warning::GlbNotWritten(e));
             }
         }
+    }
+}
+
+/// The surfacing settings with no faces reused: the surface a run from scratch gives (the
+/// final outputs of a session, a replay, the live worker's settled updates).
+pub fn exact(surface: &SurfaceParams) -> SurfaceParams {
+    SurfaceParams {
+        reuse_tolerance: 0.0,
+        ..*surface
     }
 }
 

@@ -537,7 +537,15 @@ impl Flow {
                 curves,
             }) if curves == scan.curves.len() => (p, Some(report), false),
             other => (
-                Pipeline::new().run(&scan.curves, &settings.network, settings.surface.as_ref()),
+                Pipeline::new().run(
+                    &scan.curves,
+                    &settings.network,
+                    settings
+                        .surface
+                        .as_ref()
+                        .map(crate::pipeline::exact)
+                        .as_ref(),
+                ),
                 other.map(|o| o.report),
                 true,
             ),

@@ -342,9 +342,9 @@ impl RegressionSolver {
     /// is the same; fewer iterations reach it.
     ///
     /// Precompute, then solve: the normal matrix's block pattern is built once per run
-    /// ([`NormalPattern`]) and factorised symbolically only when it changed since the last
+    /// (`NormalPattern`) and factorised symbolically only when it changed since the last
     /// run; each Levenberg–Marquardt iteration assembles the normal equations
-    /// ([`normal_equations`]) and takes a damped step ([`damped_step`]).
+    /// (`normal_equations`) and takes a damped step (`damped_step`).
     pub fn run_from(
         &mut self,
         curves: &mut [UniformCurve],

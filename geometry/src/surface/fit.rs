@@ -67,10 +67,12 @@ pub struct SurfaceParams {
     /// Which faces of the previous surface a [`Surfacer`] reuses (issue 19, [`super::faces`]),
     /// in target edges: `0` (default) only faces whose boundary is bit for bit the same (the
     /// surface is then the one a run from scratch gives); `τ > 0` also faces whose boundary
-    /// samples moved less than `τ` edges since they were built, and the surface is then
-    /// *provisional*: one pass, the kept faces weighted as in the last surface, the new ones
-    /// from their planar tessellation (see [`Surfaced::provisional`]). `f64::INFINITY`: every
-    /// face whose cycle is unchanged (a monitored structure, whose cycles never change).
+    /// samples moved less than `τ` edges since they were built, the edge and the rims'
+    /// samples held while they can be, and the surface is made in one pass, the kept faces
+    /// weighted as in the last surface (reweighted already), the others from their planar
+    /// tessellation: *provisional* ([`Surfaced::provisional`]), for a quick look that an exact
+    /// run settles later. `f64::INFINITY`: every face whose cycle is unchanged (a monitored
+    /// structure, whose cycles never change: from the second surface on, the same system).
     pub reuse_tolerance: f64,
 }
 
@@ -1009,12 +1011,9 @@ fn surface_with(
     let mut nstar = asm.normals.clone();
     // The curves' samples, then the guide curves'.
     let data: Vec<Vector3<f64>> = asm.positions[..c + asm.guided].to_vec();
-    // Provisional: one pass, the kept faces weighted as in the last surface (their reweighting
-    // already done), the new ones from their planar tessellation.
-    let single = p.reuse_tolerance > 0.0
-        && p.method == Method::NormalControl
-        && p.reweight > 0
-        && asm.pieces.iter().any(|pc| pc.face.surface.is_some());
+    // Provisional: one pass, the kept faces weighted as in the last surface (their
+    // reweighting already done), the others from their planar tessellation.
+    let single = p.reuse_tolerance > 0.0 && p.method == Method::NormalControl && p.reweight > 0;
     // Not the surface a run from scratch gives: one pass, or rims, edge or faces held.
     let provisional = single || !exact_rims || asm.pieces.iter().any(|pc| !pc.exact);
     // Per piece, the 3D weights its last pass was solved with (none: planar).

@@ -10,6 +10,8 @@
 //! - [`cotmatrix`]: the cotangent Laplacian and mixed Voronoi areas.
 //! - [`fit`]: biharmonic propagation of positions and normals, the mean-curvature guide and
 //!   the fit (hard or soft constraints), one factorisation shared, reweighting from 3D.
+//! - [`faces`]: the faces kept between surfaces of a growing or moving network (issue 19):
+//!   exact reuse, or provisional surfaces within a tolerance.
 //! - [`analytic`]: the paper's test networks with exact normals (tests, benches, Table 1).
 
 pub mod analytic;
