@@ -194,15 +194,13 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
         report.latencies.extend(lat.iter().map(|l| l.1));
         report.latency_ms = Percentiles::of(&report.latencies);
         report.update_ms = Percentiles::of(&update_ms);
-        publish(
-            &settings,
-            &scan,
-            &products,
-            &mut report,
-            &snapshot,
-            &posted,
-            &lat,
-        );
+        let update = Update {
+            settings: &settings,
+            scan: &scan,
+            snapshot: &snapshot,
+            lat: &lat,
+        };
+        update.publish(&products, &mut report, &posted);
         status_lines(&scan, &products, &lat, compute_ms);
         // A provisional surface is settled at once while no curve waits (the operator sees the
         // quick one meanwhile), so the last update is always exact.
@@ -217,15 +215,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
                     report.settled += 1;
                     settle_ms.push(ms);
                     report.settle_ms = Percentiles::of(&settle_ms);
-                    publish(
-                        &settings,
-                        &scan,
-                        &products,
-                        &mut report,
-                        &snapshot,
-                        &[],
-                        &lat,
-                    );
+                    update.publish(&products, &mut report, &[]);
                     tracing::debug!("surface settled in {ms:.1} ms");
                 }
             }
@@ -241,47 +231,51 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
     }
 }
 
-/// Tells the view, writes the snapshots and the live `report.json` of an update (`posted`:
-/// the curves it brought in, for the view; `lat`: their latencies, for the snapshots).
-fn publish(
-    settings: &LiveSettings,
-    scan: &Scan,
-    products: &Products,
-    report: &mut LiveReport,
-    snapshot: &Snapshot,
-    posted: &[(usize, Instant)],
-    lat: &[(usize, f64)],
-) {
-    // The view first: a page fetches the new network while the rest is written.
-    if let Some(v) = &settings.view {
-        v.network(products, report, scan.curves.len(), posted);
-        v.reconstruction_warnings(&products.warnings);
-    }
-    crate::memory::release_free_memory();
-    (report.rss_mb, report.peak_rss_mb) = crate::memory::rss_mb();
-    if settings.snapshots {
-        for (i, _) in lat {
-            if let Err(e) = products.write_snapshot(&settings.out_dir, *i) {
-                tracing::warn!("snapshot of curve {i}: {e}");
+/// What an update's outputs are written with: where, the curves, the session's counters,
+/// and the latencies of the curves it brought in.
+struct Update<'a> {
+    settings: &'a LiveSettings,
+    scan: &'a Scan,
+    snapshot: &'a Snapshot,
+    lat: &'a [(usize, f64)],
+}
+
+impl Update<'_> {
+    /// Tells the view (`posted`: the curves the products brought in, none for a settled
+    /// surface), writes the snapshots of the update's curves and the live `report.json`.
+    fn publish(&self, products: &Products, report: &mut LiveReport, posted: &[(usize, Instant)]) {
+        let settings = self.settings;
+        // The view first: a page fetches the new network while the rest is written.
+        if let Some(v) = &settings.view {
+            v.network(products, report, self.scan.curves.len(), posted);
+            v.reconstruction_warnings(&products.warnings);
+        }
+        crate::memory::release_free_memory();
+        (report.rss_mb, report.peak_rss_mb) = crate::memory::rss_mb();
+        if settings.snapshots {
+            for (i, _) in self.lat {
+                if let Err(e) = products.write_snapshot(&settings.out_dir, *i) {
+                    tracing::warn!("snapshot of curve {i}: {e}");
+                }
             }
         }
-    }
-    let mut live_report = crate::report::Report::assemble(
-        crate::report::Progress {
-            source: &settings.source,
-            ended: "running",
-            started: settings.started,
-            link: &snapshot.link,
-            curves: &scan.curves,
-            counts: &snapshot.counts,
-            warnings: &snapshot.warnings,
-        },
-        products,
-    );
-    live_report.live = Some(report.clone());
-    let path = settings.out_dir.join(REPORT_FILE);
-    if let Err(e) = live_report.write(&path) {
-        tracing::error!("live update: cannot write {}: {e}", path.display());
+        let mut live_report = crate::report::Report::assemble(
+            crate::report::Progress {
+                source: &settings.source,
+                ended: "running",
+                started: settings.started,
+                link: &self.snapshot.link,
+                curves: &self.scan.curves,
+                counts: &self.snapshot.counts,
+                warnings: &self.snapshot.warnings,
+            },
+            products,
+        );
+        live_report.live = Some(report.clone());
+        let path = settings.out_dir.join(REPORT_FILE);
+        if let Err(e) = live_report.write(&path) {
+            tracing::error!("live update: cannot write {}: {e}", path.display());
+        }
     }
 }
 

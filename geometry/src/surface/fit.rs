@@ -263,8 +263,8 @@ struct Piece {
     exact: bool,
 }
 
-/// `Σ` over the pieces of their weights (`pick`: which of each piece's weights) into global
-/// `#V by #V` cotangent rows and `#V` areas.
+/// The sum of per-piece weights (each piece's local → global ids and one of its weights)
+/// into global `#V by #V` cotangent rows and `#V` areas.
 fn sum_weights<'a>(
     nv: usize,
     pieces: impl Iterator<Item = (&'a [usize], &'a Weights)>,
@@ -940,8 +940,11 @@ pub fn surface(net: &NetworkSegments, p: &SurfaceParams) -> Result<Surfaced, Sur
     Surfacer::new().run(net, p)
 }
 
-/// Keeps the symbolic factorisations between surfaces (as the daemon runs it after every
-/// curve): when the mesh's pattern is unchanged only the numeric factorisations are redone.
+/// Keeps what one surface can give the next (as the daemon runs it after every curve, or a
+/// monitor at every epoch): the symbolic factorisations (when the mesh's pattern is unchanged
+/// only the numeric ones are redone), the faces ([`super::faces`], reused as
+/// [`SurfaceParams::reuse_tolerance`] says) and, reusing faces, the last numeric
+/// factorisation (the same system again: back-substitutions only).
 #[derive(Debug, Default)]
 pub struct Surfacer {
     pattern: CachedPattern,
