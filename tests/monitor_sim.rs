@@ -948,8 +948,8 @@ fn the_panel_is_surfaced_in_the_latest_shape() {
     assert_eq!(report.failed, 0);
     assert_eq!(report.surfaces_failed, 0);
     assert_eq!(report.surfaces, lines.len() as u64 / 10);
-    // Issue 19, point 5: the same faces and weights at every epoch: the first epoch's two
-    // passes are the only factorisations, every later surface back-substitutions.
+    // Issue 19, point 5: the same faces at every epoch, and from the second surface on the
+    // same weights: two factorisations in all, every later surface back-substitutions.
     assert!(report.surfaces > 3);
     assert_eq!(report.surface_factorisations, 2);
     // The epoch of the last latest.glb, and the truth then: the bulge at the centre (sensor 5

@@ -127,9 +127,9 @@ pub struct MonitorReport {
     pub surfaces: u64,
     pub surfaces_failed: u64,
     pub surface_ms: Option<f64>,
-    /// Numeric factorisations the surfaces took (issue 19: the structure's faces and weights
-    /// are kept from the first epoch, whose two passes are the only ones; every later surface
-    /// is back-substitutions).
+    /// Numeric factorisations the surfaces took (issue 19: the structure's faces are kept from
+    /// the first surface and their weights from the second, so two in all; every later
+    /// surface is back-substitutions).
     pub surface_factorisations: usize,
 }
 
