@@ -243,6 +243,8 @@ struct Assembly {
     corners: Vec<u32>,
     darts: Vec<u32>,
     triangles: Vec<[usize; 3]>,
+    /// The cotangent weights and areas of the pass being solved, summed from the pieces'
+    /// (empty until the first pass).
     lc: SparseRows,
     mass: Vec<f64>,
     /// The tessellated patches, in patch order.
@@ -308,8 +310,8 @@ struct Reuse<'a> {
     tolerance: f64,
 }
 
-/// Builds the constrained vertices (nodes, then the samples inside segments), tessellates every
-/// patch and sums the planar cotangent weights and areas.
+/// Builds the constrained vertices (nodes, then the samples inside segments) and tessellates
+/// every patch with its planar cotangent weights and areas (or keeps it from `reuse`).
 fn assemble(
     net: &NetworkSegments,
     cyc: &Cycles,
@@ -545,7 +547,7 @@ fn assemble(
             normals.push(Vector3::zeros());
         }
         triangles.extend(mesh.triangles.iter().map(|t| t.map(|i| g[i])));
-        let exact = !kept || (face.poly == loops[pi].1 && face.normals == loops[pi].2);
+        let exact = !kept || face.fits(&loops[pi].1, &loops[pi].2, 0.0);
         pieces.push(Piece {
             g,
             key,
@@ -554,10 +556,6 @@ fn assemble(
             exact,
         });
     }
-    let (lc, mass) = sum_weights(
-        positions.len(),
-        pieces.iter().map(|pc| (pc.g.as_slice(), &*pc.face.planar)),
-    );
     (
         Assembly {
             positions,
@@ -569,8 +567,8 @@ fn assemble(
             corners: split.corners,
             darts: split.darts,
             triangles,
-            lc,
-            mass,
+            lc: SparseRows::default(),
+            mass: Vec::new(),
             pieces,
         },
         skipped,
@@ -1025,7 +1023,16 @@ fn surface_with(
         .iter()
         .map(|pc| pc.face.surface.clone().filter(|_| single))
         .collect();
-    if single {
+    let passes = if single { 0 } else { p.reweight };
+    for pass in 0..=passes {
+        if pass > 0 {
+            // The weights from the surface just computed instead of the planar triangulations.
+            let all: Vec<usize> = (0..asm.pieces.len()).collect();
+            used = surface_weights(&asm.pieces, &all, &asm.positions)
+                .into_iter()
+                .map(Some)
+                .collect();
+        }
         (asm.lc, asm.mass) = sum_weights(
             nv,
             asm.pieces.iter().zip(&used).map(|(pc, w)| {
@@ -1033,22 +1040,6 @@ fn surface_with(
                 (pc.g.as_slice(), w)
             }),
         );
-    }
-    let passes = if single { 0 } else { p.reweight };
-    for pass in 0..=passes {
-        if pass > 0 {
-            // The weights from the surface just computed instead of the planar triangulations.
-            let all: Vec<usize> = (0..asm.pieces.len()).collect();
-            let w = surface_weights(&asm.pieces, &all, &asm.positions);
-            (asm.lc, asm.mass) = sum_weights(
-                nv,
-                asm.pieces
-                    .iter()
-                    .zip(&w)
-                    .map(|(pc, w)| (pc.g.as_slice(), &**w)),
-            );
-            used = w.into_iter().map(Some).collect();
-        }
         lap("weights", &mut tt);
         let q = normal_matrix(&asm.lc, &asm.mass, &rows);
         lap("normal matrix", &mut tt);
