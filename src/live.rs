@@ -5,10 +5,11 @@
 //! ```text
 //! pipeline ──(curve ended or changed, with the session's counters)──▶ Mailbox
 //!                         (one pending update at most; later curves merge into it)
-//! worker: take ▶ Reconstructor (cached pre-filter, symbolic factorisations kept) ▶
+//! worker: take ▶ Reconstructor (cached pre-filter, symbolic factorisations kept, the frames
+//!         regressed near the new curve only: a provisional network) ▶
 //!         Surfacer (faces kept: a provisional surface) ▶
 //!         network.glb and report.json replaced atomically ▶ one status line per curve ▶
-//!         while no curve waits: the surface settled (exact) ▶ network.glb and report.json again
+//!         while no curve waits: the update settled (exact) ▶ network.glb and report.json again
 //! ```
 //!
 //! Coalescing: a curve that ends while a reconstruction runs is merged into the pending
@@ -16,11 +17,16 @@
 //! mailbox ([`Live::finish`]) lets the worker bring in what is still pending and hands the last
 //! reconstruction back to the session for its final outputs.
 //!
-//! Provisional and settled (issue 19): an update's surface keeps the faces of the last one
-//! whose rims moved less than `[surface] reuse_tolerance` edges, and is made in one pass
-//! ([`sfs_geometry::surface::fit::SurfaceParams::reuse_tolerance`]): the operator sees it at
-//! once; as soon as no curve waits, the worker surfaces the same network again exactly and
-//! replaces it (`report.json`: `surface.provisional` until then, `live.settled`). A settled
+//! Provisional and settled (issue 19): an update regresses only the frames within
+//! `[network] local_window` samples of the new curve's nodes (the others kept from the last
+//! update, [`sfs_geometry::network::NetworkParams::local_window`]), and its surface keeps the
+//! faces of the last one whose rims moved less than `[surface] reuse_tolerance` edges, made in
+//! one pass ([`sfs_geometry::surface::fit::SurfaceParams::reuse_tolerance`]): the operator
+//! sees it at once; as soon as no curve waits, the worker reconstructs the whole network and
+//! surfaces it exactly, and replaces the update (`report.json`: `network.provisional`,
+//! `surface.provisional` until then, `live.settled`). A curve that arrives while the settled
+//! network is made goes first (the settled surface is not made; the next update starts from
+//! the exact frames). A settled
 //! update is a pure function of the curves (the caches change the time, not the bits: the
 //! regression is not warm-started, which measured no fewer iterations), and the last update
 //! is always settled, so the same bytes in give the same files out whatever the timing was.
@@ -202,22 +208,28 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
         };
         update.publish(&products, &mut report, &posted);
         status_lines(&scan, &products, &lat, compute_ms);
-        // A provisional surface is settled at once while no curve waits (the operator sees the
+        // A provisional update is settled at once while no curve waits (the operator sees the
         // quick one meanwhile), so the last update is always exact.
-        if let Some(sp) = &settings.surface {
-            let idle = lock(&shared.mail).curves.is_empty();
-            let t0 = Instant::now();
-            if idle && pipeline.settle(&mut products, sp) {
-                let ms = t0.elapsed().as_secs_f64() * 1e3;
-                if let Err(e) = products.write_glb(&settings.out_dir) {
-                    tracing::error!("live update: {e}");
-                } else {
-                    report.settled += 1;
-                    settle_ms.push(ms);
-                    report.settle_ms = Percentiles::of(&settle_ms);
-                    update.publish(&products, &mut report, &[]);
-                    tracing::debug!("surface settled in {ms:.1} ms");
-                }
+        let waiting = || !lock(&shared.mail).curves.is_empty();
+        let t0 = Instant::now();
+        if !waiting()
+            && pipeline.settle(
+                &scan.curves,
+                &mut products,
+                &settings.network,
+                settings.surface.as_ref(),
+                waiting,
+            )
+        {
+            let ms = t0.elapsed().as_secs_f64() * 1e3;
+            if let Err(e) = products.write_glb(&settings.out_dir) {
+                tracing::error!("live update: {e}");
+            } else {
+                report.settled += 1;
+                settle_ms.push(ms);
+                report.settle_ms = Percentiles::of(&settle_ms);
+                update.publish(&products, &mut report, &[]);
+                tracing::debug!("update settled in {ms:.1} ms");
             }
         }
         last = Some(products);

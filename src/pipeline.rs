@@ -40,6 +40,13 @@ pub const SCAN_SOFTNESS: Option<f64> = Some(0.3);
 /// issue 19). Replays surface once, from scratch, whatever it is.
 pub const LIVE_REUSE_TOLERANCE: f64 = 0.5;
 
+/// Default `[network] local_window` (samples): a live update regresses the frames of the new
+/// curve and those within this many samples of its nodes, the rest kept from the last update,
+/// and is provisional until the worker settles it (`NetworkParams::local_window`;
+/// BENCHMARKS.md, issue 19: on five scenes in both profiles, windows of 5 to 30 samples all
+/// put every point within 1e-6 of the diagonal of the whole network's regression).
+pub const LIVE_LOCAL_WINDOW: usize = 10;
+
 /// What one reconstruction of a scan produced (network, surface, the glb bytes), before it is
 /// written: shared by the live updates and the session's final outputs.
 #[derive(Debug, Default)]
@@ -101,6 +108,13 @@ impl Pipeline {
         network: &NetworkParams,
         surface: Option<&SurfaceParams>,
     ) -> Products {
+        let mut out = self.reconstruct(curves, network);
+        self.surface_into(&mut out, surface);
+        out
+    }
+
+    /// The network of `curves` alone (no surface, no glb yet).
+    fn reconstruct(&mut self, curves: &[Curve], network: &NetworkParams) -> Products {
         let t0 = Instant::now();
         let net = self.reconstructor.run(curves, network);
         let mut out = Products {
@@ -123,26 +137,44 @@ impl Pipeline {
             out.nodes.insert(k.to_string(), crate::gltf_out::to_gltf(p));
         }
         out.network = Some(net);
-        self.surface_into(&mut out, surface);
         out
     }
 
-    /// Makes the exact surface of products whose surface is provisional (a live update that
-    /// kept faces, [`SurfaceParams::reuse_tolerance`]): the same network surfaced again with
-    /// no tolerance, as a run from scratch would; the surface's warnings and the glb
-    /// replaced. Whether there was anything to settle.
-    pub fn settle(&mut self, out: &mut Products, surface: &SurfaceParams) -> bool {
+    /// Makes provisional products exact: a network regressed locally
+    /// ([`NetworkParams::local_window`]) is reconstructed again over the whole network and
+    /// surfaced exactly; a provisional surface (a live update that kept faces,
+    /// [`SurfaceParams::reuse_tolerance`]) is surfaced again with no tolerance: what a run
+    /// from scratch on `curves` gives. Whether `out` was settled: not when there was nothing
+    /// to settle, nor when `waiting` says a curve waits once the network is made (the next
+    /// update comes first; its local regression then starts from the exact frames).
+    pub fn settle(
+        &mut self,
+        curves: &[Curve],
+        out: &mut Products,
+        network: &NetworkParams,
+        surface: Option<&SurfaceParams>,
+        waiting: impl Fn() -> bool,
+    ) -> bool {
+        let surface = surface.map(exact);
+        if out.network.as_ref().is_some_and(|n| n.report.provisional) {
+            let mut settled = self.reconstruct(curves, &exact_network(network));
+            if waiting() {
+                return false;
+            }
+            self.surface_into(&mut settled, surface.as_ref());
+            *out = settled;
+            return true;
+        }
         if !out.surface.as_ref().is_some_and(|s| s.provisional) {
             return false;
         }
-        let exact = exact(surface);
         out.warnings.retain(|w| {
             !matches!(
                 w,
                 Warning::Surface(_) | Warning::NoSurface(_) | Warning::GlbNotWritten(_)
             )
         });
-        self.surface_into(out, Some(&exact));
+        self.surface_into(out, surface.as_ref());
         true
     }
 
@@ -186,6 +218,15 @@ pub fn exact(surface: &SurfaceParams) -> SurfaceParams {
     SurfaceParams {
         reuse_tolerance: 0.0,
         ..*surface
+    }
+}
+
+/// The reconstruction settings with the whole network regressed: the network a run from
+/// scratch gives (the final outputs of a session, the live worker's settled updates).
+pub fn exact_network(network: &NetworkParams) -> NetworkParams {
+    NetworkParams {
+        local_window: 0,
+        ..*network
     }
 }
 

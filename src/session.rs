@@ -539,7 +539,7 @@ impl Flow {
             other => (
                 Pipeline::new().run(
                     &scan.curves,
-                    &settings.network,
+                    &crate::pipeline::exact_network(&settings.network),
                     settings
                         .surface
                         .as_ref()

@@ -61,13 +61,17 @@ impl Default for SerialSettings {
 impl Default for Settings {
     /// Documented defaults; the surface is made, with soft constraints
     /// ([`crate::pipeline::SCAN_SOFTNESS`]) and live updates that keep the faces they can
-    /// ([`crate::pipeline::LIVE_REUSE_TOLERANCE`]).
+    /// ([`crate::pipeline::LIVE_REUSE_TOLERANCE`]) and regress the new curve's neighbourhood
+    /// ([`crate::pipeline::LIVE_LOCAL_WINDOW`]).
     fn default() -> Self {
         Settings {
             source: None,
             serial: SerialSettings::default(),
             acquisition: AcquisitionConfig::default(),
-            network: NetworkParams::default(),
+            network: NetworkParams {
+                local_window: crate::pipeline::LIVE_LOCAL_WINDOW,
+                ..Default::default()
+            },
             surface: Some(SurfaceParams {
                 soft: crate::pipeline::SCAN_SOFTNESS,
                 reuse_tolerance: crate::pipeline::LIVE_REUSE_TOLERANCE,

@@ -1,10 +1,10 @@
-//! Issue 19, point 1: the surface state kept across updates gives, once settled, the surface a
-//! run from scratch gives — on every shipped scene, curve by curve, as the live worker runs it
-//! (a provisional update keeping what faces it can, then settled).
+//! Issue 19, points 1 and 2: the surface state kept across updates and the network regressed
+//! near the new curve give, once settled, the network and surface a run from scratch gives —
+//! on every shipped scene, curve by curve, as the live worker runs it (a provisional update
+//! keeping what faces and frames it can, then settled).
 
-use sfs::pipeline::{exact, Pipeline};
+use sfs::pipeline::{exact, exact_network, Pipeline};
 use sfs::simulate::scene;
-use sfs_geometry::network::NetworkParams;
 use std::path::Path;
 
 #[test]
@@ -28,8 +28,9 @@ fn issue_19_every_shipped_scene_settles_to_the_surface_from_scratch() {
         .expect("surfacing on by default");
     assert!(live.reuse_tolerance > 0.0);
     live.max_vertices = 3000;
-    let net = NetworkParams::default();
-    let mut kept = 0;
+    let net = sfs::settings::Settings::default().network;
+    assert!(net.local_window > 0);
+    let (mut kept, mut local) = (0, 0);
     for name in &names {
         let s = scene::load(&scene::find(name, &dir)).unwrap();
         let scan = s.exact_scan();
@@ -41,17 +42,27 @@ fn issue_19_every_shipped_scene_settles_to_the_surface_from_scratch() {
                 continue;
             };
             kept += report.faces_kept;
+            let regressed = &products.network.as_ref().unwrap().report;
+            if regressed.provisional {
+                local += 1;
+                assert!(regressed.regression.frames_moved < regressed.regression.frames);
+            }
             assert!(report.provisional, "{name}, {k} curves: not provisional");
-            assert!(pipeline.settle(&mut products, &live));
+            assert!(pipeline.settle(curves, &mut products, &net, Some(&live), || false));
+            assert!(!products.network.as_ref().unwrap().report.provisional);
             let settled = products.surface.as_ref().expect("a settled surface");
             assert!(!settled.provisional);
-            let fresh = Pipeline::new().run(curves, &net, Some(&exact(&live)));
+            let fresh = Pipeline::new().run(curves, &exact_network(&net), Some(&exact(&live)));
             assert!(
                 products.glb == fresh.glb,
                 "{name}, {k} curves: the settled network.glb differs from the one from scratch"
             );
         }
     }
-    // Faces were kept on the way (the state was exercised, not only rebuilt).
-    assert!(kept > 0);
+    // Faces were kept and networks regressed locally on the way (the state was exercised,
+    // not only rebuilt).
+    assert!(
+        kept > 0 && local > 0,
+        "{kept} faces kept, {local} local regressions"
+    );
 }

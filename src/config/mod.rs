@@ -59,6 +59,8 @@
 //! bend_fraction = 0.5                # bending smoothing length ℓ₂ in h (or bend_length in m)
 //! stretch_length = 0.0               # stretching smoothing length ℓ₁, m
 //! xi = 1e4                           # weight of the node normal consistency
+//! local_window = 10                  # live: samples either side of the new curve's nodes
+//!                                    # regressed again (0: the whole network every update)
 //!
 //! [surface]                          # surfacing with normal control
 //! enabled = true                     # false: write the network only
@@ -527,6 +529,16 @@ mod tests {
                 "not a tolerance",
             ),
             (
+                "[network]\nlocal_window = 1000000\n",
+                "network.local_window",
+                "more than 100000",
+            ),
+            (
+                "[network]\nlocal_window = -1\n",
+                "network.local_window",
+                "invalid value",
+            ),
+            (
                 "[output]\nsnapshot = true\n",
                 "output.snapshot",
                 "unknown field",
@@ -545,6 +557,9 @@ mod tests {
         let s = ok.surface.unwrap();
         assert_eq!((s.max_vertices, s.soft), (5000, None));
         assert_eq!(s.reuse_tolerance, crate::pipeline::LIVE_REUSE_TOLERANCE);
+        assert_eq!(ok.network.local_window, crate::pipeline::LIVE_LOCAL_WINDOW);
+        let whole = parse(&format!("{base}[network]\nlocal_window = 0\n")).unwrap();
+        assert_eq!(whole.network.local_window, 0);
         let inf = parse(&format!("{base}[surface]\nreuse_tolerance = inf\n")).unwrap();
         assert_eq!(inf.surface.unwrap().reuse_tolerance, f64::INFINITY);
         assert!(ok.snapshots);

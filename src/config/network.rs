@@ -16,6 +16,7 @@ pub struct NetworkToml {
     pub bend_fraction: Option<f64>,
     pub stretch_length: Option<f64>,
     pub xi: Option<f64>,
+    pub local_window: Option<usize>,
 }
 
 impl ConfigFile {
@@ -58,6 +59,17 @@ impl ConfigFile {
         }
         if let Some(x) = check("xi", n.xi, 0.0, 1e9)? {
             p.regression.xi = x;
+        }
+        p.local_window = crate::pipeline::LIVE_LOCAL_WINDOW;
+        if let Some(w) = n.local_window {
+            if w > 100_000 {
+                return Err(ConfigError::new(
+                    file,
+                    "network.local_window",
+                    format!("{w} samples is more than 100000 (0 regresses the whole network every update)"),
+                ));
+            }
+            p.local_window = w;
         }
         Ok(p)
     }

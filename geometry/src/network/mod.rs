@@ -33,6 +33,12 @@ pub struct NetworkParams {
     pub no_regression: bool,
     /// Skip the loop-closure test of the tags ([`closure`]), for comparisons.
     pub no_closure_check: bool,
+    /// Live updates (issue 19): when > 0, a run after the first moves only the frames of the
+    /// curves that changed since the last run and those within this many samples of the
+    /// nodes they pass through ([`RegressionSolver::run_local`]); the others keep the last
+    /// run's. The result is then provisional ([`NetworkReport::provisional`]): close to the
+    /// whole network's regression, not equal to it. Default 0: the whole network every run.
+    pub local_window: usize,
 }
 
 /// What a reconstruction did, for `report.json`.
@@ -50,6 +56,9 @@ pub struct NetworkReport {
     pub max_node_normal_angle_deg: f64,
     /// The regression's iterations and energies.
     pub regression: RegressionReport,
+    /// The regression moved only the frames near what changed since the last run
+    /// ([`NetworkParams::local_window`]): a run with a window of 0 gives the exact network.
+    pub provisional: bool,
     /// How each curve closes the network's loops (the loop-closure test's misfit, before the
     /// regression), with the tags that explain most of it marked; empty without loops.
     pub closure: Vec<closure::CurveMisfit>,
@@ -178,6 +187,9 @@ pub struct Reconstructor {
     regression: RegressionSolver,
     prefiltered: HashMap<usize, (CurveKey, Result<UniformCurve, prefilter::PrefilterError>)>,
     regressed: HashMap<usize, Vec<UnitQuaternion<f64>>>,
+    /// The node ties of each curve the last regression saw (sample, node), after the closure
+    /// test: a curve whose ties changed moves whole in a local run.
+    regressed_nodes: HashMap<usize, Vec<(usize, u32)>>,
     /// Curves pre-filtered by the last run (not taken from the cache).
     pub prefiltered_last: usize,
 }
@@ -326,8 +338,38 @@ impl Reconstructor {
                 .cloned()
                 .map(NetworkWarning::TagRefused),
         );
+        // The nodes of curves that left the regressed network (a curve undone, or now left
+        // out): their ties went with them.
+        let in_use: std::collections::HashSet<usize> = uniform.iter().map(|u| u.index).collect();
+        let mut changed_nodes: Vec<u32> = self
+            .regressed_nodes
+            .iter()
+            .filter(|(k, _)| !in_use.contains(k))
+            .flat_map(|(_, nodes)| nodes.iter().map(|x| x.1))
+            .collect();
+        changed_nodes.sort_unstable();
+        changed_nodes.dedup();
+        let local = p.local_window > 0 && !self.regressed_nodes.is_empty();
         let regression = if p.no_regression {
             RegressionReport::default()
+        } else if local {
+            let previous: Vec<Option<&[UnitQuaternion<f64>]>> = uniform
+                .iter()
+                .map(|u| {
+                    let same_ties = self.regressed_nodes.get(&u.index) == Some(&u.nodes);
+                    self.regressed
+                        .get(&u.index)
+                        .filter(|_| same_ties)
+                        .map(|q| q.as_slice())
+                })
+                .collect();
+            self.regression.run_local(
+                &mut uniform,
+                &p.regression,
+                &previous,
+                p.local_window,
+                &changed_nodes,
+            )
         } else if warm {
             let init: Vec<Vec<UnitQuaternion<f64>>> = uniform
                 .iter()
@@ -339,9 +381,11 @@ impl Reconstructor {
         } else {
             self.regression.run(&mut uniform, &p.regression)
         };
+        self.regressed_nodes.clear();
         if !p.no_regression {
             for u in &uniform {
                 self.regressed.insert(u.index, u.q.clone());
+                self.regressed_nodes.insert(u.index, u.nodes.clone());
             }
         }
         let t2 = Instant::now();
@@ -372,6 +416,7 @@ impl Reconstructor {
             outliers_removed: uniform.iter().map(|u| u.outliers).sum(),
             tags_detached: closure.detached.len(),
             max_node_normal_angle_deg: max_node_normal_angle(&positions),
+            provisional: regression.frames_moved < regression.frames,
             regression,
             closure: closure.curves,
             timings_ms: Timings {

@@ -21,6 +21,10 @@
 //! plus the node couplings) factorised by sparse Cholesky with its symbolic factorisation
 //! reused across iterations and runs.
 //!
+//! Live updates (issue 19) may regress locally ([`RegressionSolver::run_local`]): only the
+//! frames of the curves that changed and those near the nodes they pass through move, the
+//! rest are constants at the last run's frames; a whole-network run settles it later.
+//!
 //! Units: `E₁` carries `1/h` and `E₂` `1/h³`, so the weights are set from smoothing lengths:
 //! `λ = ℓ₁²/h` and `μ = ℓ₂⁴/h` make the terms compare with `E₀` as a smoothing spline of
 //! lengths `ℓ₁`, `ℓ₂` would, whatever the sampling step (see [`RegressionParams`]).
@@ -81,12 +85,20 @@ pub struct RegressionReport {
     pub energy_final: f64,
     pub gradient_norm: f64,
     pub converged: bool,
+    /// Frames the run moved: all of them, unless it was limited to the neighbourhood of what
+    /// changed ([`RegressionSolver::run_local`]); the others kept the last run's.
+    pub frames_moved: usize,
+    /// Frames of the network (a closed curve's first and last sample are one).
+    pub frames: usize,
 }
 
 /// Keeps the symbolic factorisation of the normal matrix between iterations and runs.
 #[derive(Debug, Default)]
 pub struct RegressionSolver {
     pattern: CachedPattern,
+    /// The pattern of the last local run's (smaller) system, kept apart so that the whole
+    /// network's symbolic factorisation survives local runs.
+    local_pattern: CachedPattern,
 }
 
 /// The Jacobian of a residual block with respect to one variable: one row of 3 per residual.
@@ -132,6 +144,9 @@ struct Resolved {
 struct Problem {
     /// Targets and current frames, per variable.
     a: Vec<Matrix3<f64>>,
+    /// The variables `0..movable` move; the rest (a local run's fixed frames that a kept term
+    /// touches, [`restrict`]) are constants at their frames in `x`.
+    movable: usize,
     /// Reliability of each target (weight of its E₀ term).
     w: Vec<f64>,
     /// (var i, var i+1, step h) per edge; (prev, mid, next, h) per bending triple.
@@ -220,6 +235,7 @@ fn problem(curves: &[UniformCurve]) -> Problem {
         }
     }
     Problem {
+        movable: a.len(),
         a,
         w,
         edges,
@@ -246,8 +262,8 @@ fn terms(pb: &Problem, x: &[Matrix3<f64>], p: &Resolved) -> Terms {
     // E0 = Σ w‖X − A‖²_F = Σ w (6 − 2 tr XᵀA); with J_k = √w X ê_k,
     // Jᵀr = −2w vee(skew(XᵀA)) and JᵀJ = 2w I.
     let mut e0_energy = 0.0;
-    let mut e0_grad = Vec::with_capacity(x.len());
-    for (i, (xi, ai)) in x.iter().zip(&pb.a).enumerate() {
+    let mut e0_grad = Vec::with_capacity(pb.movable);
+    for (i, (xi, ai)) in x.iter().zip(&pb.a).take(pb.movable).enumerate() {
         let w = pb.w[i];
         let m = xi.transpose() * ai;
         e0_energy += w * (xi - ai).norm_squared();
@@ -303,6 +319,12 @@ fn terms(pb: &Problem, x: &[Matrix3<f64>], p: &Resolved) -> Terms {
         };
         blocks.push((vec![(i, rows(ji)), (j, rows(jj))], r.as_slice().to_vec()));
     }
+    if pb.movable < pb.a.len() {
+        // Constants have no Jacobian.
+        for (vars, _) in &mut blocks {
+            vars.retain(|(v, _)| *v < pb.movable);
+        }
+    }
     Terms {
         blocks,
         e0_energy,
@@ -352,77 +374,111 @@ impl RegressionSolver {
         init: &[Option<&[UnitQuaternion<f64>]>],
     ) -> RegressionReport {
         let pb = problem(curves);
-        let p = &Resolved {
+        let p = Resolved {
             stretch_length: params.stretch_length,
             bend: bend_length(curves, params),
             xi: params.xi,
         };
-        let n = pb.a.len();
-        if n == 0 {
-            return RegressionReport::default();
-        }
-        let mut x = start(&pb, curves, init);
-        let (normal, entries) = NormalPattern::of(&pb, p);
-        let symbolic = match self.pattern.pattern(3 * n, entries) {
-            Ok((s, _)) => s,
-            Err(e) => {
-                tracing::error!("regression: {e}");
-                return RegressionReport::default();
-            }
-        };
-        let mut t = terms(&pb, &x, p);
-        let slots = normal.slots(&t);
-        let e0 = energy(&t);
-        let mut report = RegressionReport {
-            energy_initial: e0,
-            energy_final: e0,
-            ..Default::default()
-        };
-        let mut damping = 1e-6;
-        let mut e = e0;
-        for it in 0..params.max_iterations {
-            report.iterations = it + 1;
-            let (blocks, g) = normal_equations(&pb, &t, &slots, &normal);
-            let gnorm = g.iter().map(|v| v.norm_squared()).sum::<f64>().sqrt();
-            report.gradient_norm = gnorm;
-            if gnorm < params.gradient_tolerance {
-                report.converged = true;
-                break;
-            }
-            let accepted = match damped_step(
-                symbolic,
-                &normal,
-                &blocks,
-                &g,
-                &x,
-                e,
-                &mut damping,
-                |trial| {
-                    let tt = terms(&pb, trial, p);
-                    let et = energy(&tt);
-                    (tt, et)
-                },
-            ) {
-                Some((trial, tt, et)) => {
-                    let rel = (e - et) / e.max(1e-300);
-                    x = trial;
-                    t = tt;
-                    e = et;
-                    damping = (damping / 3.0).max(1e-12);
-                    if rel < params.relative_tolerance {
-                        report.converged = true;
-                    }
-                    true
-                }
-                None => false,
-            };
-            if !accepted || report.converged {
-                report.converged |= !accepted && gnorm < 1e-6;
-                break;
-            }
-        }
-        report.energy_final = e;
+        let x = start(&pb, curves, init);
+        let (x, report) = optimise(&mut self.pattern, &pb, &p, x, params);
         write_back(curves, &pb, &x);
+        report
+    }
+
+    /// As [`run_from`](Self::run_from) from `previous` (each curve's frames of the last run,
+    /// `None` for a curve that is new or changed since), moving only the frames near what
+    /// changed (issue 19): every frame of a changed curve, and the frames within `window`
+    /// samples of each node a changed curve passes through, or one of `changed_nodes` (the
+    /// nodes of curves that left the network, or whose ties changed otherwise); every other
+    /// frame keeps its `previous` value. The terms that touch a moving frame are minimised,
+    /// the others are constants.
+    ///
+    /// The node ties are strong and the bending weak at the default lengths (`ℓ₂ = h/2`: a
+    /// correction at a node decays by ~0.3 per sample along a curve of full reliability), so
+    /// the frames outside the window barely move in a whole-network run; but this is an
+    /// approximation of [`run`](Self::run)'s optimum, for live updates that a whole-network
+    /// run settles later. When everything changed, it is `run_from(previous)`.
+    pub fn run_local(
+        &mut self,
+        curves: &mut [UniformCurve],
+        params: &RegressionParams,
+        previous: &[Option<&[UnitQuaternion<f64>]>],
+        window: usize,
+        changed_nodes: &[u32],
+    ) -> RegressionReport {
+        let kept = |k: usize| -> Option<&[UnitQuaternion<f64>]> {
+            previous
+                .get(k)
+                .copied()
+                .flatten()
+                .filter(|q| q.len() == curves[k].q.len())
+        };
+        let pb = problem(curves);
+        let mut free = vec![false; pb.a.len()];
+        let mut nodes: std::collections::HashSet<u32> = changed_nodes.iter().copied().collect();
+        for (k, c) in curves.iter().enumerate() {
+            if kept(k).is_none() {
+                for &v in &pb.var_of[k] {
+                    free[v] = true;
+                }
+                nodes.extend(c.nodes.iter().map(|x| x.1));
+            }
+        }
+        for (k, c) in curves.iter().enumerate() {
+            let vars = &pb.var_of[k];
+            let n = vars.len();
+            // A closed curve's last variable is its first: its windows wrap.
+            let closed = n > 2 && vars[0] == vars[n - 1];
+            for &(i, _) in c.nodes.iter().filter(|x| nodes.contains(&x.1)) {
+                let (i, w) = (i as isize, window as isize);
+                for j in i - w..=i + w {
+                    let j = if closed {
+                        Some(j.rem_euclid(n as isize - 1))
+                    } else {
+                        (0..n as isize).contains(&j).then_some(j)
+                    };
+                    if let Some(j) = j {
+                        free[vars[j as usize]] = true;
+                    }
+                }
+            }
+        }
+        let moving = free.iter().filter(|f| **f).count();
+        if moving == free.len() {
+            return self.run_from(curves, params, previous);
+        }
+        let p = Resolved {
+            stretch_length: params.stretch_length,
+            bend: bend_length(curves, params),
+            xi: params.xi,
+        };
+        let init: Vec<Option<&[UnitQuaternion<f64>]>> = (0..curves.len()).map(kept).collect();
+        let mut x = start(&pb, curves, &init);
+        let mut report = RegressionReport::default();
+        if moving > 0 {
+            let (sub, of) = restrict(&pb, &free);
+            let xs = of.iter().map(|&v| x[v]).collect();
+            let (xs, r) = optimise(&mut self.local_pattern, &sub, &p, xs, params);
+            for (&v, xv) in of.iter().zip(xs).take(sub.movable) {
+                x[v] = xv;
+            }
+            report = r;
+        }
+        report.frames = pb.a.len();
+        report.frames_moved = moving;
+        // The kept frames as they were, to the bit (not through their matrices).
+        let kept: Vec<Option<Vec<UnitQuaternion<f64>>>> =
+            init.iter().map(|q| q.map(<[_]>::to_vec)).collect();
+        write_back(curves, &pb, &x);
+        for ((c, vars), q0) in curves.iter_mut().zip(&pb.var_of).zip(kept) {
+            if let Some(q0) = q0 {
+                for ((q, &v), q0) in c.q.iter_mut().zip(vars).zip(q0) {
+                    if !free[v] {
+                        *q = q0;
+                    }
+                }
+            }
+        }
         report
     }
 
@@ -430,6 +486,135 @@ impl RegressionSolver {
     pub fn symbolic_count(&self) -> usize {
         self.pattern.symbolic_count()
     }
+}
+
+/// Levenberg–Marquardt on problem `pb` from frames `x` (`pb.a.len()` of them; those past
+/// `pb.movable` stay): the normal matrix's block pattern built once (`NormalPattern`) and
+/// factorised symbolically only when it changed since `pattern`'s last use; each iteration
+/// assembles the normal equations (`normal_equations`) and takes a damped step
+/// (`damped_step`). The frames reached and what it took.
+fn optimise(
+    pattern: &mut CachedPattern,
+    pb: &Problem,
+    p: &Resolved,
+    mut x: Vec<Matrix3<f64>>,
+    params: &RegressionParams,
+) -> (Vec<Matrix3<f64>>, RegressionReport) {
+    let n = pb.movable;
+    let mut report = RegressionReport {
+        frames: n,
+        frames_moved: n,
+        ..Default::default()
+    };
+    if n == 0 {
+        return (x, report);
+    }
+    let (normal, entries) = NormalPattern::of(pb, p);
+    let symbolic = match pattern.pattern(3 * n, entries) {
+        Ok((s, _)) => s,
+        Err(e) => {
+            tracing::error!("regression: {e}");
+            return (x, report);
+        }
+    };
+    let mut t = terms(pb, &x, p);
+    let slots = normal.slots(&t);
+    let e0 = energy(&t);
+    report.energy_initial = e0;
+    report.energy_final = e0;
+    let mut damping = 1e-6;
+    let mut e = e0;
+    for it in 0..params.max_iterations {
+        report.iterations = it + 1;
+        let (blocks, g) = normal_equations(pb, &t, &slots, &normal);
+        let gnorm = g.iter().map(|v| v.norm_squared()).sum::<f64>().sqrt();
+        report.gradient_norm = gnorm;
+        if gnorm < params.gradient_tolerance {
+            report.converged = true;
+            break;
+        }
+        let accepted = match damped_step(
+            symbolic,
+            &normal,
+            &blocks,
+            &g,
+            &x,
+            e,
+            &mut damping,
+            |trial| {
+                let tt = terms(pb, trial, p);
+                let et = energy(&tt);
+                (tt, et)
+            },
+        ) {
+            Some((trial, tt, et)) => {
+                let rel = (e - et) / e.max(1e-300);
+                x = trial;
+                t = tt;
+                e = et;
+                damping = (damping / 3.0).max(1e-12);
+                if rel < params.relative_tolerance {
+                    report.converged = true;
+                }
+                true
+            }
+            None => false,
+        };
+        if !accepted || report.converged {
+            report.converged |= !accepted && gnorm < 1e-6;
+            break;
+        }
+    }
+    report.energy_final = e;
+    (x, report)
+}
+
+/// The part of `pb` that moves when only the variables marked in `free` may: those variables
+/// first (in their order, `movable` of them), then the fixed ones that a kept term touches
+/// (constants); the terms that touch a free variable. With the variable of `pb` behind each
+/// of its variables.
+fn restrict(pb: &Problem, free: &[bool]) -> (Problem, Vec<usize>) {
+    let mut of: Vec<usize> = (0..pb.a.len()).filter(|&v| free[v]).collect();
+    let movable = of.len();
+    let mut new = vec![usize::MAX; pb.a.len()];
+    for (k, &v) in of.iter().enumerate() {
+        new[v] = k;
+    }
+    let mut map = |v: usize| -> usize {
+        if new[v] == usize::MAX {
+            new[v] = of.len();
+            of.push(v);
+        }
+        new[v]
+    };
+    let edges: Vec<(usize, usize, f64)> = pb
+        .edges
+        .iter()
+        .filter(|e| free[e.0] || free[e.1])
+        .map(|&(i, j, h)| (map(i), map(j), h))
+        .collect();
+    let triples = pb
+        .triples
+        .iter()
+        .filter(|t| free[t.0] || free[t.1] || free[t.2])
+        .map(|&(a, b, c, h)| (map(a), map(b), map(c), h))
+        .collect();
+    let pairs = pb
+        .pairs
+        .iter()
+        .filter(|q| free[q.0] || free[q.1])
+        .map(|&(i, j)| (map(i), map(j)))
+        .collect();
+    let sub = Problem {
+        a: of.iter().map(|&v| pb.a[v]).collect(),
+        movable,
+        w: of.iter().map(|&v| pb.w[v]).collect(),
+        edges,
+        triples,
+        pairs,
+        var_of: Vec::new(),
+    };
+    (sub, of)
 }
 
 /// The frames the iterations start from: the data, or `init[k]` where it fits curve `k`.
@@ -465,10 +650,10 @@ impl NormalPattern {
     /// The pattern of problem `pb` under the settings `p` (terms of weight zero add none),
     /// and its scalar entries (`(row, col)`, `row ≥ col`, in the order of [`values`](Self::values)).
     fn of(pb: &Problem, p: &Resolved) -> (Self, Vec<(usize, usize)>) {
-        let n = pb.a.len();
+        let n = pb.movable;
         let mut block_keys: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
         let mut add = |a: usize, b: usize| {
-            if a != b {
+            if a != b && a < n && b < n {
                 block_keys.push((a.max(b), a.min(b)));
             }
         };
@@ -564,7 +749,7 @@ fn normal_equations(
 ) -> (Vec<Matrix3<f64>>, Vec<Vector3<f64>>) {
     let mut blocks = vec![Matrix3::<f64>::zeros(); pattern.block_keys.len()];
     let mut g = t.e0_grad.clone();
-    for (i, w) in pb.w.iter().enumerate() {
+    for (i, w) in pb.w.iter().take(pb.movable).enumerate() {
         blocks[pattern.diag_slot[i]] += Matrix3::identity() * (2.0 * w);
     }
     for ((vars, r), slot) in t.blocks.iter().zip(slots) {
@@ -613,14 +798,16 @@ fn damped_step<T>(
         };
         let mut rhs: Vec<[f64; 1]> = g.iter().flat_map(|v| [[-v.x], [-v.y], [-v.z]]).collect();
         f.solve(&mut rhs);
+        // Frames past the gradient's (a local run's constants) stay.
         let trial: Vec<Matrix3<f64>> = x
             .iter()
             .enumerate()
-            .map(|(i, xi)| {
-                retract(
+            .map(|(i, xi)| match g.get(i) {
+                Some(_) => retract(
                     xi,
                     &Vector3::new(rhs[3 * i][0], rhs[3 * i + 1][0], rhs[3 * i + 2][0]),
-                )
+                ),
+                None => *xi,
             })
             .collect();
         if trial.iter().any(|m| m.iter().any(|v| !v.is_finite())) {
@@ -726,6 +913,53 @@ mod tests {
             "{}",
             n0.angle(&n1).to_degrees()
         );
+    }
+
+    /// Issue 19, point 2: a curve joins a network of two; the local run moves the new curve
+    /// and the window around the nodes it shares, keeps every other frame as it was, and
+    /// lands next to the whole network's optimum.
+    #[test]
+    fn issue_19_a_local_run_moves_the_new_curves_neighbourhood_only() {
+        let (a, _) = arc(0.02, 11, 0, (0, 1), 0.0);
+        let (b, _) = arc(0.02, 12, 1, (0, 2), 0.1);
+        let (c, _) = arc(0.02, 13, 2, (1, 2), 0.2);
+        let p = RegressionParams::default();
+        let mut before = vec![a.clone(), b.clone()];
+        let mut solver = RegressionSolver::new();
+        solver.run(&mut before, &p);
+        let mut whole = vec![a.clone(), b.clone(), c.clone()];
+        RegressionSolver::new().run(&mut whole, &p);
+        let mut local = vec![a, b, c];
+        let previous = [
+            Some(before[0].q.as_slice()),
+            Some(before[1].q.as_slice()),
+            None,
+        ];
+        let window = 10;
+        let rep = solver.run_local(&mut local, &p, &previous, window, &[]);
+        // Curve c (201 frames) and the last 11 frames of a and b (at nodes 1 and 2).
+        assert_eq!(rep.frames, 603);
+        assert_eq!(rep.frames_moved, 201 + 2 * (window + 1));
+        assert!(rep.energy_final < rep.energy_initial);
+        for k in 0..2 {
+            for j in 0..=200 {
+                let kept = local[k].q[j] == before[k].q[j];
+                assert_eq!(kept, j < 200 - window, "curve {k}, sample {j}");
+            }
+        }
+        let worst = local
+            .iter()
+            .zip(&whole)
+            .flat_map(|(l, w)| l.q.iter().zip(&w.q).map(|(x, y)| x.angle_to(y)))
+            .fold(0.0f64, f64::max);
+        assert!(worst.to_degrees() < 0.01, "{}°", worst.to_degrees());
+        // Curve b leaves the network: the frames at its nodes move again (a's at node 0,
+        // c's at node 2).
+        let mut two = vec![local[0].clone(), local[2].clone()];
+        let prev: Vec<Vec<UnitQuaternion<f64>>> = two.iter().map(|c| c.q.clone()).collect();
+        let previous = [Some(prev[0].as_slice()), Some(prev[1].as_slice())];
+        let rep = solver.run_local(&mut two, &p, &previous, window, &[0, 2]);
+        assert_eq!(rep.frames_moved, 2 * (window + 1));
     }
 
     #[test]
