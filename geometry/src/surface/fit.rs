@@ -701,19 +701,19 @@ impl SoftSolver {
 
     /// Two propagations at once (`b = 0`), as [`solve`](Self::solve).
     fn solve_pair(&self, x: &mut [Vector3<f64>], y: &mut [Vector3<f64>]) {
-        let mut rhs: Vec<[f64; 6]> = (0..x.len())
-            .map(|i| match self.weights.get(i) {
-                Some(&w) => {
-                    let (r, s) = (x[i] * w, y[i] * w);
-                    [r.x, r.y, r.z, s.x, s.y, s.z]
-                }
-                None => [0.0; 6],
-            })
-            .collect();
-        self.factor.solve(&mut rhs);
-        for (i, r) in rhs.iter().enumerate() {
+        let rhs = |v: &[Vector3<f64>]| -> Vec<[f64; 3]> {
+            (0..v.len())
+                .map(|i| {
+                    let r = v[i] * self.weights.get(i).copied().unwrap_or(0.0);
+                    [r.x, r.y, r.z]
+                })
+                .collect()
+        };
+        let (mut rx, mut ry) = (rhs(x), rhs(y));
+        self.factor.solve_two(&mut rx, &mut ry);
+        for (i, (r, s)) in rx.iter().zip(&ry).enumerate() {
             x[i] = Vector3::new(r[0], r[1], r[2]);
-            y[i] = Vector3::new(r[3], r[4], r[5]);
+            y[i] = Vector3::new(s[0], s[1], s[2]);
         }
     }
 
@@ -793,23 +793,25 @@ impl FreeSolver {
     /// Two biharmonic fields at once (`b = 0`, one pass over the factor for both).
     fn solve_pair(&self, q: &SparseRows, x: &mut [Vector3<f64>], y: &mut [Vector3<f64>]) {
         let c = self.c;
-        let mut rhs: Vec<[f64; 6]> = (c..q.n())
-            .map(|i| {
-                let wg = self.guide.get(i - c).copied().unwrap_or(0.0);
-                let (mut r, mut s) = (x[i] * wg, y[i] * wg);
-                for &(j, w) in &q.rows[i] {
-                    if j < c {
-                        r -= x[j] * w;
-                        s -= y[j] * w;
+        let rhs = |v: &[Vector3<f64>]| -> Vec<[f64; 3]> {
+            (c..q.n())
+                .map(|i| {
+                    let wg = self.guide.get(i - c).copied().unwrap_or(0.0);
+                    let mut r = v[i] * wg;
+                    for &(j, w) in &q.rows[i] {
+                        if j < c {
+                            r -= v[j] * w;
+                        }
                     }
-                }
-                [r.x, r.y, r.z, s.x, s.y, s.z]
-            })
-            .collect();
-        self.factor.solve(&mut rhs);
-        for (i, r) in rhs.iter().enumerate() {
+                    [r.x, r.y, r.z]
+                })
+                .collect()
+        };
+        let (mut rx, mut ry) = (rhs(x), rhs(y));
+        self.factor.solve_two(&mut rx, &mut ry);
+        for (i, (r, s)) in rx.iter().zip(&ry).enumerate() {
             x[c + i] = Vector3::new(r[0], r[1], r[2]);
-            y[c + i] = Vector3::new(r[3], r[4], r[5]);
+            y[c + i] = Vector3::new(s[0], s[1], s[2]);
         }
     }
 
