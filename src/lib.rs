@@ -35,7 +35,8 @@
 //!   latest.glb, gauges on the view's `/metrics`).
 //! - [`settings`]: everything a session runs with, resolved once; [`config`]: the
 //!   configuration file (`config/*.toml`), one module per section, resolved into settings;
-//!   [`cli`]: the raw flags; `main.rs` the thin binary over them.
+//!   [`cli`]: the raw flags; `main.rs` the thin binary over them; [`logging`]: the log
+//!   lines (human or JSON with the session, journald-aware).
 //! - [`shutdown`]: the stop signal passed into every long-running part.
 //! - Tools beside the daemon: [`calibrate`] (`sfs calibrate`: ellipsoid and static-pose
 //!   fits), [`simulate`] (captures of known shapes: operator timeline, device models),
@@ -56,6 +57,7 @@ pub mod gltf_out;
 pub mod keypad;
 pub mod link;
 pub mod live;
+pub mod logging;
 pub mod memory;
 pub mod metrics;
 pub mod monitor;

@@ -3,8 +3,7 @@
 
 use clap::Parser;
 use sfs::cli::{
-    CalibrateArgs, Cli, Command, ConfigCommand, EvalArgs, LogFormat, ReplayArgs, RunArgs,
-    SimulateArgs,
+    CalibrateArgs, Cli, Command, ConfigCommand, EvalArgs, ReplayArgs, RunArgs, SimulateArgs,
 };
 use sfs::config::{self, ConfigError};
 use sfs::exit;
@@ -29,7 +28,7 @@ fn main() {
             std::process::exit(code);
         }
     };
-    init_logging(cli.log_format, cli.log.as_deref());
+    sfs::logging::init(cli.log_format, cli.log.as_deref());
     std::process::exit(match cli.command {
         Command::Replay(a) => replay(a),
         Command::Run(a) => run(a),
@@ -38,37 +37,6 @@ fn main() {
         Command::Eval(a) => eval(a),
         Command::Config(ConfigCommand::Check { file }) => config_check(&file),
     });
-}
-
-fn init_logging(format: LogFormat, filter: Option<&str>) {
-    use tracing_subscriber::EnvFilter;
-    let filter = match filter {
-        Some(f) => EnvFilter::new(f),
-        None => EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
-    };
-    use std::io::IsTerminal;
-    let builder = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_ansi(std::io::stderr().is_terminal())
-        .with_writer(|| QuietStderr);
-    match format {
-        LogFormat::Human => builder.init(),
-        LogFormat::Json => builder.json().init(),
-    }
-}
-
-/// Standard error for the logs, ignoring write errors: a closed log pipe must not stop (or
-/// panic) the daemon.
-struct QuietStderr;
-
-impl std::io::Write for QuietStderr {
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        let _ = std::io::stderr().write_all(buf);
-        Ok(buf.len())
-    }
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
 }
 
 /// Prints to standard output, ignoring a closed pipe (`sfs … | head` must not panic).
@@ -88,6 +56,7 @@ macro_rules! complain {
 }
 
 fn replay(a: ReplayArgs) -> i32 {
+    sfs::logging::set_session(&a.out.display().to_string());
     let spec = SourceSpec::Replay {
         path: a.capture,
         pace: a.pace,
@@ -122,6 +91,7 @@ fn run(a: RunArgs) -> i32 {
             return exit::USAGE;
         }
     };
+    sfs::logging::set_session(&dir.display().to_string());
     // A resumed session keeps the configuration it started with.
     let saved = dir.join(session::CONFIG_COPY);
     let config = match (&a.config, resume) {
