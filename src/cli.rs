@@ -69,6 +69,38 @@ pub enum Command {
     /// Configuration files.
     #[command(subcommand)]
     Config(ConfigCommand),
+    /// List the serial ports with their type and USB identity (vendor:product id,
+    /// manufacturer, product, serial number); with --probe, open each for a moment and say
+    /// which speak this protocol (the HELLO's device kind, id, firmware and rate).
+    Ports(PortsArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct PortsArgs {
+    /// Open each port for up to --probe-secs and decode what it sends.
+    #[arg(long)]
+    pub probe: bool,
+    /// How long a probe listens, seconds (a device sends HELLO every 5 s; valid packets before
+    /// it are enough to say it speaks the protocol).
+    #[arg(long, default_value_t = 2.0, value_parser = probe_secs)]
+    pub probe_secs: f64,
+    /// Serial speed of the probes, baud.
+    #[arg(long, default_value_t = crate::settings::DEFAULT_BAUD)]
+    pub baud: u32,
+    /// Print JSON (an array of ports) instead of lines.
+    #[arg(long)]
+    pub json: bool,
+    /// More ports to list and probe (a udev symlink such as /dev/sfs-morphorider-…, a
+    /// pseudo-terminal).
+    pub paths: Vec<PathBuf>,
+}
+
+fn probe_secs(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if (0.05..=60.0).contains(&x) => Ok(x),
+        Ok(x) => Err(format!("{x} s is not between 0.05 and 60")),
+        Err(e) => Err(e.to_string()),
+    }
 }
 
 #[derive(Debug, Args)]

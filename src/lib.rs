@@ -5,7 +5,8 @@
 //!
 //! - `device-protocol` (its own crate): bytes ⇄ packets, the wire format version 1.
 //! - [`source`]: where bytes come from (serial port, capture file, stdin), each on its own
-//!   thread behind one channel of [`source::SourceEvent`]s.
+//!   thread behind one channel of [`source::SourceEvent`]s; [`ports`]: the serial ports with
+//!   their USB identity, probed for this protocol (`sfs ports`).
 //! - [`capture`]: lossless capture of live bytes, written before anything decodes them
 //!   (rotated with retention for unattended runs, each piece keeping the session's time);
 //!   [`clock`]: the session time from the device's stamps (wraps and reboots bridged).
@@ -63,6 +64,7 @@ pub mod metrics;
 pub mod monitor;
 pub mod orientation;
 pub mod pipeline;
+pub mod ports;
 pub mod report;
 pub mod scan;
 pub mod sensor;

@@ -3,7 +3,8 @@
 
 use clap::Parser;
 use sfs::cli::{
-    CalibrateArgs, Cli, Command, ConfigCommand, EvalArgs, ReplayArgs, RunArgs, SimulateArgs,
+    CalibrateArgs, Cli, Command, ConfigCommand, EvalArgs, PortsArgs, ReplayArgs, RunArgs,
+    SimulateArgs,
 };
 use sfs::config::{self, ConfigError};
 use sfs::exit;
@@ -36,6 +37,7 @@ fn main() {
         Command::Simulate(a) => simulate(a),
         Command::Eval(a) => eval(a),
         Command::Config(ConfigCommand::Check { file }) => config_check(&file),
+        Command::Ports(a) => ports(a),
     });
 }
 
@@ -193,6 +195,90 @@ fn calibrate(a: CalibrateArgs) -> i32 {
             complain!("sfs: {e}");
             exit::INPUT
         }
+    }
+}
+
+/// `sfs ports`: the listed ports and those given, probed in parallel with --probe.
+fn ports(a: PortsArgs) -> i32 {
+    use sfs::ports::{self, PortInfo, Probe};
+    let mut list = ports::list();
+    let mut missing = false;
+    for p in &a.paths {
+        if !p.exists() {
+            complain!("sfs: {}: no such port", p.display());
+            missing = true;
+            continue;
+        }
+        // A symlink to a listed port is that port, under the name given.
+        let real = std::fs::canonicalize(p).ok();
+        let known = list
+            .iter()
+            .position(|q| real.as_deref() == Some(Path::new(&q.path)));
+        let path = p.display().to_string();
+        match known {
+            Some(k) => list[k].path = path,
+            None => list.push(PortInfo {
+                path,
+                kind: "unknown",
+                usb: None,
+            }),
+        }
+    }
+    let time = Duration::from_secs_f64(a.probe_secs);
+    let probes: Vec<Option<Probe>> = if a.probe {
+        std::thread::scope(|s| {
+            let handles: Vec<_> = list
+                .iter()
+                .map(|p| s.spawn(move || ports::probe(Path::new(&p.path), a.baud, time)))
+                .collect();
+            handles.into_iter().map(|h| h.join().ok()).collect()
+        })
+    } else {
+        vec![None; list.len()]
+    };
+    if a.json {
+        let rows: Vec<serde_json::Value> = list
+            .iter()
+            .zip(&probes)
+            .map(|(p, probe)| {
+                let mut v = serde_json::to_value(p).unwrap_or_default();
+                if let Some(pr) = probe {
+                    v["probe"] = serde_json::to_value(pr).unwrap_or_default();
+                    v["probe"]["text"] = pr.to_string().into();
+                }
+                v
+            })
+            .collect();
+        say!("{}", serde_json::Value::Array(rows));
+    } else if list.is_empty() {
+        say!("no serial ports found");
+    }
+    if !a.json {
+        for (p, probe) in list.iter().zip(&probes) {
+            let mut line = format!("{}: {}", p.path, p.kind);
+            if let Some(u) = &p.usb {
+                line += &format!(" {}", u.id);
+                let names: Vec<&str> = [&u.manufacturer, &u.product]
+                    .into_iter()
+                    .filter_map(|x| x.as_deref())
+                    .collect();
+                if !names.is_empty() {
+                    line += &format!(", {}", names.join(" "));
+                }
+                if let Some(sn) = &u.serial {
+                    line += &format!(", serial {sn}");
+                }
+            }
+            say!("{line}");
+            if let Some(pr) = probe {
+                say!("  probe: {pr}");
+            }
+        }
+    }
+    if missing {
+        exit::INPUT
+    } else {
+        exit::OK
     }
 }
 
