@@ -203,6 +203,11 @@ pub struct RunArgs {
     /// configuration the session started with (SESSION/config.toml) is used.
     #[arg(long, value_name = "SESSION")]
     pub resume: Option<PathBuf>,
+    /// With --session: when the directory already holds a capture, continue it as --resume
+    /// would instead of refusing it (a service restarted after a crash, a stall or a reboot
+    /// keeps one session: deploy/sfs@.service).
+    #[arg(long = "continue", requires = "session")]
+    pub continue_existing: bool,
     /// Serve the live view (a web page: the network as it grows, the curve being scanned,
     /// the status, the warnings) at ADDR (default 127.0.0.1:8040) while the session runs;
     /// overrides `[view] address`.

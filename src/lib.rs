@@ -38,7 +38,8 @@
 //!   configuration file (`config/*.toml`), one module per section, resolved into settings;
 //!   [`cli`]: the raw flags; `main.rs` the thin binary over them; [`logging`]: the log
 //!   lines (human or JSON with the session, journald-aware).
-//! - [`shutdown`]: the stop signal passed into every long-running part.
+//! - [`shutdown`]: the stop signal passed into every long-running part; [`service`]: systemd's
+//!   readiness, status and watchdog (`deploy/sfs@.service`).
 //! - Tools beside the daemon: [`calibrate`] (`sfs calibrate`: ellipsoid and static-pose
 //!   fits), [`simulate`] (captures of known shapes: operator timeline, device models),
 //!   [`eval`] (`sfs eval`: scoring against a truth).
@@ -68,6 +69,7 @@ pub mod ports;
 pub mod report;
 pub mod scan;
 pub mod sensor;
+pub mod service;
 pub mod session;
 pub mod settings;
 pub mod shutdown;

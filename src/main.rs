@@ -86,6 +86,10 @@ fn replay(a: ReplayArgs) -> i32 {
 
 fn run(a: RunArgs) -> i32 {
     let (dir, resume) = match (&a.session, &a.resume) {
+        (Some(d), None) if a.continue_existing && d.join(session::CAPTURE_FILE).exists() => {
+            tracing::info!("{} holds a capture: continuing it", d.display());
+            (d.clone(), true)
+        }
         (Some(d), None) => (d.clone(), false),
         (None, Some(d)) => (d.clone(), true),
         _ => {

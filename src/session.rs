@@ -163,8 +163,14 @@ pub async fn run(
         started,
         view.clone(),
     )?;
+    // The service manager is told once the source is open (a resumed capture is decoded
+    // after, with the watchdog fed as it goes).
+    flow.notifier.ready(&format!("reading {description}"));
     if let Some(files) = prior {
+        flow.notifier
+            .status("resuming: decoding the capture so far");
         flow.resume(files)?;
+        flow.notifier.status(&format!("reading {description}"));
     }
     let end = flow.stream(&mut src, &shutdown, progress.as_ref()).await;
     stop_source(src).await;
@@ -310,6 +316,10 @@ struct Flow {
     /// When the view was last given the preview, and whether it shows one.
     preview_at: Option<Instant>,
     preview_shown: bool,
+    /// systemd: readiness, status, the watchdog fed by this loop.
+    notifier: crate::service::Notifier,
+    /// The watchdog test's fault injection ([`crate::service::stall_after_bytes`]).
+    stall_after: Option<u64>,
 }
 
 impl Flow {
@@ -357,6 +367,8 @@ impl Flow {
             warnings_shown: 0,
             preview_at: None,
             preview_shown: false,
+            notifier: crate::service::Notifier::from_env(),
+            stall_after: crate::service::stall_after_bytes(),
         })
     }
 
@@ -371,6 +383,11 @@ impl Flow {
                 }
                 if let (Some(v), Update::CurveEnded(i)) = (&self.view, update) {
                     v.curve_ended(i);
+                }
+                if let (true, Update::CurveEnded(i)) = (post, update) {
+                    let curves = self.acq.scan().curves.len();
+                    self.notifier
+                        .status(&format!("curve {i} ended; {curves} curves in the scan"));
                 }
             }
         }
@@ -436,6 +453,7 @@ impl Flow {
                     break;
                 }
                 self.feed(&chunk[..n], false);
+                self.notifier.alive();
             }
         }
         tracing::info!(
@@ -465,9 +483,15 @@ impl Flow {
             STATS_LOG_INTERVAL,
         );
         let mut logged = LinkStats::default();
+        // The watchdog is fed by this loop, also while the source is silent.
+        let ping_period = self.notifier.ping_period();
+        let mut watchdog =
+            tokio::time::interval(ping_period.unwrap_or(std::time::Duration::from_secs(3600)));
         loop {
+            self.notifier.alive();
             let ev = tokio::select! {
                 ev = src.events.recv() => ev,
+                _ = watchdog.tick(), if ping_period.is_some() => continue,
                 _ = tick.tick() => {
                     if self.stats != logged {
                         log_stats("link", &self.stats);
@@ -477,6 +501,7 @@ impl Flow {
                 }
                 _ = shutdown.triggered(), if deadline.is_none() => {
                     tracing::info!("shutdown requested: draining the source");
+                    self.notifier.stopping();
                     deadline = Some(tokio::time::Instant::now() + SHUTDOWN_GRACE);
                     continue;
                 }
@@ -488,6 +513,9 @@ impl Flow {
             match ev {
                 Some(SourceEvent::Bytes(bytes)) => {
                     self.stats.bytes += bytes.len() as u64;
+                    if self.stall_after.is_some_and(|n| self.stats.bytes >= n) {
+                        crate::service::stall();
+                    }
                     if let Some(p) = progress {
                         p.inc(bytes.len() as u64);
                     }

@@ -159,3 +159,260 @@ fn issue_20_ports_probe_reports_the_hello_and_tells_other_streams_apart() {
     let (code, _) = probe_while_sending(&link, Vec::new(), &[missing.to_str().unwrap()]);
     assert_eq!(code, 3);
 }
+
+/// The datagrams `sfs` sends to a fake `NOTIFY_SOCKET`, with when they arrived.
+struct NotifySocket {
+    path: std::path::PathBuf,
+    rx: std::sync::mpsc::Receiver<(std::time::Instant, String)>,
+    seen: Vec<(std::time::Instant, String)>,
+}
+
+impl NotifySocket {
+    fn bind(path: std::path::PathBuf) -> Self {
+        let _ = std::fs::remove_file(&path);
+        let sock = std::os::unix::net::UnixDatagram::bind(&path).unwrap();
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = sock.recv(&mut buf) {
+                let msg = String::from_utf8_lossy(&buf[..n]).into_owned();
+                if tx.send((std::time::Instant::now(), msg)).is_err() {
+                    break;
+                }
+            }
+        });
+        NotifySocket {
+            path,
+            rx,
+            seen: Vec::new(),
+        }
+    }
+
+    /// Waits up to `timeout` for a datagram holding `line`; when it came.
+    fn wait_for(&mut self, line: &str, timeout: std::time::Duration) -> Option<std::time::Instant> {
+        let end = std::time::Instant::now() + timeout;
+        loop {
+            let left = end.checked_duration_since(std::time::Instant::now())?;
+            let (at, msg) = self.rx.recv_timeout(left).ok()?;
+            self.seen.push((at, msg.clone()));
+            if msg.lines().any(|l| l == line) {
+                return Some(at);
+            }
+        }
+    }
+
+    /// The arrival times of `line` among the datagrams already received.
+    fn drain(&mut self, line: &str) -> Vec<std::time::Instant> {
+        let mut at = Vec::new();
+        while let Ok((t, msg)) = self.rx.try_recv() {
+            if msg.lines().any(|l| l == line) {
+                at.push(t);
+            }
+            self.seen.push((t, msg));
+        }
+        at
+    }
+
+    /// The arrival times of `line` from now during `time`.
+    fn collect(&mut self, line: &str, time: std::time::Duration) -> Vec<std::time::Instant> {
+        let end = std::time::Instant::now() + time;
+        let mut at = Vec::new();
+        while let Some(left) = end.checked_duration_since(std::time::Instant::now()) {
+            match self.rx.recv_timeout(left) {
+                Ok((t, msg)) => {
+                    if msg.lines().any(|l| l == line) {
+                        at.push(t);
+                    }
+                    self.seen.push((t, msg));
+                }
+                Err(_) => break,
+            }
+        }
+        at
+    }
+}
+
+/// Whether process `pid` has `pts` open.
+fn has_open(pid: u32, pts: &str) -> bool {
+    std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .map(|d| {
+            d.filter_map(|e| std::fs::read_link(e.ok()?.path()).ok())
+                .any(|t| t == Path::new(pts))
+        })
+        .unwrap_or(false)
+}
+
+/// The largest gap between consecutive instants, and from the last to `end`.
+fn largest_gap(
+    at: &[std::time::Instant],
+    start: std::time::Instant,
+    end: std::time::Instant,
+) -> std::time::Duration {
+    let mut prev = start;
+    let mut worst = std::time::Duration::ZERO;
+    for &t in at.iter().chain([end].iter()) {
+        worst = worst.max(t.saturating_duration_since(prev));
+        prev = t;
+    }
+    worst
+}
+
+/// A child killed when dropped (a failed assertion must not leave a stalled daemon behind).
+struct Daemon(std::process::Child);
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Starts `sfs run` on a pseudo-terminal as systemd starts `deploy/sfs@.service`: a notify
+/// socket and a 2 s watchdog in its environment.
+fn start_service(
+    dir: &Path,
+    extra_env: &[(&str, String)],
+) -> (Daemon, common::pty::Device, NotifySocket) {
+    let link = dir.join("sfs-morphorider-7");
+    let dev = common::pty::plug(&link);
+    let notify = NotifySocket::bind(dir.join("notify.sock"));
+    let child = sfs()
+        .args(["run", "--serial"])
+        .arg(&link)
+        .arg("--session")
+        .arg(dir.join("session"))
+        .arg("--continue")
+        .env("NOTIFY_SOCKET", &notify.path)
+        .env("WATCHDOG_USEC", "2000000")
+        .envs(extra_env.iter().map(|(k, v)| (k, v)))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    (Daemon(child), dev, notify)
+}
+
+/// Writes `bytes` to the device over about `time`.
+fn send_over(dev: &mut common::pty::Device, bytes: &[u8], time: std::time::Duration) {
+    use std::io::Write;
+    let chunks: Vec<&[u8]> = bytes.chunks(128).collect();
+    let pause = time / chunks.len().max(1) as u32;
+    for c in chunks {
+        dev.master.write_all(c).unwrap();
+        std::thread::sleep(pause);
+    }
+}
+
+fn device_stream(samples: i32) -> Vec<u8> {
+    let mut b = Builder::new();
+    b.packet(hello());
+    for i in 0..samples {
+        b.sample(i % 1000);
+    }
+    b.bytes
+}
+
+#[test]
+fn issue_20_notify_ready_after_the_port_is_open_watchdog_while_running_stopping_on_signal() {
+    use std::time::{Duration, Instant};
+    let dir = tmpdir("service-notify");
+    let (mut child, mut dev, mut notify) = start_service(&dir, &[]);
+    let ready = notify.wait_for("READY=1", Duration::from_secs(20));
+    assert!(ready.is_some(), "no READY=1: {:?}", notify.seen);
+    // The port was open when it said so.
+    assert!(
+        has_open(child.0.id(), &dev.pts),
+        "READY=1 before the port was opened"
+    );
+    assert!(notify
+        .seen
+        .iter()
+        .any(|(_, m)| m.contains("STATUS=reading")));
+    // Pings while data flows, then while the device is silent: never a gap the watchdog
+    // (2 s) would restart it for.
+    let start = Instant::now();
+    send_over(&mut dev, &device_stream(600), Duration::from_secs(2));
+    let mut pings = notify.drain("WATCHDOG=1");
+    pings.extend(notify.collect("WATCHDOG=1", Duration::from_millis(2500)));
+    let end = Instant::now();
+    assert!(
+        pings.len() >= 4,
+        "{} pings in {:?}",
+        pings.len(),
+        end - start
+    );
+    let gap = largest_gap(&pings, start, end);
+    assert!(
+        gap < Duration::from_millis(1900),
+        "a {gap:?} gap between pings"
+    );
+    // SIGTERM: STOPPING=1, then a clean exit.
+    let killed = Command::new("kill")
+        .args(["-TERM", &child.0.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    assert!(
+        notify
+            .wait_for("STOPPING=1", Duration::from_secs(10))
+            .is_some(),
+        "{:?}",
+        notify.seen
+    );
+    let status = child.0.wait().unwrap();
+    assert_eq!(status.code(), Some(0));
+    // Started again as systemd restarts it: the same session, continued.
+    let capture = dir.join("session/capture.bin");
+    let before = std::fs::metadata(&capture).unwrap().len();
+    assert!(before > 0);
+    let (mut child, mut dev, mut notify) = start_service(&dir, &[]);
+    assert!(notify
+        .wait_for("READY=1", Duration::from_secs(20))
+        .is_some());
+    send_over(&mut dev, &device_stream(50), Duration::from_millis(300));
+    let _ = Command::new("kill")
+        .args(["-TERM", &child.0.id().to_string()])
+        .status();
+    assert_eq!(child.0.wait().unwrap().code(), Some(0));
+    assert!(
+        std::fs::metadata(&capture).unwrap().len() > before,
+        "the capture was continued"
+    );
+}
+
+#[test]
+fn issue_20_a_stalled_pipeline_stops_the_watchdog_pings() {
+    use std::time::{Duration, Instant};
+    let dir = tmpdir("service-stall");
+    let first = device_stream(300);
+    let (mut child, mut dev, mut notify) = start_service(
+        &dir,
+        &[(
+            "SFS_TEST_STALL_AFTER_BYTES",
+            (first.len() + 2000).to_string(),
+        )],
+    );
+    assert!(notify
+        .wait_for("READY=1", Duration::from_secs(20))
+        .is_some());
+    let start = Instant::now();
+    send_over(&mut dev, &first, Duration::from_secs(1));
+    let pings = notify.collect("WATCHDOG=1", Duration::from_millis(1500));
+    assert!(!pings.is_empty(), "no pings before the stall");
+    assert!(largest_gap(&pings, start, Instant::now()) < Duration::from_millis(1900));
+    // Past the stall: the pings stop while the process stays up.
+    send_over(&mut dev, &device_stream(200), Duration::from_millis(500));
+    std::thread::sleep(Duration::from_millis(500));
+    let _ = notify.drain("WATCHDOG=1");
+    let after = notify.collect("WATCHDOG=1", Duration::from_secs(5));
+    assert!(
+        after.is_empty(),
+        "{} pings after the stall, at {:?}",
+        after.len(),
+        after.iter().map(|t| *t - start).collect::<Vec<_>>()
+    );
+    assert!(
+        child.0.try_wait().unwrap().is_none(),
+        "the process is still up"
+    );
+}
