@@ -250,6 +250,9 @@ fn ports(a: PortsArgs) -> i32 {
                     v["probe"] = serde_json::to_value(pr).unwrap_or_default();
                     v["probe"]["text"] = pr.to_string().into();
                 }
+                if let Some(rule) = udev(p, probe.as_ref()) {
+                    v["udev"] = rule.into();
+                }
                 v
             })
             .collect();
@@ -277,6 +280,16 @@ fn ports(a: PortsArgs) -> i32 {
             if let Some(pr) = probe {
                 say!("  probe: {pr}");
             }
+            if let Some(rule) = udev(p, probe.as_ref()) {
+                say!("  udev (deploy/99-sfs.rules): {rule}");
+            }
+        }
+    }
+    /// The udev line for a USB port whose device sent its HELLO.
+    fn udev(p: &PortInfo, probe: Option<&Probe>) -> Option<String> {
+        match (p.usb.as_ref(), probe) {
+            (Some(u), Some(Probe::Hello { device, .. })) => ports::udev_rule(u, device),
+            _ => None,
         }
     }
     if missing {

@@ -85,6 +85,27 @@ fn info(p: serialport::SerialPortInfo) -> PortInfo {
     }
 }
 
+/// The udev rule (deploy/99-sfs.rules) that names the adapter `/dev/sfs-<kind>-<serial>`,
+/// for a USB port whose device said what it is.
+pub fn udev_rule(usb: &UsbIdentity, device: &str) -> Option<String> {
+    let (vid, pid) = usb.id.split_once(':')?;
+    let serial = usb.serial.as_deref().filter(|s| !s.is_empty())?;
+    let name: String = serial
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    let quoted = serial.replace('"', "");
+    Some(format!(
+        "SUBSYSTEM==\"tty\", ATTRS{{idVendor}}==\"{vid}\", ATTRS{{idProduct}}==\"{pid}\", ATTRS{{serial}}==\"{quoted}\", SYMLINK+=\"sfs-{device}-{name}\", GROUP=\"dialout\", MODE=\"0660\", TAG+=\"systemd\""
+    ))
+}
+
 /// What a probe of a port found.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(tag = "result", rename_all = "snake_case")]
@@ -232,6 +253,33 @@ fn group_name(etc_group: &str, gid: u32) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_udev_rule_names_the_adapter_by_kind_and_serial() {
+        let usb = UsbIdentity {
+            id: "0403:6015".into(),
+            manufacturer: Some("FTDI".into()),
+            product: None,
+            serial: Some("DK0A/9 Z".into()),
+        };
+        let rule = udev_rule(&usb, "morphorider").unwrap();
+        assert!(
+            rule.contains(r#"ATTRS{idVendor}=="0403", ATTRS{idProduct}=="6015""#),
+            "{rule}"
+        );
+        assert!(rule.contains(r#"ATTRS{serial}=="DK0A/9 Z""#), "{rule}");
+        assert!(
+            rule.contains(r#"SYMLINK+="sfs-morphorider-DK0A_9_Z""#),
+            "{rule}"
+        );
+        assert!(rule.contains(r#"GROUP="dialout", MODE="0660""#), "{rule}");
+        // No serial number: no stable name to give.
+        let anonymous = UsbIdentity {
+            serial: None,
+            ..usb
+        };
+        assert_eq!(udev_rule(&anonymous, "phone"), None);
+    }
 
     #[test]
     fn group_names_come_from_etc_group() {
