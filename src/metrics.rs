@@ -189,6 +189,11 @@ pub struct MonitorMetrics {
     pub sensors_missing: Gauge,
     pub sensors_saturated: Gauge,
     pub sensors_disturbed: Gauge,
+    /// Consecutive epochs with a sensor of the layout left out (missing, saturated or
+    /// disturbed); 0 while every sensor is in.
+    pub sensors_left_out_epochs: Gauge,
+    /// From an epoch's window closing to its metrics line (and latest.glb) written, seconds.
+    pub epoch_latency: GaugeF64,
     pub alarms_raised: Counter,
     /// 1 while an alarm is raised (`metric`, `threshold` labels).
     pub alarm: Family<Labels, Gauge>,
@@ -252,6 +257,17 @@ impl MonitorMetrics {
             "sensors_disturbed",
             "Sensors of the layout left out because their magnetic field is disturbed",
             self.sensors_disturbed.clone(),
+        );
+        r.register(
+            "sensors_left_out_epochs",
+            "Consecutive epochs with a sensor of the layout left out (missing, saturated or disturbed)",
+            self.sensors_left_out_epochs.clone(),
+        );
+        r.register_with_unit(
+            "epoch_latency",
+            "From the latest epoch's window closing to its metrics line and latest.glb written",
+            Unit::Seconds,
+            self.epoch_latency.clone(),
         );
         r.register("alarms_raised", "Alarms raised", self.alarms_raised.clone());
         r.register(

@@ -119,3 +119,156 @@ fn issue_20_systemd_analyze_verifies_the_unit() {
     // Unknown keys are only warnings to systemd: none is accepted here.
     assert!(out.status.success() && said.trim().is_empty(), "{said}");
 }
+
+/// Every metric `/metrics` can carry (the label families given a value so that they are
+/// encoded): name → type.
+fn exported() -> std::collections::BTreeMap<String, String> {
+    let mon = sfs::metrics::MonitorMetrics::default();
+    let m = sfs::metrics::SessionMetrics::new(Some(&mon));
+    let l = |k: &str, v: &str| vec![(k.to_string(), v.to_string())];
+    m.link_packets.get_or_create(&l("type", "HELLO")).inc();
+    m.link_rejected.get_or_create(&l("reason", "crc")).inc();
+    mon.alarm
+        .get_or_create(&l("metric", "max_displacement"))
+        .set(1);
+    mon.sensor_left_out.get_or_create(&l("sensor", "3")).set(1);
+    m.encode()
+        .lines()
+        .filter_map(|line| {
+            let mut f = line.strip_prefix("# TYPE ")?.split_whitespace();
+            Some((f.next()?.to_owned(), f.next()?.to_owned()))
+        })
+        .collect()
+}
+
+/// The `sfs_…` metric names in `text`, each checked against the exporter: a gauge by its
+/// name, a counter by its name with `_total`.
+fn check_names(text: &str, what: &str) -> std::collections::BTreeSet<String> {
+    let known = exported();
+    let mut names = std::collections::BTreeSet::new();
+    let bytes = text.as_bytes();
+    let mut i = 0;
+    while let Some(k) = text[i..].find("sfs_") {
+        let start = i + k;
+        let word_start =
+            start == 0 || !(bytes[start - 1].is_ascii_alphanumeric() || bytes[start - 1] == b'_');
+        let end = start
+            + text[start..]
+                .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                .unwrap_or(text.len() - start);
+        if word_start {
+            names.insert(text[start..end].to_owned());
+        }
+        i = end;
+    }
+    for n in &names {
+        let ok = match n.strip_suffix("_total") {
+            Some(base) => known.get(base).is_some_and(|t| t == "counter"),
+            None => known.get(n).is_some_and(|t| t != "counter"),
+        };
+        assert!(ok, "{what} names {n}, which sfs does not export: {known:?}");
+    }
+    names
+}
+
+#[test]
+fn issue_20_the_alerting_rules_name_exported_metrics_and_cover_the_cases() {
+    let rules = std::fs::read_to_string(deploy("prometheus/sfs-rules.yml")).unwrap();
+    let names = check_names(&rules, "sfs-rules.yml");
+    for n in [
+        "sfs_alarm",
+        "sfs_sensors_left_out_epochs",
+        "sfs_epochs_total",
+        "sfs_link_lost_packets_total",
+    ] {
+        assert!(names.contains(n), "no rule on {n}");
+    }
+    for alert in [
+        "SfsAlarmRaised",
+        "SfsSensorsLeftOut",
+        "SfsNoEpoch",
+        "SfsLinkLosses",
+        "SfsSessionStopped",
+    ] {
+        assert!(
+            rules.contains(&format!("alert: {alert}\n")),
+            "no alert {alert}"
+        );
+    }
+    assert!(rules.contains("[30s]"), "no epoch for 30 s");
+}
+
+#[test]
+fn issue_20_the_dashboard_names_exported_metrics_and_shows_the_monitoring() {
+    let text = std::fs::read_to_string(deploy("grafana/sfs-monitoring.json")).unwrap();
+    let dash: serde_json::Value = serde_json::from_str(&text).unwrap();
+    fn exprs(v: &serde_json::Value, out: &mut Vec<String>) {
+        match v {
+            serde_json::Value::Object(m) => {
+                for (k, x) in m {
+                    match (k.as_str(), x) {
+                        ("expr" | "definition", serde_json::Value::String(s)) => {
+                            out.push(s.clone())
+                        }
+                        _ => exprs(x, out),
+                    }
+                }
+            }
+            serde_json::Value::Array(a) => a.iter().for_each(|x| exprs(x, out)),
+            _ => {}
+        }
+    }
+    let mut all = Vec::new();
+    exprs(&dash, &mut all);
+    let names = check_names(&all.join("\n"), "sfs-monitoring.json");
+    for n in [
+        "sfs_max_displacement_meters",
+        "sfs_max_curvature_change_radians_per_meter",
+        "sfs_sensor_left_out",
+        "sfs_alarm",
+        "sfs_epoch_latency_seconds",
+    ] {
+        assert!(names.contains(n), "no panel on {n}");
+    }
+    // Every panel draws something.
+    for p in dash["panels"].as_array().unwrap() {
+        assert!(
+            !p["targets"].as_array().unwrap().is_empty(),
+            "{}",
+            p["title"]
+        );
+    }
+}
+
+#[test]
+fn issue_20_promtool_checks_and_tests_the_rules() {
+    if std::process::Command::new("promtool")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        assert!(
+            std::env::var_os("SFS_REQUIRE_PROMTOOL").is_none(),
+            "promtool is missing"
+        );
+        eprintln!("skipping: promtool is not installed (Debian: prometheus)");
+        return;
+    }
+    let dir = deploy("prometheus");
+    for args in [
+        ["check", "rules", "sfs-rules.yml"],
+        ["test", "rules", "sfs-rules.test.yml"],
+    ] {
+        let out = std::process::Command::new("promtool")
+            .args(args)
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "promtool {args:?}: {}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}

@@ -366,6 +366,14 @@ fn metrics_are_served_for_a_scraper_while_the_session_runs() {
     );
     assert!(page.contains("sfs_sensors_missing 0"), "{page}");
     assert!(page.contains("sfs_sensors_unknown 0"), "{page}");
+    // Issue 20: the dashboard's epoch latency, the alert's count of epochs with a sensor out.
+    assert!(page.contains("sfs_sensors_left_out_epochs 0"), "{page}");
+    let latency: f64 = page
+        .lines()
+        .find_map(|l| l.strip_prefix("sfs_epoch_latency_seconds "))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{page}"));
+    assert!(latency > 0.0 && latency < 5.0, "{latency}");
     drop(stdin); // end of input: the session finishes and the endpoint closes
     assert!(child.wait().unwrap().success());
     assert!(get().is_none(), "still serving after the session ended");

@@ -178,6 +178,8 @@ pub struct Monitor {
     surface_error: Option<String>,
     /// Epochs failing since, and why.
     failing: Option<(f64, String)>,
+    /// Consecutive epochs with a sensor of the layout left out (0: every sensor in).
+    left_out_streak: i64,
     csv: Option<std::fs::File>,
     csv_bytes: u64,
     /// Resume: epochs up to this time were written by the session before (quiet replay).
@@ -218,6 +220,7 @@ impl Monitor {
             known: cfg.layout.sensors.iter().map(|s| s.sensor).collect(),
             health: BTreeMap::new(),
             failing: None,
+            left_out_streak: 0,
             output_failing: Default::default(),
             surface_error: None,
             health_logged: BTreeMap::new(),
@@ -444,6 +447,7 @@ impl Monitor {
         x.sensors_missing.set(missing as i64);
         x.sensors_saturated.set(saturated as i64);
         x.sensors_disturbed.set(disturbed as i64);
+        x.sensors_left_out_epochs.set(self.left_out_streak);
         count_to(&x.alarms_raised, self.report.alarms_raised);
         for a in &self.alarms {
             let labels = vec![
@@ -549,6 +553,7 @@ impl Monitor {
     /// shape is reconstructed, measured against the reference, the alarms updated, and the
     /// outputs written (a metrics line, every `latest_every` epochs `latest.glb`).
     fn close(&mut self, t: f64, window: BTreeMap<u16, (UnitQuaternion<f64>, u8)>) {
+        let started = std::time::Instant::now();
         let quiet = self.begin_epoch(t);
         let usable = self.usable_orientations(&window);
         let shape = match self.rec.run(
@@ -563,6 +568,10 @@ impl Monitor {
             Err(e) => return self.failed(t, e.to_string()),
         };
         let (missing, saturated, disturbed) = self.health(t, &shape.missing, &window, quiet);
+        self.left_out_streak = match missing + saturated + disturbed {
+            0 => 0,
+            _ => self.left_out_streak + 1,
+        };
         for w in &shape.left_out {
             tracing::debug!("monitor: t = {t:.2} s: {w}");
         }
@@ -595,6 +604,9 @@ impl Monitor {
         if self.report.epochs % self.cfg.latest_every as u64 == 0 {
             self.write_latest(t, &shape.positions);
         }
+        self.metrics
+            .epoch_latency
+            .set(started.elapsed().as_secs_f64());
     }
 
     /// Counts the epoch; whether it is a quiet one (a resumed session feeding again what its
