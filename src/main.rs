@@ -185,11 +185,11 @@ fn calibrate(a: CalibrateArgs) -> i32 {
                 use std::io::Write as _;
                 let _ = std::io::stdout().lock().write_all(c.render().as_bytes());
             }
-            if c.any() {
+            if c.usable() {
                 exit::OK
             } else {
                 complain!(
-                    "sfs: {}: no calibration could be fitted",
+                    "sfs: {}: nothing usable could be fitted (see the comments above)",
                     a.capture.display()
                 );
                 exit::UNUSABLE

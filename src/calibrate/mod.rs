@@ -1,13 +1,16 @@
 //! `sfs calibrate CAPTURE`: fits the magnetometer's hard and soft iron ([`ellipsoid`]) from a
 //! capture of the device turned through many orientations, the accelerometer's bias and scale
-//! ([`accel`]) from its static poses, and the gyroscope's bias from the same rests, then prints
-//! the fit quality and a `[calibration]` snippet for the configuration.
+//! ([`accel`]) from its rests ([`rests`]: still by thresholds from the capture's own noise,
+//! not turning), and the gyroscope's bias from the same rests, then prints the fit quality,
+//! the rests found and used, and a `[calibration]` snippet for the configuration, in which a
+//! fit it calls poor is commented out with the reason.
 //!
 //! The fits work in sensor axes on values scaled by the HELLO's LSB sizes, before any axis
 //! mapping, exactly where the configured calibration is applied.
 
 pub mod accel;
 pub mod ellipsoid;
+pub mod rests;
 
 use device_protocol::{Decoder, Event, Packet};
 use nalgebra::Vector3;
@@ -77,104 +80,95 @@ pub fn recording(bytes: &[u8], sensor: u16) -> Option<Recording> {
     scales.map(|_| rec)
 }
 
-/// Mean readings of the static poses: windows of `window` seconds whose accelerometer varies
-/// by less than `acc_std` (m/s², per axis) and, with a gyroscope, turns slower than 2°/s;
-/// consecutive static windows form one pose. Returns `(acc means, gyro means)`.
-pub fn static_poses(
-    rec: &Recording,
-    window: f64,
-    acc_std: f64,
-) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
-    let n = rec.t.len();
-    let mut poses = Vec::new();
-    let mut gyros = Vec::new();
-    let (mut sum_a, mut sum_g, mut count) = (Vector3::zeros(), Vector3::zeros(), 0usize);
-    let mut i = 0;
-    while i < n {
-        let mut j = i;
-        while j < n && rec.t[j] - rec.t[i] < window {
-            j += 1;
-        }
-        if j - i < 3 {
-            i = j.max(i + 1);
-            continue;
-        }
-        let m = (j - i) as f64;
-        let mean = rec.acc[i..j].iter().sum::<Vector3<f64>>() / m;
-        let var = rec.acc[i..j]
-            .iter()
-            .map(|a| (a - mean).component_mul(&(a - mean)))
-            .sum::<Vector3<f64>>()
-            / m;
-        let gmean = if rec.gyro.is_empty() {
-            Vector3::zeros()
-        } else {
-            rec.gyro[i..j].iter().sum::<Vector3<f64>>() / m
-        };
-        let gyro_still = rec.gyro.is_empty()
-            || rec.gyro[i..j]
-                .iter()
-                .all(|g| (g - gmean).norm() < 2f64.to_radians());
-        let still = var.iter().all(|v| v.sqrt() < acc_std) && gyro_still;
-        if still {
-            sum_a += mean * m;
-            sum_g += gmean * m;
-            count += j - i;
-        } else if count > 0 {
-            poses.push(sum_a / count as f64);
-            gyros.push(sum_g / count as f64);
-            (sum_a, sum_g, count) = (Vector3::zeros(), Vector3::zeros(), 0);
-        }
-        i = j;
-    }
-    if count > 0 {
-        poses.push(sum_a / count as f64);
-        gyros.push(sum_g / count as f64);
-    }
-    (poses, gyros)
-}
+/// A magnetometer fit covering less than this fraction of directions is not usable (the
+/// device was turned about one axis, or too little: the sphere is not pinned down).
+pub const MIN_COVERAGE: f64 = 0.6;
+
+/// The accelerometer's z bias and scale are poorly determined unless a rest tilted it past
+/// this angle, degrees.
+pub const MIN_TILT_DEG: f64 = 70.0;
 
 /// What `sfs calibrate` found.
 #[derive(Debug, Clone)]
 pub struct Calibration {
     pub samples: usize,
+    /// The rests found and used (the accelerometer's poses, the gyroscope's bias).
+    pub rests: rests::Rests,
     pub mag: Result<ellipsoid::EllipsoidFit, ellipsoid::FitError>,
     pub acc: Result<accel::AccelFit, accel::AccelFitError>,
-    /// Mean gyroscope reading over the static poses (phone).
+    /// Mean gyroscope reading over the rests (phone).
     pub gyro_bias: Option<Vector3<f64>>,
 }
 
 impl Calibration {
-    /// Whether at least one fit succeeded.
-    pub fn any(&self) -> bool {
-        self.mag.is_ok() || self.acc.is_ok() || self.gyro_bias.is_some()
+    /// Why the magnetometer fit is not to be used, if it is not.
+    pub fn mag_poor(&self) -> Option<String> {
+        match &self.mag {
+            Ok(m) if m.coverage < MIN_COVERAGE => Some(format!(
+                "only {:.0} % of directions covered (at least {:.0} %): the device was turned about too few axes; turn it through every orientation",
+                100.0 * m.coverage,
+                100.0 * MIN_COVERAGE
+            )),
+            Ok(_) => None,
+            Err(e) => Some(e.to_string()),
+        }
     }
 
-    /// The human summary and the configuration snippet.
+    /// Whether at least one fit is usable (printed as configuration, not as a comment).
+    pub fn usable(&self) -> bool {
+        self.mag_poor().is_none() || self.acc.is_ok() || self.gyro_bias.is_some()
+    }
+
+    /// The human summary and the configuration snippet: usable fits as keys, poor ones
+    /// commented out with the reason.
     pub fn render(&self) -> String {
         let mut s = String::new();
         let v = |x: &Vector3<f64>| format!("[{:.6}, {:.6}, {:.6}]", x.x, x.y, x.z);
+        let r = &self.rests;
         let _ = writeln!(s, "# sfs calibrate: {} samples", self.samples);
+        let _ = writeln!(
+            s,
+            "# rests: {} found, {} used{}; accelerometer noise {:.4} m/s² (still below {:.4}), magnetometer still below {:.3} µT{}",
+            r.found,
+            r.used(),
+            if r.turning > 0 {
+                format!(" ({} refused: turning)", r.turning)
+            } else {
+                String::new()
+            },
+            r.acc_noise,
+            r.acc_threshold,
+            r.mag_threshold,
+            r.gyro_threshold
+                .map(|g| format!(", gyroscope still below {:.3} °/s", g.to_degrees()))
+                .unwrap_or_default()
+        );
         let _ = writeln!(s, "[calibration]");
-        match &self.mag {
-            Ok(m) => {
+        match (&self.mag, self.mag_poor()) {
+            (Ok(m), poor) => {
                 let _ = writeln!(
                     s,
-                    "# magnetometer: field {:.2} µT, residual {:.2} %, {:.0} % of directions covered{}",
+                    "# magnetometer: field {:.2} µT, residual {:.2} %, {:.0} % of directions covered",
                     m.radius,
                     100.0 * m.rel_residual,
                     100.0 * m.coverage,
-                    if m.coverage < 0.6 { " (LOW: turn the device through more orientations)" } else { "" }
                 );
+                let hash = match &poor {
+                    Some(why) => {
+                        let _ = writeln!(s, "# NOT USABLE, left commented out: {why}");
+                        "# "
+                    }
+                    None => "",
+                };
                 let w = &m.soft_iron;
-                let _ = writeln!(s, "mag_hard_iron = {}", v(&m.hard_iron));
+                let _ = writeln!(s, "{hash}mag_hard_iron = {}", v(&m.hard_iron));
                 let _ = writeln!(
                     s,
-                    "mag_soft_iron = [[{:.6}, {:.6}, {:.6}], [{:.6}, {:.6}, {:.6}], [{:.6}, {:.6}, {:.6}]]",
+                    "{hash}mag_soft_iron = [[{:.6}, {:.6}, {:.6}], [{:.6}, {:.6}, {:.6}], [{:.6}, {:.6}, {:.6}]]",
                     w[(0, 0)], w[(0, 1)], w[(0, 2)], w[(1, 0)], w[(1, 1)], w[(1, 2)], w[(2, 0)], w[(2, 1)], w[(2, 2)]
                 );
             }
-            Err(e) => {
+            (Err(e), _) => {
                 let _ = writeln!(s, "# magnetometer: not fitted: {e}");
             }
         }
@@ -182,21 +176,46 @@ impl Calibration {
             Ok(a) => {
                 let _ = writeln!(
                     s,
-                    "# accelerometer: {} static poses, residual {:.4} m/s²",
+                    "# accelerometer: {} rests, residual {:.4} m/s²",
                     a.poses, a.residual
                 );
+                tilt_warning(&mut s, r);
                 let _ = writeln!(s, "acc_bias = {}", v(&a.bias));
                 let _ = writeln!(s, "acc_scale = {}", v(&a.scale));
             }
             Err(e) => {
                 let _ = writeln!(s, "# accelerometer: not fitted: {e}");
+                tilt_warning(&mut s, r);
             }
         }
-        if let Some(g) = &self.gyro_bias {
-            let _ = writeln!(s, "# gyroscope: mean over the static poses");
-            let _ = writeln!(s, "gyro_bias = {}", v(g));
+        match &self.gyro_bias {
+            Some(g) => {
+                let _ = writeln!(s, "# gyroscope: mean over the {} rests", r.used());
+                let _ = writeln!(s, "gyro_bias = {}", v(g));
+            }
+            None if !r.gyros.is_empty() || r.gyro_threshold.is_some() => {
+                let _ = writeln!(s, "# gyroscope: not fitted: no rest found");
+            }
+            None => {}
+        }
+        if !self.usable() {
+            let _ = writeln!(
+                s,
+                "# nothing usable was fitted: calibrate again, resting the device still on each face and turning it through every orientation in between"
+            );
         }
         s
+    }
+}
+
+/// Warns when no rest tilted the device past [`MIN_TILT_DEG`] from lying flat.
+fn tilt_warning(s: &mut String, r: &rests::Rests) {
+    let tilt = r.max_tilt_deg();
+    if r.used() > 0 && tilt < MIN_TILT_DEG {
+        let _ = writeln!(
+            s,
+            "# WARNING: never tilted past {MIN_TILT_DEG:.0}° from lying flat (at most {tilt:.0}°): the accelerometer's z bias and scale are poorly determined; rest the device on its sides and ends too"
+        );
     }
 }
 
@@ -205,14 +224,15 @@ pub fn calibrate(rec: &Recording) -> Calibration {
     // The ellipsoid fit's cost grows with the samples; 20 000 spread over the capture suffice.
     let step = (rec.mag.len() / 20_000).max(1);
     let mags: Vec<Vector3<f64>> = rec.mag.iter().step_by(step).copied().collect();
-    let (poses, gyros) = static_poses(rec, 0.5, 0.05);
-    let gyro_bias = (!rec.gyro.is_empty() && !gyros.is_empty())
-        .then(|| gyros.iter().sum::<Vector3<f64>>() / gyros.len() as f64);
+    let rests = rests::rests(rec);
+    let gyro_bias = (!rests.gyros.is_empty())
+        .then(|| rests.gyros.iter().sum::<Vector3<f64>>() / rests.gyros.len() as f64);
     Calibration {
         samples: rec.t.len(),
         mag: ellipsoid::fit(&mags),
-        acc: accel::fit(&poses),
+        acc: accel::fit(&rests.poses),
         gyro_bias,
+        rests,
     }
 }
 
