@@ -11,7 +11,7 @@
 //! (`.ci/run` installs both and sets it).
 
 mod common;
-use common::view::{ended_report, free_port, serve_replay};
+use common::view::{ended_report, serve_replay_on_a_free_port};
 use common::webdriver::{available, Browser};
 use common::*;
 use std::path::PathBuf;
@@ -77,13 +77,11 @@ async fn issue_16_the_page_shows_a_replayed_session_in_a_real_browser() {
         return;
     }
     let dir = tmpdir("view-browser");
-    let port = free_port();
     let out = dir.join("out");
-    let _served = serve_replay(
+    let (port, _served) = serve_replay_on_a_free_port(
         &root().join("replay-logs/cone-morphorider.bin"),
         &out,
         None,
-        port,
         &[],
     );
     // The replay ends (and keeps serving).
@@ -133,13 +131,11 @@ async fn issue_16_a_running_session_is_drawn_as_it_is_scanned() {
     }
     let dir = tmpdir("view-browser-live");
     let browser = Browser::start(&dir.join("profile")).await;
-    let port = free_port();
     let out = dir.join("out");
-    let _served = serve_replay(
+    let (port, _served) = serve_replay_on_a_free_port(
         &root().join("replay-logs/cone-morphorider.bin"),
         &out,
         Some("x5"),
-        port,
         &[],
     );
     let status = format!("http://127.0.0.1:{port}/status");

@@ -48,6 +48,37 @@ pub fn serve_replay(
     )
 }
 
+/// [`serve_replay`] on a free port, and the port: tried again on another port when the daemon
+/// exits at once (the port [`free_port`] chose was taken meanwhile, e.g. by a browser's
+/// debugging port, and the daemon could not bind it).
+pub fn serve_replay_on_a_free_port(
+    capture: &Path,
+    out: &Path,
+    pace: Option<&str>,
+    extra: &[&str],
+) -> (u16, Served) {
+    for _ in 0..5 {
+        let port = free_port();
+        let mut served = serve_replay(capture, out, pace, port, extra);
+        let t0 = Instant::now();
+        while t0.elapsed() < Duration::from_secs(20) {
+            if served.0.try_wait().ok().flatten().is_some() {
+                break;
+            }
+            if std::net::TcpStream::connect(("127.0.0.1", port)).is_ok() {
+                std::thread::sleep(Duration::from_millis(200));
+                if served.0.try_wait().ok().flatten().is_none() {
+                    return (port, served);
+                }
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = std::fs::remove_dir_all(out);
+    }
+    panic!("the daemon could not serve on any of 5 free ports");
+}
+
 /// SIGINT: the replay that keeps serving stops, with success.
 pub fn interrupt(served: &mut Served) {
     let child = &mut served.0;
