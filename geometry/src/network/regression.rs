@@ -467,14 +467,12 @@ impl RegressionSolver {
         report.frames = pb.a.len();
         report.frames_moved = moving;
         // The kept frames as they were, to the bit (not through their matrices).
-        let kept: Vec<Option<Vec<UnitQuaternion<f64>>>> =
-            init.iter().map(|q| q.map(<[_]>::to_vec)).collect();
         write_back(curves, &pb, &x);
-        for ((c, vars), q0) in curves.iter_mut().zip(&pb.var_of).zip(kept) {
+        for ((c, vars), q0) in curves.iter_mut().zip(&pb.var_of).zip(&init) {
             if let Some(q0) = q0 {
-                for ((q, &v), q0) in c.q.iter_mut().zip(vars).zip(q0) {
+                for ((q, &v), q0) in c.q.iter_mut().zip(vars).zip(*q0) {
                     if !free[v] {
-                        *q = q0;
+                        *q = *q0;
                     }
                 }
             }
