@@ -14,8 +14,7 @@ use sfs_geometry::network::regression::{RegressionParams, RegressionSolver};
 use std::hint::black_box;
 
 fn scan(name: &str) -> Scan {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
-    let s = scene::load(&scene::find(name, &dir)).expect("scene");
+    let s = scene::builtin(name).expect("scene");
     let sim = simulate::run(&s, DeviceKind::Morphorider, Profile::Default, 1);
     Acquisition::scan_bytes(&sim.bytes, AcquisitionConfig::default())
 }

@@ -221,7 +221,8 @@ async fn latency_of(seed: u64, dir: &Path) -> Measured {
 }
 
 fn latency() {
-    if !webdriver::available() {
+    if !webdriver::installed() {
+        eprintln!("view latency: not measured, chromium or chromedriver is not installed");
         return;
     }
     let seeds: Vec<u64> = std::env::var("SFS_BENCH_SEEDS")

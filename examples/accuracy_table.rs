@@ -22,7 +22,6 @@ use device_protocol::DeviceKind;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
 use sfs::simulate::{self, scene, Fault, Mistakes, Profile};
 use sfs_geometry::network::{NetworkParams, Reconstructor};
-use std::path::PathBuf;
 
 #[path = "shared/mod.rs"]
 mod shared;
@@ -91,8 +90,7 @@ fn variant(
     v: &Variant,
     settings: &(AcquisitionConfig, NetworkParams),
 ) -> Result<(f64, f64), String> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
-    let s = scene::load(&scene::find(name, &dir)).map_err(|e| e.to_string())?;
+    let s = scene::builtin(name).map_err(|e| e.to_string())?;
     let sim = simulate::run_without(&s, device, profile, seed, &Mistakes::default(), &v.without);
     let mut scan = Acquisition::scan_bytes(&sim.bytes, settings.0.clone());
     if v.true_q || v.true_d {

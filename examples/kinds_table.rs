@@ -18,7 +18,6 @@ use sfs::simulate::{self, scene, Profile};
 use sfs_geometry::curve::CurveKind;
 use sfs_geometry::network::NetworkParams;
 use sfs_geometry::surface::fit::SurfaceParams;
-use std::path::PathBuf;
 
 #[path = "shared/mod.rs"]
 mod shared;
@@ -50,8 +49,7 @@ fn score(
     smooth: bool,
     guide: Option<usize>,
 ) -> Result<(Score, GuideScore), String> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
-    let s = scene::load(&scene::find(name, &dir)).map_err(|e| e.to_string())?;
+    let s = scene::builtin(name).map_err(|e| e.to_string())?;
     let sim = simulate::run(&s, device, Profile::Default, seed);
     let mut scan = Acquisition::scan_bytes(&sim.bytes, AcquisitionConfig::default());
     // Diagnostic: the simulator's true distances put in.

@@ -13,7 +13,6 @@ use device_protocol::DeviceKind;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
 use sfs::simulate::{self, scene, Profile};
 use sfs_geometry::network::{NetworkParams, Reconstructor};
-use std::path::PathBuf;
 
 #[path = "shared/mod.rs"]
 mod shared;
@@ -35,11 +34,10 @@ fn main() {
     let seed: u64 = list(&args, "--seed", "1")[0]
         .parse()
         .expect("--seed: a number");
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
     println!("| scene | device | window | points (% of diagonal) | normals (°) | regression, whole | regression, local | frames moved |");
     println!("|---|---|---|---|---|---|---|---|");
     for name in &scenes {
-        let s = scene::load(&scene::find(name, &dir)).expect("a shipped scene");
+        let s = scene::builtin(name).expect("a shipped scene");
         let diag = s.bbox_diagonal();
         for device in &devices {
             let kind = match device.as_str() {

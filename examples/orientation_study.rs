@@ -12,7 +12,6 @@ use device_protocol::DeviceKind;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
 use sfs::simulate::{self, scene, Profile};
-use std::path::Path;
 
 fn main() {
     let a: Vec<String> = std::env::args().skip(1).collect();
@@ -26,8 +25,7 @@ fn main() {
         _ => Profile::Default,
     };
     let seed = a.get(3).and_then(|s| s.parse().ok()).unwrap_or(1);
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
-    let s = scene::load(&scene::find(name, &dir)).expect("scene");
+    let s = scene::builtin(name).expect("scene");
     let sim = simulate::run(&s, device, profile, seed);
     let mut cfg = AcquisitionConfig::default();
     // Parameter studies: SFS_TAU_MAG, SFS_TAU_BIAS override the phone filter's defaults.

@@ -50,10 +50,36 @@ pub enum LogFormat {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Replay a capture file through the pipeline and write DIR/report.json.
+    /// Replay a capture file through the pipeline; write DIR/report.json, DIR/scan.json and
+    /// DIR/network.glb.
+    ///
+    /// Writes, once the capture has been read: DIR/report.json (the link statistics, the
+    /// curves, the reconstruction's figures, every warning), DIR/scan.json (the tagged
+    /// curves: orientations, distances, nodes) and DIR/network.glb (the curve network and
+    /// its surface, glTF 2.0); a sensor array's capture, replayed with a [monitor]
+    /// configuration (--config), writes the monitoring outputs instead (metrics.csv,
+    /// events.log, latest.glb, reference.json). The source is the capture file (the raw
+    /// bytes a device sent: a session's capture.bin, or sfs simulate's PREFIX.bin); a
+    /// configuration's [source] is ignored. With --view the outputs are also rebuilt after
+    /// every curve and shown in a browser. Exit codes: 0 done, 2 usage or configuration, 3
+    /// the capture cannot be read, 4 an output cannot be written, 5 nothing usable in the
+    /// capture (no packet).
+    #[command(verbatim_doc_comment)]
     Replay(ReplayArgs),
-    /// Read a live device (serial port or standard input), capture every byte to
-    /// SESSION/capture.bin, and write SESSION/report.json when it ends (Ctrl-C).
+    /// Read a live device, capture every byte to SESSION/capture.bin, and rebuild
+    /// SESSION/network.glb and SESSION/report.json after every curve.
+    ///
+    /// Sources, one of: a serial port (--serial PATH, or [source] kind = "serial" in the
+    /// configuration), standard input (--stdin, or kind = "stdin"), or a capture file
+    /// replayed as if live (kind = "replay" with its path and pace, as config/demo.toml).
+    /// Writes into SESSION: capture.bin (every byte, before it is decoded), config.toml (the
+    /// configuration it started with, for --resume), network.glb and report.json (after
+    /// every curve the operator ends with E, replaced atomically), scan.json (at the end);
+    /// with [monitor], metrics.csv, events.log, latest.glb and reference.json. A session is
+    /// stopped with Ctrl-C or SIGTERM (the outputs are finished first) and continued with
+    /// --resume SESSION. Exit codes: 0 done, 2 usage or configuration, 3 the source cannot
+    /// be opened, 4 an output cannot be written.
+    #[command(verbatim_doc_comment)]
     Run(RunArgs),
     /// Fit the magnetometer (hard/soft iron), accelerometer (bias/scale) and gyroscope bias from
     /// a capture of the device turned through many orientations with static rests; prints the
@@ -117,11 +143,14 @@ pub struct EvalArgs {
 }
 
 #[derive(Debug, Args)]
-#[command(group(clap::ArgGroup::new("what").required(true).args(["scene", "structure"])))]
+#[command(group(clap::ArgGroup::new("what").required(true).args(["scene", "structure", "list"])))]
 pub struct SimulateArgs {
-    /// Scene name (a file NAME.toml in --scenes) or the path of a scene file.
-    #[arg(long)]
+    /// A built-in scene by NAME (`--list` names them), or a scene file given as PATH.toml.
+    #[arg(long, value_name = "NAME|PATH.toml")]
     pub scene: Option<String>,
+    /// List the built-in scenes with their descriptions, and exit.
+    #[arg(long)]
+    pub list: bool,
     /// A deforming instrumented structure streamed by a sensor array (monitoring mode):
     /// PREFIX.truth.json then holds the layout and the truth at every second.
     #[arg(long, value_enum)]
@@ -136,14 +165,11 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Output prefix: PREFIX.bin and PREFIX.truth.json.
-    #[arg(long)]
-    pub out: PathBuf,
+    #[arg(long, required_unless_present = "list")]
+    pub out: Option<PathBuf>,
     /// `default` (documented noise, rare link faults) or `field` (what real sessions bring).
     #[arg(long, value_enum, default_value = "default")]
     pub profile: Profile,
-    /// Directory of the scene files.
-    #[arg(long, default_value = "config/scenes")]
-    pub scenes: PathBuf,
 }
 
 #[derive(Debug, Args)]
@@ -172,7 +198,7 @@ pub struct ReplayArgs {
     /// Serve the live view (a web page: the network as it grows, the status, the warnings)
     /// at ADDR (default 127.0.0.1:8040), with live updates after every curve; it keeps
     /// serving after the end of the capture until interrupted.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::view::DEFAULT_ADDRESS)]
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::view::DEFAULT_ADDRESS, value_parser = crate::view::parse_address)]
     pub view: Option<std::net::SocketAddr>,
 }
 
@@ -211,7 +237,7 @@ pub struct RunArgs {
     /// Serve the live view (a web page: the network as it grows, the curve being scanned,
     /// the status, the warnings) at ADDR (default 127.0.0.1:8040) while the session runs;
     /// overrides `[view] address`.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::view::DEFAULT_ADDRESS)]
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::view::DEFAULT_ADDRESS, value_parser = crate::view::parse_address)]
     pub view: Option<std::net::SocketAddr>,
 }
 

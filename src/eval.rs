@@ -46,7 +46,19 @@ pub struct Registration {
     pub rotation_deg: f64,
     pub translation_m: [f64; 3],
     pub icp_iterations: usize,
+    /// The root mean square distance of the registered curve points to the truth network,
+    /// % of the truth's diagonal.
+    pub residual_rms_pct: f64,
+    /// Whether the registration fits: the residual is under [`MAX_RESIDUAL_PCT`]. When not,
+    /// the reconstruction is most likely of another shape than the truth's (`sfs eval` exits
+    /// 5), and the distances below mean nothing.
+    pub fits: bool,
 }
+
+/// The largest registration residual (RMS, % of the diagonal) of a reconstruction of the
+/// truth's own shape: the worst field captures stay under 2 %; a network of another scene
+/// (the bowl's truth against the cone's network) is over 10 %.
+pub const MAX_RESIDUAL_PCT: f64 = 5.0;
 
 /// The JSON object `sfs eval` prints.
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -66,7 +78,8 @@ pub struct Evaluation {
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub creases: Vec<CreaseAngles>,
     /// Node position errors after registration, m, by node index.
-    pub node_errors_m: std::collections::BTreeMap<String, f64>,
+    /// (Sorted by node number; JSON object keys are strings.)
+    pub node_errors_m: std::collections::BTreeMap<u32, f64>,
 }
 
 /// The dihedral angle along one crease curve: at its points (every centimetre, away from its
@@ -425,9 +438,11 @@ pub fn evaluate(truth: &Truth, rec: &ReadNetwork) -> Result<Evaluation, EvalErro
         .iter()
         .filter_map(|(k, p)| {
             let q = truth.nodes.get(&k.to_string())?;
-            Some((k.to_string(), (r * p + t - Vector3::from(*q)).norm()))
+            Some((*k, (r * p + t - Vector3::from(*q)).norm()))
         })
         .collect();
+    let curves = distances(&d, diag);
+    let residual_rms_pct = curves.rms_m / diag * 100.0;
     Ok(Evaluation {
         scene: truth.scene.clone(),
         bbox_diagonal_m: diag,
@@ -439,8 +454,10 @@ pub fn evaluate(truth: &Truth, rec: &ReadNetwork) -> Result<Evaluation, EvalErro
                 .to_degrees(),
             translation_m: [t.x, t.y, t.z],
             icp_iterations: iterations,
+            residual_rms_pct,
+            fits: residual_rms_pct <= MAX_RESIDUAL_PCT,
         },
-        curves: distances(&d, diag),
+        curves,
         curves_by_kind,
         surface,
         creases,

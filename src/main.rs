@@ -60,7 +60,7 @@ macro_rules! complain {
 fn replay(a: ReplayArgs) -> i32 {
     sfs::logging::set_session(&a.out.display().to_string());
     let spec = SourceSpec::Replay {
-        path: a.capture,
+        path: a.capture.clone(),
         pace: a.pace,
     };
     let settings = match &a.config {
@@ -81,7 +81,39 @@ fn replay(a: ReplayArgs) -> i32 {
         keep_serving: view.is_some(),
         ..settings
     };
-    run_session(spec, &a.out, &settings, session::Start::New)
+    let monitoring = settings.monitor.is_some();
+    let capture = a.capture.clone();
+    run_session_then(spec, &a.out, &settings, session::Start::New, |o| {
+        replay_verdict(o, &capture, monitoring)
+    })
+}
+
+/// A replay that found nothing to work on says so: no packet at all (exit 5), or a sensor
+/// array's capture without the monitoring configuration that reconstructs it (exit 2).
+fn replay_verdict(o: &Outcome, capture: &Path, monitoring: bool) -> i32 {
+    let link = &o.report.link;
+    if link.packets.total() == 0 {
+        complain!(
+            "sfs: {}: no packet of the device protocol found in its {} bytes: is it a capture (the bytes a device sent)?",
+            capture.display(),
+            link.bytes
+        );
+        return exit::UNUSABLE;
+    }
+    let array = link.packets.get(device_protocol::PacketType::ArraySample) > 0
+        || link
+            .hello
+            .as_ref()
+            .is_some_and(|h| h.kind_code == device_protocol::DeviceKind::SensorArray.code());
+    if array && !monitoring {
+        complain!(
+            "sfs: {} is a sensor array's capture: it is reconstructed by monitoring, which needs the array's layout from a configuration with a [monitor] section: sfs replay {} --config FILE (config/riser.toml is one)",
+            capture.display(),
+            capture.display()
+        );
+        return exit::USAGE;
+    }
+    exit::OK
 }
 
 fn run(a: RunArgs) -> i32 {
@@ -97,6 +129,15 @@ fn run(a: RunArgs) -> i32 {
             return exit::USAGE;
         }
     };
+    if a.resume.is_some() && !dir.join(session::CAPTURE_FILE).is_file() {
+        complain!(
+            "sfs: {} holds no session to resume (no {}): start one with --session {}",
+            dir.display(),
+            session::CAPTURE_FILE,
+            dir.display()
+        );
+        return exit::USAGE;
+    }
     sfs::logging::set_session(&dir.display().to_string());
     // A resumed session keeps the configuration it started with.
     let saved = dir.join(session::CONFIG_COPY);
@@ -197,7 +238,10 @@ fn calibrate(a: CalibrateArgs) -> i32 {
         }
         Err(e) => {
             complain!("sfs: {e}");
-            exit::INPUT
+            match e {
+                sfs::calibrate::CalibrateError::NoSensor { .. } => exit::USAGE,
+                _ => exit::INPUT,
+            }
         }
     }
 }
@@ -324,7 +368,26 @@ fn write_outputs(files: &[(&Path, &[u8])]) -> Result<(), i32> {
 
 fn simulate(a: SimulateArgs) -> i32 {
     use sfs::simulate::{self, scene};
-    let (bin, truth) = (with_ext(&a.out, ".bin"), with_ext(&a.out, ".truth.json"));
+    if a.list {
+        for (name, _) in scene::BUILTIN {
+            let line = match scene::builtin(name) {
+                Ok(s) => format!(
+                    "{name:<12} {} nodes, {} curves: {}",
+                    s.nodes.len(),
+                    s.curves.len(),
+                    s.description
+                ),
+                Err(e) => format!("{name:<12} not available here: {}", e.reason),
+            };
+            say!("{line}");
+        }
+        return exit::OK;
+    }
+    let Some(out) = a.out.as_deref() else {
+        complain!("sfs: --out PREFIX is required");
+        return exit::USAGE;
+    };
+    let (bin, truth) = (with_ext(out, ".bin"), with_ext(out, ".truth.json"));
     if let Some(kind) = a.structure {
         if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 7.0 * 86_400.0) {
             complain!(
@@ -349,16 +412,15 @@ fn simulate(a: SimulateArgs) -> i32 {
         say!("capture: {}\ntruth:   {}", bin.display(), truth.display());
         return exit::OK;
     }
-    let path = scene::find(a.scene.as_deref().unwrap_or_default(), &a.scenes);
-    let sc = match scene::load(&path) {
+    let arg = a.scene.as_deref().unwrap_or_default();
+    let sc = match scene::resolve(arg) {
         Ok(s) => s,
         Err(e) => {
             complain!("sfs: {e}");
-            return if path.exists() {
-                exit::USAGE
-            } else {
-                exit::INPUT
-            };
+            // A file or mesh that cannot be read is the input; anything else, the usage.
+            let unreadable = (scene::is_path(arg) && !Path::new(arg).is_file())
+                || matches!(e.key.as_deref(), Some("surface.paper" | "surface.path"));
+            return if unreadable { exit::INPUT } else { exit::USAGE };
         }
     };
     let sim = simulate::run(&sc, a.device.0, a.profile, a.seed);
@@ -423,6 +485,17 @@ fn eval(a: EvalArgs) -> i32 {
             complain!("sfs: cannot write {}: {e}", r.display());
             return exit::OUTPUT;
         }
+    }
+    if !ev.registration.fits {
+        complain!(
+            "sfs: no rigid registration fits {} onto the truth of scene {}: {:.1} % of the diagonal left after {} iterations (at most {} % for the same shape): is the truth of the scene that was scanned?",
+            a.glb.display(),
+            ev.scene,
+            ev.registration.residual_rms_pct,
+            ev.registration.icp_iterations,
+            sfs::eval::MAX_RESIDUAL_PCT
+        );
+        return exit::UNUSABLE;
     }
     exit::OK
 }
@@ -491,6 +564,18 @@ fn config_check(file: &Path) -> i32 {
 }
 
 fn run_session(spec: SourceSpec, out: &Path, settings: &Settings, start: session::Start) -> i32 {
+    run_session_then(spec, out, settings, start, |_| exit::OK)
+}
+
+/// Runs a session, prints its summary, then `verdict` gives the exit code from the outcome;
+/// a view still served (a replay with `--view`) is served after that, until interrupted.
+fn run_session_then(
+    spec: SourceSpec,
+    out: &Path,
+    settings: &Settings,
+    start: session::Start,
+    verdict: impl FnOnce(&Outcome) -> i32,
+) -> i32 {
     let rt = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -505,10 +590,14 @@ fn run_session(spec: SourceSpec, out: &Path, settings: &Settings, start: session
     rt.block_on(async {
         let shutdown = Shutdown::new();
         tokio::spawn(signals(shutdown.clone()));
-        match session::run(spec, out, settings, start, shutdown).await {
-            Ok(o) => {
+        match session::run(spec, out, settings, start, shutdown.clone()).await {
+            Ok(mut o) => {
                 print_summary(&o);
-                exit::OK
+                let code = verdict(&o);
+                if let Some(serving) = o.serving.take() {
+                    serving.until(&shutdown).await;
+                }
+                code
             }
             Err(e) => {
                 complain!("sfs: {e}");

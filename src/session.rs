@@ -75,11 +75,13 @@ pub enum SessionError {
 }
 
 /// What a finished session reports.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct Outcome {
     pub report: Report,
     pub report_path: PathBuf,
     pub capture_path: Option<PathBuf>,
+    /// The view, still served after the end when the settings ask to keep serving.
+    pub serving: Option<Serving>,
 }
 
 /// Runs a session from `spec` until its source ends or `shutdown` is triggered, then writes
@@ -137,7 +139,16 @@ pub async fn run(
     let _stop_server = StopOnDrop(server_stop.clone());
     tracing::info!(source = %description, out = %out_dir.display(), "session started");
     let started = Instant::now();
-    let mut src = source::spawn(spec, prepared.capture, shutdown.clone())?;
+    let created = prepared.created;
+    let mut src = match source::spawn(spec, prepared.capture, shutdown.clone()) {
+        Ok(s) => s,
+        Err(e) => {
+            // Nothing was read: what this run made in the directory goes (a port that does
+            // not exist leaves no empty session behind).
+            created.undo();
+            return Err(e.into());
+        }
+    };
     // Resume: the capture files to decode again, from the newest that starts before what a
     // monitor needs (all of them otherwise).
     let prior = prepared.prior.map(|mut files| {
@@ -206,19 +217,46 @@ pub async fn run(
             source_name: description,
         });
     }
-    if let (Some(server), true) = (server, settings.keep_serving) {
-        if !shutdown.is_triggered() {
-            tracing::info!("the session is over; the view is still served until interrupted");
-            shutdown.triggered().await;
+    let serving = match (server, settings.keep_serving) {
+        (Some(task), true) => Some(Serving {
+            task,
+            _stop: _stop_server,
+        }),
+        (Some(task), false) => {
+            server_stop.trigger();
+            let _ = tokio::time::timeout(std::time::Duration::from_secs(2), task).await;
+            None
         }
-        server_stop.trigger();
-        let _ = tokio::time::timeout(std::time::Duration::from_secs(2), server).await;
-    }
+        (None, _) => None,
+    };
     Ok(Outcome {
         report,
         report_path,
         capture_path: prepared.capture_path,
+        serving,
     })
+}
+
+/// The view of a finished session, still served (`keep_serving`: a replay watched with
+/// `--view`) until [`Serving::until`] is told to stop; dropped, it stops at once.
+#[derive(Debug)]
+pub struct Serving {
+    task: tokio::task::JoinHandle<()>,
+    _stop: StopOnDrop,
+}
+
+impl Serving {
+    /// Serves until `shutdown` is triggered (the operator's interrupt), then stops the
+    /// server, giving it 2 s to close its connections.
+    pub async fn until(self, shutdown: &Shutdown) {
+        if !shutdown.is_triggered() {
+            tracing::info!("the session is over; the view is still served until interrupted");
+            shutdown.triggered().await;
+        }
+        let Serving { task, _stop } = self;
+        drop(_stop);
+        let _ = tokio::time::timeout(std::time::Duration::from_secs(2), task).await;
+    }
 }
 
 /// A session directory made ready before the source starts.
@@ -231,6 +269,33 @@ struct Prepared {
     /// Where the session clock starts for a replayed file (a piece of a rotated capture
     /// continues the time of the files before it: its sidecar).
     replay_start: crate::capture::CaptureStart,
+    /// What preparing made, removed again when the source cannot start.
+    created: Created,
+}
+
+/// The files and directory a session's preparation made (none of them existed before).
+#[derive(Debug, Default)]
+struct Created {
+    dir: Option<PathBuf>,
+    files: Vec<PathBuf>,
+}
+
+impl Created {
+    /// Removes them: the directory with what it holds when this run made it (a monitor's
+    /// outputs, opened empty, included), else the files; a capture only while it is empty.
+    fn undo(self) {
+        if let Some(d) = self.dir {
+            let _ = std::fs::remove_dir_all(d);
+            return;
+        }
+        for f in self.files {
+            if std::fs::metadata(&f).is_ok_and(|m| m.len() == 0)
+                || f.file_name().is_some_and(|n| n == CONFIG_COPY)
+            {
+                let _ = std::fs::remove_file(f);
+            }
+        }
+    }
 }
 
 /// Prepares `out_dir`: created, the temporary files of a killed session removed, a new
@@ -244,6 +309,10 @@ fn prepare(
     start: &Start,
 ) -> Result<Prepared, SessionError> {
     let output_err = OutputError::at;
+    let mut created = Created {
+        dir: (!out_dir.exists()).then(|| out_dir.to_owned()),
+        files: Vec::new(),
+    };
     std::fs::create_dir_all(out_dir).map_err(output_err(out_dir))?;
     match crate::atomic::remove_stale(out_dir) {
         Ok(0) => {}
@@ -280,7 +349,13 @@ fn prepare(
     };
     if let (Some(_), Start::NewWithConfig(text)) = (&capture_path, start) {
         let p = out_dir.join(CONFIG_COPY);
+        if !p.exists() {
+            created.files.push(p.clone());
+        }
         crate::atomic::write_atomic(&p, text.as_bytes()).map_err(output_err(&p))?;
+    }
+    if let Some(p) = capture_path.as_ref().filter(|p| !p.exists()) {
+        created.files.push(p.clone());
     }
     let capture = match (&capture_path, settings.capture_rotation) {
         (Some(p), None) => Some(CaptureWriter::open_append(p).map_err(output_err(p))?),
@@ -297,6 +372,7 @@ fn prepare(
         prior,
         capture,
         replay_start,
+        created,
     })
 }
 
@@ -752,6 +828,7 @@ async fn sleep_until(deadline: Option<tokio::time::Instant>) {
 
 /// Triggers a [`Shutdown`] when dropped (the view's server stops with the session, however
 /// it ends).
+#[derive(Debug)]
 struct StopOnDrop(Shutdown);
 
 impl Drop for StopOnDrop {

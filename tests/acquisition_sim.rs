@@ -439,8 +439,7 @@ fn sensor_array_orientations_are_averaged_per_window() {
 #[test]
 fn issue_17_samples_before_the_first_hello_are_held_not_lost() {
     use sfs::simulate::{self, scene, Profile};
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
-    let s = scene::load(&scene::find("cone", &dir)).unwrap();
+    let s = scene::builtin("cone").unwrap();
     let sim = simulate::run(
         &s,
         device_protocol::DeviceKind::Morphorider,

@@ -7,12 +7,11 @@ use sfs::gltf_out::{network_glb, NetworkCurve, SurfaceMesh};
 use sfs::simulate::rng::Rng;
 use sfs::simulate::truth::Truth;
 use sfs::simulate::{self, scene, Profile};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 
 fn truth() -> Truth {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
-    let s = scene::load(&scene::find("bowl", &dir)).unwrap();
+    let s = scene::builtin("bowl").unwrap();
     simulate::run(
         &s,
         device_protocol::DeviceKind::Morphorider,
@@ -205,13 +204,12 @@ fn missing_or_invalid_inputs_are_input_errors() {
 /// score about zero (from the identity, the bowl and the cone scored 1.3–10.5 %).
 #[test]
 fn issue_15_a_glb_without_nodes_is_registered_from_the_best_start() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
     let rotations = [
         Rotation3::from_euler_angles(2.5, -1.0, 2.0),
         Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI * 0.9),
     ];
     for name in ["bowl", "cone", "torus"] {
-        let s = scene::load(&scene::find(name, &dir)).unwrap();
+        let s = scene::builtin(name).unwrap();
         let t = simulate::run(
             &s,
             device_protocol::DeviceKind::Morphorider,

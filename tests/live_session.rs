@@ -17,13 +17,9 @@ fn sfs() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sfs"))
 }
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
 /// The seed-1 Morphorider scan of a shipped scene: its bytes and its truth file.
 fn simulated(name: &str, dir: &Path) -> (Vec<u8>, PathBuf) {
-    let s = scene::load(&scene::find(name, &root().join("config/scenes"))).unwrap();
+    let s = scene::builtin(name).unwrap();
     let sim = simulate::run(&s, DeviceKind::Morphorider, Profile::Default, 1);
     let truth = dir.join(format!("{name}.truth.json"));
     std::fs::write(&truth, serde_json::to_vec(&sim.truth).unwrap()).unwrap();

@@ -12,8 +12,10 @@
 //!
 //! The digests depend on the floating point the machine runs: faer picks its SIMD kernels
 //! (and so whether it fuses multiply-adds) at run time. The file records the instruction set
-//! level it was made on; on a machine of another level the outputs are still produced and
-//! checked for completeness, and the byte comparison is skipped with a note.
+//! level it was made on; on a machine of another level the build script (`build.rs`) tells
+//! cargo, and the comparison is reported as ignored. The paper's scenes (LILIUM, BUMPY CUBE)
+//! have their own file, `tests/golden/outputs-paper.txt`, compared when `SFS_PAPER_DATA`
+//! names their meshes.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -23,8 +25,14 @@ fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// The digests of the cases that run from the repository alone.
 fn golden_path() -> PathBuf {
     root().join("tests/golden/outputs.txt")
+}
+
+/// The digests of the paper's scenes (their meshes are not shipped: `SFS_PAPER_DATA`).
+fn paper_golden_path() -> PathBuf {
+    root().join("tests/golden/outputs-paper.txt")
 }
 
 /// The x86-64 micro-architecture level faer's kernels dispatch on.
@@ -128,7 +136,8 @@ const MONITOR_OUTPUTS: &[&str] = &[
     "scan.json",
 ];
 
-/// Every case: its name and its outputs' digests.
+/// The replay logs, the README's main job and the shipped scenes that need no paper data:
+/// each case's name and its outputs' digests.
 fn all_cases() -> Vec<(String, Digests)> {
     let tmp = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
         .join(format!("outputs-unchanged-{}", std::process::id()));
@@ -167,15 +176,26 @@ fn all_cases() -> Vec<(String, Digests)> {
     );
     cases.push(("run demo".into(), outputs(&session, SCAN_OUTPUTS)));
     // Every scene, both devices, seed 1, simulated and replayed by the binary.
-    for scene in [
-        "cone",
-        "sphere-cube",
-        "sphere-octa",
-        "torus",
-        "bowl",
-        "lilium",
-        "bumpy-cube",
-    ] {
+    cases.extend(scene_cases(
+        &tmp,
+        &[
+            "cone",
+            "sphere-cube",
+            "sphere-octa",
+            "torus",
+            "bowl",
+            "relief",
+            "bumpy",
+        ],
+    ));
+    let _ = std::fs::remove_dir_all(&tmp);
+    cases
+}
+
+/// The scenes, both devices, seed 1, simulated and replayed by the binary.
+fn scene_cases(tmp: &Path, scenes: &[&str]) -> Vec<(String, Digests)> {
+    let mut cases = Vec::new();
+    for scene in scenes {
         for device in ["morphorider", "phone"] {
             let prefix = tmp.join(format!("{scene}-{device}"));
             sfs(
@@ -193,7 +213,6 @@ fn all_cases() -> Vec<(String, Digests)> {
             ));
         }
     }
-    let _ = std::fs::remove_dir_all(&tmp);
     cases
 }
 
@@ -211,34 +230,50 @@ fn render(cases: &[(String, Digests)]) -> String {
 }
 
 #[test]
+#[cfg_attr(
+    not(sfs_golden_simd),
+    ignore = "tests/golden/outputs.txt was made on another SIMD level than this machine's (faer's kernels round differently): SFS_BLESS=1 records this machine's"
+)]
 fn issue_14_outputs_are_those_of_the_code_before_the_restructuring() {
-    if !root()
-        .join("../shared/data/libigl-tutorial-data/lilium.obj")
-        .exists()
-    {
-        eprintln!("skipped: ../shared/data is not beside the repository (lilium, bumpy-cube)");
-        return;
-    }
-    let got = render(&all_cases());
+    compare(&golden_path(), &all_cases());
+}
+
+#[test]
+#[cfg_attr(
+    not(all(sfs_golden_simd, sfs_paper_data)),
+    ignore = "needs the paper's meshes (SFS_PAPER_DATA) and a machine of the SIMD level the digests were made on"
+)]
+fn issue_14_outputs_of_the_paper_scenes_are_unchanged() {
+    let tmp = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("outputs-paper-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).unwrap();
+    let cases = scene_cases(&tmp, &sfs::simulate::scene::PAPER_SCENES);
+    let _ = std::fs::remove_dir_all(&tmp);
+    compare(&paper_golden_path(), &cases);
+}
+
+/// The digests of `cases` against the file `golden` (recorded instead with `SFS_BLESS=1`).
+fn compare(golden: &Path, cases: &[(String, Digests)]) {
+    let got = render(cases);
     if std::env::var_os("SFS_BLESS").is_some() {
-        std::fs::create_dir_all(golden_path().parent().unwrap()).unwrap();
-        std::fs::write(golden_path(), &got).unwrap();
-        eprintln!("recorded {}", golden_path().display());
+        std::fs::create_dir_all(golden.parent().unwrap()).unwrap();
+        std::fs::write(golden, &got).unwrap();
+        eprintln!("recorded {}", golden.display());
         return;
     }
-    let want = std::fs::read_to_string(golden_path()).expect("tests/golden/outputs.txt");
+    let want =
+        std::fs::read_to_string(golden).unwrap_or_else(|e| panic!("{}: {e}", golden.display()));
     let made_on = want
         .lines()
         .next()
         .and_then(|l| l.rsplit(' ').next())
         .unwrap_or("");
-    if made_on != simd_level() {
-        eprintln!(
-            "outputs produced, byte comparison skipped: digests made on {made_on}, this machine is {}",
-            simd_level()
-        );
-        return;
-    }
+    assert_eq!(
+        made_on,
+        simd_level(),
+        "{} was made on another SIMD level (the build script saw this machine's as {made_on})",
+        golden.display()
+    );
     let differ: Vec<String> = want
         .lines()
         .skip(1)

@@ -9,11 +9,9 @@ use sfs::simulate::scene::{self, Scene};
 use sfs::simulate::truth::Truth;
 use sfs::simulate::{self, Profile};
 use sfs_geometry::network::{NetworkParams, Reconstructor};
-use std::path::Path;
 
-fn load(name: &str) -> Option<(Scene, Truth)> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
-    let s = scene::load(&scene::find(name, &dir)).ok()?;
+fn load(name: &str) -> (Scene, Truth) {
+    let s = scene::builtin(name).unwrap_or_else(|e| panic!("{e}"));
     let t = simulate::run(
         &s,
         device_protocol::DeviceKind::SensorArray,
@@ -21,7 +19,7 @@ fn load(name: &str) -> Option<(Scene, Truth)> {
         1,
     )
     .truth;
-    Some((s, t))
+    (s, t)
 }
 
 fn score(t: &Truth, scan: &Scan, h: f64) -> f64 {
@@ -36,11 +34,21 @@ fn score(t: &Truth, scan: &Scan, h: f64) -> f64 {
 
 #[test]
 fn exact_input_converges_and_meets_the_target() {
-    for name in ["bowl", "sphere-octa", "cone", "bumpy-cube"] {
-        let Some((s, t)) = load(name) else {
-            eprintln!("skipping {name}: scene not available");
-            continue;
-        };
+    converges(&["bowl", "sphere-octa", "cone", "bumpy", "relief"]);
+}
+
+#[test]
+#[cfg_attr(
+    not(sfs_paper_data),
+    ignore = "needs the paper's meshes (lilium.obj, bumpy-cube.obj): set SFS_PAPER_DATA to their directory"
+)]
+fn exact_input_converges_and_meets_the_target_on_the_paper_scenes() {
+    converges(&["bumpy-cube", "lilium"]);
+}
+
+fn converges(names: &[&str]) {
+    for &name in names {
+        let (s, t) = load(name);
         let scan = s.exact_scan();
         let diag = t.bbox_diagonal;
         let errs: Vec<f64> = [0.032, 0.016, 0.008]
@@ -55,7 +63,7 @@ fn exact_input_converges_and_meets_the_target() {
 
 #[test]
 fn unusable_curves_are_left_out_with_a_reason_and_parts_placed_separately() {
-    let (s, _) = load("sphere-octa").unwrap();
+    let (s, _) = load("sphere-octa");
     let mut scan = s.exact_scan();
     // A curve with one tag, a curve shorter than 2h, and a separate loop with its own nodes.
     let mut one_tag = scan.curves[0].clone();
@@ -125,9 +133,7 @@ fn unusable_curves_are_left_out_with_a_reason_and_parts_placed_separately() {
 #[test]
 fn issue_18_box_and_roof_from_exact_frames() {
     for (name, curves_max, surface_max) in [("box", 0.01, 0.005), ("roof", 0.02, 0.01)] {
-        let Some((s, t)) = load(name) else {
-            panic!("scene {name} not found");
-        };
+        let (s, t) = load(name);
         let run = |smooth: bool| {
             let mut scan = s.exact_scan();
             if smooth {

@@ -32,7 +32,7 @@ fn root() -> &'static Path {
 #[test]
 fn committed_logs_are_what_the_simulator_makes() {
     for &(name, sc, device, profile, seed) in LOGS {
-        let s = scene::load(&scene::find(sc, &root().join("config/scenes"))).unwrap();
+        let s = scene::builtin(sc).unwrap();
         let sim = simulate::run(&s, device, profile, seed);
         let bin = std::fs::read(root().join(format!("replay-logs/{name}.bin"))).unwrap();
         assert!(

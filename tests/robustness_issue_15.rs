@@ -273,8 +273,7 @@ fn issue_15_a_loop_through_one_node_is_a_closed_curve() {
 fn issue_15_loops_through_one_node_reconstruct() {
     use sfs::simulate::{self, scene, Profile};
     use sfs_geometry::network::{NetworkParams, Reconstructor};
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
-    let s = scene::load(&scene::find("torus-loops", &dir)).unwrap();
+    let s = scene::builtin("torus-loops").unwrap();
     for (device, target_pct) in [
         (device_protocol::DeviceKind::Morphorider, 0.10),
         (device_protocol::DeviceKind::Phone, 0.40),
@@ -304,8 +303,7 @@ fn issue_15_loops_through_one_node_reconstruct() {
 #[test]
 fn issue_15_a_repeat_undone_in_the_field_keeps_every_node() {
     use sfs::simulate::{self, scene, Mistakes, Profile};
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
-    let s = scene::load(&scene::find("cone", &dir)).unwrap();
+    let s = scene::builtin("cone").unwrap();
     let more = Mistakes {
         repeated_index: Some((2, 1)),
         ..Default::default()
@@ -415,11 +413,8 @@ fn issue_15_a_taken_port_stops_the_session_before_any_capture() {
 /// "appending to the capture failed"); the capture stands on `/dev/full`, which fails every
 /// write with ENOSPC.
 #[test]
+#[cfg_attr(not(sfs_dev_full), ignore = "needs /dev/full (Linux)")]
 fn issue_15_a_full_disk_names_the_first_write_that_failed() {
-    if !std::path::Path::new("/dev/full").exists() {
-        eprintln!("skipping: no /dev/full");
-        return;
-    }
     let dir = tmpdir("full-disk");
     let session = dir.join("s");
     std::fs::create_dir_all(&session).unwrap();

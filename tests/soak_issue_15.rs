@@ -10,7 +10,7 @@ use common::*;
 use device_protocol::{Decoder, DeviceKind, Event, Packet};
 use sfs::simulate::{self, scene, Profile};
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -82,8 +82,7 @@ fn rss_once_idle(pid: u32, session: &Path, bytes: u64, curves: usize) -> f64 {
 
 #[test]
 fn issue_15_an_hour_at_full_speed_holds_its_memory_and_matches_replay() {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let s = scene::load(&scene::find("torus-hour", &root.join("config/scenes"))).unwrap();
+    let s = scene::builtin("torus-hour").unwrap();
     for device in [DeviceKind::Morphorider, DeviceKind::Phone] {
         let dir = tmpdir(&format!("soak-{device}"));
         let bytes = simulate::run(&s, device, Profile::Default, 1).bytes;

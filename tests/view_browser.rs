@@ -72,10 +72,12 @@ fn drawn(state: &serde_json::Value) -> (usize, usize, Vec<u64>, Vec<(u64, u64)>)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(sfs_chromium),
+    ignore = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
+)]
 async fn issue_16_the_page_shows_a_replayed_session_in_a_real_browser() {
-    if !available() {
-        return;
-    }
+    available();
     let dir = tmpdir("view-browser");
     let out = dir.join("out");
     let (port, _served) = serve_replay_on_a_free_port(
@@ -125,10 +127,12 @@ async fn issue_16_the_page_shows_a_replayed_session_in_a_real_browser() {
 /// preview grows while a curve is scanned; after each `E` the page fetches and draws the new
 /// network (one per curve it saw end), and the preview gives way to it.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(sfs_chromium),
+    ignore = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
+)]
 async fn issue_16_a_running_session_is_drawn_as_it_is_scanned() {
-    if !available() {
-        return;
-    }
+    available();
     let dir = tmpdir("view-browser-live");
     let browser = Browser::start(&dir.join("profile")).await;
     let out = dir.join("out");

@@ -25,6 +25,8 @@ pub struct Recording {
     pub mag: Vec<Vector3<f64>>,
     /// Empty without a gyroscope.
     pub gyro: Vec<Vector3<f64>>,
+    /// A sensor array's capture: the sensors it holds samples of (empty for other devices).
+    pub array_sensors: std::collections::BTreeSet<u16>,
 }
 
 /// Why a recording could not be read.
@@ -37,6 +39,12 @@ pub enum CalibrateError {
     },
     #[error("{}: no HELLO in the capture, so no sample can be scaled", path.display())]
     NoHello { path: std::path::PathBuf },
+    #[error("{}: --sensor {sensor}: the capture has no sensor {sensor} ({})", path.display(), if have.is_empty() { "it is not a sensor array's: give no --sensor".to_string() } else { format!("its sensors: {}", have.iter().map(u16::to_string).collect::<Vec<_>>().join(", ")) })]
+    NoSensor {
+        path: std::path::PathBuf,
+        sensor: u16,
+        have: Vec<u16>,
+    },
 }
 
 /// Extracts the samples of `sensor` (arrays; ignored for other kinds) from capture bytes.
@@ -66,8 +74,11 @@ pub fn recording(bytes: &[u8], sensor: u16) -> Option<Recording> {
                     rec.mag.push(v(s.mag, sm));
                     rec.gyro.push(v(s.gyro, sg));
                 }
-                Packet::ArraySample(s) if s.sensor == sensor => {
-                    let Some((sa, _, sm)) = scales else { continue };
+                Packet::ArraySample(s) => {
+                    rec.array_sensors.insert(s.sensor);
+                    let Some((sa, _, sm)) = scales.filter(|_| s.sensor == sensor) else {
+                        continue;
+                    };
                     rec.t.push(clock.advance(s.t_us));
                     rec.acc.push(v(s.acc, sa));
                     rec.mag.push(v(s.mag, sm));
@@ -83,6 +94,16 @@ pub fn recording(bytes: &[u8], sensor: u16) -> Option<Recording> {
 /// A magnetometer fit covering less than this fraction of directions is not usable (the
 /// device was turned about one axis, or too little: the sphere is not pinned down).
 pub const MIN_COVERAGE: f64 = 0.6;
+
+/// The field magnitudes a magnetometer fit may find, µT: the Earth's field is 25–65 µT
+/// everywhere; outside these bounds the device was not turned (the fit is of noise) or the
+/// scales are wrong.
+pub const FIELD_RANGE_UT: (f64, f64) = (20.0, 70.0);
+
+/// A magnetometer fit whose residual, relative to the field, is above this is not usable: the
+/// samples do not lie on an ellipsoid (a fixed sensor's noise, or a field that changed while
+/// the device was turned). A turned device, even a noisy phone's, stays under 5 %.
+pub const MAX_MAG_RESIDUAL: f64 = 0.1;
 
 /// The accelerometer's z bias and scale are poorly determined unless a rest tilted it past
 /// this angle, degrees.
@@ -104,6 +125,15 @@ impl Calibration {
     /// Why the magnetometer fit is not to be used, if it is not.
     pub fn mag_poor(&self) -> Option<String> {
         match &self.mag {
+            Ok(m) if !(FIELD_RANGE_UT.0..=FIELD_RANGE_UT.1).contains(&m.radius) => Some(format!(
+                "a field of {:.2} µT is not the Earth's ({:.0}–{:.0} µT): the device was not turned through orientations, or its scales are wrong",
+                m.radius, FIELD_RANGE_UT.0, FIELD_RANGE_UT.1
+            )),
+            Ok(m) if m.rel_residual > MAX_MAG_RESIDUAL => Some(format!(
+                "a residual of {:.1} % of the field (at most {:.0} %): the samples do not lie on an ellipsoid (a device that was not turned, or a field that changed meanwhile)",
+                100.0 * m.rel_residual,
+                100.0 * MAX_MAG_RESIDUAL
+            )),
             Ok(m) if m.coverage < MIN_COVERAGE => Some(format!(
                 "only {:.0} % of directions covered (at least {:.0} %): the device was turned about too few axes; turn it through every orientation",
                 100.0 * m.coverage,
@@ -245,5 +275,13 @@ pub fn calibrate_file(path: &Path, sensor: u16) -> Result<Calibration, Calibrate
     let rec = recording(&bytes, sensor).ok_or_else(|| CalibrateError::NoHello {
         path: path.to_owned(),
     })?;
+    let is_array = !rec.array_sensors.is_empty();
+    if (is_array && !rec.array_sensors.contains(&sensor)) || (!is_array && sensor != 0) {
+        return Err(CalibrateError::NoSensor {
+            path: path.to_owned(),
+            sensor,
+            have: rec.array_sensors.into_iter().collect(),
+        });
+    }
     Ok(calibrate(&rec))
 }

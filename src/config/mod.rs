@@ -131,10 +131,10 @@ pub use crate::settings::{DEFAULT_BAUD, DEFAULT_WATCHDOG_MS};
 
 /// A configuration error: the file, the key, the reason.
 #[derive(Debug, thiserror::Error)]
-#[error("{}: {key}: {reason}", file.display())]
+#[error("{}: {}{reason}", file.display(), if key.is_empty() { String::new() } else { format!("{key}: ") })]
 pub struct ConfigError {
     pub file: PathBuf,
-    /// Dotted key (`source.baud`), or `-` when the file itself is at fault.
+    /// Dotted key (`source.baud`), or empty when the file itself is at fault.
     pub key: String,
     pub reason: String,
 }
@@ -194,12 +194,30 @@ fn read_limited(path: &Path, limit: u64) -> std::io::Result<String> {
     Ok(text)
 }
 
+/// Largest configuration file, bytes.
+pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
+/// Reads a configuration file: a regular file (never a FIFO or a device, which could block or
+/// never end) of at most [`MAX_CONFIG_BYTES`].
+fn read_config_file(path: &Path) -> Result<String, String> {
+    let meta = std::fs::metadata(path).map_err(|e| format!("cannot read: {e}"))?;
+    if !meta.is_file() {
+        return Err("cannot read: not a regular file".into());
+    }
+    if meta.len() > MAX_CONFIG_BYTES {
+        return Err(format!(
+            "{} bytes: a configuration has at most {MAX_CONFIG_BYTES}",
+            meta.len()
+        ));
+    }
+    read_limited(path, MAX_CONFIG_BYTES).map_err(|e| format!("cannot read: {e}"))
+}
+
 /// Reads `path` and resolves it into the settings it describes (every key checked, each
 /// section once). Relative paths inside it are taken relative to the directory of the file,
 /// so a shipped configuration works from any working directory.
 pub fn load(path: &Path) -> Result<Settings, ConfigError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| ConfigError::new(path, "-", format!("cannot read: {e}")))?;
+    let text = read_config_file(path).map_err(|reason| ConfigError::new(path, "", reason))?;
     from_text(&text, path)
 }
 
@@ -208,9 +226,7 @@ pub fn from_text(text: &str, path: &Path) -> Result<Settings, ConfigError> {
     let mut cfg: ConfigFile = toml::from_str(text).map_err(|e| {
         ConfigError::new(
             path,
-            e.span()
-                .map(|s| key_at(text, s.start))
-                .unwrap_or_else(|| "-".into()),
+            e.span().map(|s| key_at(text, s.start)).unwrap_or_default(),
             e.message().trim(),
         )
     })?;
@@ -228,8 +244,7 @@ pub fn from_text(text: &str, path: &Path) -> Result<Settings, ConfigError> {
 /// Loads a session's kept configuration (`SESSION/config.toml`, see [`kept_config`]): its
 /// relative paths are resolved where it was copied from, and its errors name that file.
 pub fn load_kept(path: &Path) -> Result<Settings, ConfigError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| ConfigError::new(path, "-", format!("cannot read: {e}")))?;
+    let text = read_config_file(path).map_err(|reason| ConfigError::new(path, "", reason))?;
     match kept_origin(&text) {
         (Some(origin), body) => from_text(body, &origin),
         (None, _) => from_text(&text, path),
@@ -310,7 +325,7 @@ fn key_at(text: &str, at: usize) -> String {
         pos += line.len();
     }
     match (table.is_empty(), key.is_empty()) {
-        (true, true) => "-".into(),
+        (true, true) => String::new(),
         (true, false) => key,
         (false, true) => table,
         (false, false) => format!("{table}.{key}"),
@@ -587,7 +602,7 @@ mod tests {
             ("[acquisition]\nmax_curve_samples = 1\n", "acquisition.max_curve_samples", "out of range"),
             ("[acquisition]\nloop_distance = 0\n", "acquisition.loop_distance", "out of range"),
             ("[acquisition]\nloop_turn_deg = 400\n", "acquisition.loop_turn_deg", "out of range"),
-            ("[view]\naddress = \"localhost\"\n", "view.address", "not an address"),
+            ("[view]\naddress = \"localhost\"\n", "view.address", "no port"),
             ("[view]\nport = 8040\n", "view.port", "unknown field"),
             (
                 "[acquisition.segment_lengths]\nfirst = [0.3]\n",

@@ -20,15 +20,7 @@ impl ConfigFile {
             .address
             .as_deref()
             .map(|a| {
-                a.parse().map_err(|e| {
-                    ConfigError::new(
-                        file,
-                        "view.address",
-                        format!(
-                            "{a:?} is not an address and port (such as \"127.0.0.1:8040\"): {e}"
-                        ),
-                    )
-                })
+                crate::view::parse_address(a).map_err(|e| ConfigError::new(file, "view.address", e))
             })
             .transpose()
     }

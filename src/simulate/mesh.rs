@@ -36,16 +36,23 @@ pub enum MeshError {
     },
     #[error("{}: no triangles", path.display())]
     Empty { path: std::path::PathBuf },
+    #[error("no generated mesh is called {name:?}")]
+    Unknown { name: String },
 }
 
 impl TriMesh {
     /// Loads the `v` and `f` lines of an OBJ file (polygons are fanned into triangles; texture
     /// and normal indices are ignored), then computes vertex normals.
     pub fn load_obj(path: &Path) -> Result<TriMesh, MeshError> {
-        let text = std::fs::read_to_string(path).map_err(|source| MeshError::Read {
+        let text = read_bounded(path).map_err(|source| MeshError::Read {
             path: path.to_owned(),
             source,
         })?;
+        Self::parse_obj(&text, path)
+    }
+
+    /// Parses the text of an OBJ file (`path` names it in errors).
+    pub fn parse_obj(text: &str, path: &Path) -> Result<TriMesh, MeshError> {
         let perr = |line: usize, reason: String| MeshError::Parse {
             path: path.to_owned(),
             line,
@@ -105,6 +112,21 @@ impl TriMesh {
         }
         m.compute_normals();
         Ok(m)
+    }
+
+    /// The mesh as OBJ text (`v` and `f` lines), every coordinate written with the shortest
+    /// decimal that reads back to the same `f64`: [`TriMesh::parse_obj`] gives this mesh
+    /// again, bit for bit.
+    pub fn to_obj(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::with_capacity(self.v.len() * 60 + self.f.len() * 24);
+        for p in &self.v {
+            let _ = writeln!(s, "v {} {} {}", p.x, p.y, p.z);
+        }
+        for f in &self.f {
+            let _ = writeln!(s, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1);
+        }
+        s
     }
 
     /// Angle-weighted vertex normals from the faces' orientation.
@@ -274,6 +296,30 @@ impl TriMesh {
     }
 }
 
+/// Largest mesh file read (a scene's OBJ): 256 MB.
+pub const MAX_MESH_BYTES: u64 = 256 << 20;
+
+/// Reads a mesh file: a regular file of at most [`MAX_MESH_BYTES`].
+fn read_bounded(path: &Path) -> std::io::Result<String> {
+    let meta = std::fs::metadata(path)?;
+    if !meta.is_file() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a regular file",
+        ));
+    }
+    if meta.len() > MAX_MESH_BYTES {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!(
+                "{} bytes, more than the {MAX_MESH_BYTES} a mesh may have",
+                meta.len()
+            ),
+        ));
+    }
+    std::fs::read_to_string(path)
+}
+
 /// One connected piece of a plane section.
 #[derive(Debug, Clone)]
 pub struct Section {
@@ -329,5 +375,18 @@ mod tests {
         assert!(e.contains(":4:") && e.contains("out of range"), "{e}");
         std::fs::write(&p, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
         assert_eq!(TriMesh::load_obj(&p).unwrap().f.len(), 1);
+        assert!(TriMesh::load_obj(&dir)
+            .unwrap_err()
+            .to_string()
+            .contains("not a regular file"));
+    }
+
+    #[test]
+    fn obj_text_reads_back_bit_for_bit() {
+        let mut m = square();
+        m.transform(0.1, Vector3::new(1.0 / 3.0, -2.0e-7, 1e300));
+        let back = TriMesh::parse_obj(&m.to_obj(), Path::new("x.obj")).unwrap();
+        assert_eq!(back.v, m.v);
+        assert_eq!(back.f, m.f);
     }
 }

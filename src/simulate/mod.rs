@@ -17,6 +17,7 @@
 pub mod device;
 pub mod mesh;
 pub mod operator;
+pub mod procedural;
 pub use sfs_geometry::rng;
 pub mod scene;
 pub mod shapes;

@@ -42,14 +42,61 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// A scene error: the file, where, and why.
+/// A scene error: the scene (a file, or a built-in scene by name), the key when one is to
+/// blame, and why.
 #[derive(Debug, thiserror::Error)]
-#[error("{}: {key}: {reason}", file.display())]
+#[error("{origin}: {}{reason}", key.as_deref().map(|k| format!("{k}: ")).unwrap_or_default())]
 pub struct SceneError {
-    pub file: PathBuf,
-    pub key: String,
+    /// The file's path, or "built-in scene NAME".
+    pub origin: String,
+    pub key: Option<String>,
     pub reason: String,
 }
+
+/// The scenes built into the binary (`config/scenes/*.toml`), by name: `sfs simulate --scene
+/// NAME` runs from any directory. The paper's LILIUM and BUMPY CUBE name meshes that are not
+/// shipped (see [`PAPER_DATA_ENV`]).
+pub const BUILTIN: &[(&str, &str)] = &[
+    ("bowl", include_str!("../../config/scenes/bowl.toml")),
+    ("box", include_str!("../../config/scenes/box.toml")),
+    ("bumpy", include_str!("../../config/scenes/bumpy.toml")),
+    (
+        "bumpy-cube",
+        include_str!("../../config/scenes/bumpy-cube.toml"),
+    ),
+    ("cone", include_str!("../../config/scenes/cone.toml")),
+    ("lilium", include_str!("../../config/scenes/lilium.toml")),
+    ("relief", include_str!("../../config/scenes/relief.toml")),
+    ("roof", include_str!("../../config/scenes/roof.toml")),
+    (
+        "sphere-cube",
+        include_str!("../../config/scenes/sphere-cube.toml"),
+    ),
+    (
+        "sphere-octa",
+        include_str!("../../config/scenes/sphere-octa.toml"),
+    ),
+    ("torus", include_str!("../../config/scenes/torus.toml")),
+    (
+        "torus-hour",
+        include_str!("../../config/scenes/torus-hour.toml"),
+    ),
+    (
+        "torus-loops",
+        include_str!("../../config/scenes/torus-loops.toml"),
+    ),
+];
+
+/// The built-in scenes whose meshes are the paper's (not shipped: [`PAPER_DATA_ENV`]).
+pub const PAPER_SCENES: [&str; 2] = ["bumpy-cube", "lilium"];
+
+/// The environment variable naming the directory that holds the paper's meshes
+/// (`lilium.obj`, `bumpy-cube.obj`: libigl's tutorial data), which a scene names with
+/// `[surface] paper = "FILE"`.
+pub const PAPER_DATA_ENV: &str = "SFS_PAPER_DATA";
+
+/// Largest scene file read: 1 MB.
+pub const MAX_SCENE_BYTES: u64 = 1 << 20;
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -78,6 +125,8 @@ struct SurfaceToml {
     a: Option<f64>,
     rim: Option<f64>,
     path: Option<PathBuf>,
+    paper: Option<String>,
+    generate: Option<String>,
     fit_xy: Option<[f64; 2]>,
     scale: Option<f64>,
     base_z: Option<f64>,
@@ -158,6 +207,13 @@ pub enum SurfaceRef {
         translate: [f64; 3],
         flip_normals: bool,
     },
+    /// The same, applied to a [`procedural`](super::procedural) mesh.
+    Generated {
+        generate: String,
+        scale: f64,
+        translate: [f64; 3],
+        flip_normals: bool,
+    },
 }
 
 impl SurfaceRef {
@@ -199,15 +255,33 @@ impl SurfaceRef {
                 translate,
                 flip_normals,
             } => {
-                let mut m = TriMesh::load_obj(path)?;
-                m.transform(*scale, Vector3::from(*translate));
-                if *flip_normals {
-                    m.flip();
-                }
-                Surface::Mesh(Box::new(m))
+                let m = TriMesh::load_obj(path)?;
+                Surface::Mesh(Box::new(placed(m, *scale, translate, *flip_normals)))
+            }
+            SurfaceRef::Generated {
+                generate,
+                scale,
+                translate,
+                flip_normals,
+            } => {
+                let m = super::procedural::generate(generate).ok_or_else(|| {
+                    super::mesh::MeshError::Unknown {
+                        name: generate.clone(),
+                    }
+                })?;
+                Surface::Mesh(Box::new(placed(m, *scale, translate, *flip_normals)))
             }
         })
     }
+}
+
+/// `m` scaled, moved and, when asked, flipped, as the scene placed it.
+fn placed(mut m: TriMesh, scale: f64, translate: &[f64; 3], flip: bool) -> TriMesh {
+    m.transform(scale, Vector3::from(*translate));
+    if flip {
+        m.flip();
+    }
+    m
 }
 
 /// One curve of a built scene: a dense polyline with exact normals, and its node tags.
@@ -323,27 +397,82 @@ impl Scene {
     }
 }
 
-/// Finds a scene: a path to a `.toml` file, or a name in `dir`.
-pub fn find(name_or_path: &str, dir: &Path) -> PathBuf {
-    let p = Path::new(name_or_path);
-    if p.extension().is_some_and(|e| e == "toml") || p.components().count() > 1 {
-        p.to_owned()
+/// The names of the built-in scenes, sorted.
+pub fn names() -> impl Iterator<Item = &'static str> {
+    BUILTIN.iter().map(|(n, _)| *n)
+}
+
+/// Whether `arg` names a scene file rather than a built-in scene: it ends in `.toml` or has
+/// a directory in it.
+pub fn is_path(arg: &str) -> bool {
+    let p = Path::new(arg);
+    p.extension().is_some_and(|e| e == "toml") || p.components().count() > 1
+}
+
+/// A scene from the command line: a built-in scene by name, or a scene file (`PATH.toml`).
+pub fn resolve(name_or_path: &str) -> Result<Scene, SceneError> {
+    if is_path(name_or_path) {
+        load(Path::new(name_or_path))
     } else {
-        dir.join(format!("{name_or_path}.toml"))
+        builtin(name_or_path)
     }
 }
 
-/// Loads and builds a scene file.
+/// Builds the built-in scene `name`.
+pub fn builtin(name: &str) -> Result<Scene, SceneError> {
+    let origin = format!("built-in scene {name}");
+    match BUILTIN.iter().find(|(n, _)| *n == name) {
+        Some((_, text)) => parse(text, &origin, None),
+        None => Err(SceneError {
+            origin: name.to_owned(),
+            key: None,
+            reason: format!(
+                "no such built-in scene (they are: {}); a scene file is given as PATH.toml",
+                names().collect::<Vec<_>>().join(", ")
+            ),
+        }),
+    }
+}
+
+/// Loads and builds a scene file (a regular file of at most [`MAX_SCENE_BYTES`]); a mesh's
+/// `path` is relative to the file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let origin = path.display().to_string();
+    let text = read_scene_file(path).map_err(|reason| SceneError {
+        origin: origin.clone(),
+        key: None,
+        reason,
+    })?;
+    parse(&text, &origin, Some(path.parent().unwrap_or(Path::new(""))))
+}
+
+fn read_scene_file(path: &Path) -> Result<String, String> {
+    let meta = std::fs::metadata(path).map_err(|e| format!("cannot read the scene file: {e}"))?;
+    if !meta.is_file() {
+        return Err("not a regular file".into());
+    }
+    if meta.len() > MAX_SCENE_BYTES {
+        return Err(format!(
+            "{} bytes, more than the {MAX_SCENE_BYTES} a scene file may have",
+            meta.len()
+        ));
+    }
+    std::fs::read_to_string(path).map_err(|e| format!("cannot read the scene file: {e}"))
+}
+
+/// Builds a scene from its TOML text; `origin` names it in errors, `base` is the directory a
+/// mesh's `path` is relative to (none for a built-in scene).
+pub fn parse(text: &str, origin: &str, base: Option<&Path>) -> Result<Scene, SceneError> {
     let err = |key: &str, reason: String| SceneError {
-        file: path.to_owned(),
-        key: key.to_owned(),
+        origin: origin.to_owned(),
+        key: Some(key.to_owned()),
         reason,
     };
-    let text = std::fs::read_to_string(path).map_err(|e| err("-", format!("cannot read: {e}")))?;
-    let t: SceneToml =
-        toml::from_str(&text).map_err(|e| err("-", e.message().trim().to_owned()))?;
-    let base = path.parent().unwrap_or(Path::new(""));
+    let t: SceneToml = toml::from_str(text).map_err(|e| SceneError {
+        origin: origin.to_owned(),
+        key: None,
+        reason: toml_error(text, &e),
+    })?;
     let (surface, surface_ref) =
         build_surface(&t.surface, base).map_err(|(k, r)| err(&format!("surface.{k}"), r))?;
     let spacing = t.spacing.unwrap_or(0.002);
@@ -384,7 +513,84 @@ fn need(v: Option<f64>, k: &str) -> Result<f64, (String, String)> {
     }
 }
 
-fn build_surface(s: &SurfaceToml, base: &Path) -> Result<(Surface, SurfaceRef), (String, String)> {
+/// A TOML error as one line: where (line and column) and why.
+fn toml_error(text: &str, e: &toml::de::Error) -> String {
+    let why = e.message().trim().to_owned();
+    match e.span() {
+        Some(span) => {
+            let before = &text[..span.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let col = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+            format!("line {line}, column {col}: {why}")
+        }
+        None => why,
+    }
+}
+
+/// The mesh a `mesh` surface names: `path` (relative to the scene file), `paper` (in
+/// [`PAPER_DATA_ENV`]) or `generate` (a [`procedural`](super::procedural) mesh), and what
+/// the truth file will call it.
+fn mesh_source(
+    s: &SurfaceToml,
+    base: Option<&Path>,
+) -> Result<(TriMesh, MeshSource), (String, String)> {
+    let given = [s.path.is_some(), s.paper.is_some(), s.generate.is_some()];
+    if given.iter().filter(|g| **g).count() != 1 {
+        return Err((
+            "path".into(),
+            "a mesh needs one of path (an OBJ file beside the scene), paper (one of the \
+             paper's meshes) or generate (relief or bumpy)"
+                .into(),
+        ));
+    }
+    if let Some(g) = &s.generate {
+        let m = super::procedural::generate(g).ok_or((
+            "generate".to_string(),
+            format!(
+                "unknown mesh {g:?}: {}",
+                super::procedural::NAMES.join(" or ")
+            ),
+        ))?;
+        return Ok((m, MeshSource::Generated(g.clone())));
+    }
+    let (key, path) = if let Some(file) = &s.paper {
+        let dir = std::env::var_os(PAPER_DATA_ENV).ok_or((
+            "paper".to_string(),
+            format!(
+                "{file} is one of the paper's meshes, which are not shipped (no licence allows \
+                 it): set {PAPER_DATA_ENV} to the directory that holds it (libigl's tutorial data)"
+            ),
+        ))?;
+        ("paper", PathBuf::from(dir).join(file))
+    } else {
+        let rel = s.path.clone().unwrap_or_default();
+        let path = match base {
+            Some(b) => b.join(rel),
+            None if rel.is_absolute() => rel,
+            None => {
+                return Err((
+                    "path".into(),
+                    "a built-in scene has no directory a relative path could be in".into(),
+                ))
+            }
+        };
+        ("path", path)
+    };
+    let m = TriMesh::load_obj(&path).map_err(|e| (key.to_string(), e.to_string()))?;
+    let path = std::fs::canonicalize(&path).unwrap_or(path);
+    Ok((m, MeshSource::File(path)))
+}
+
+/// Where a scene's mesh came from.
+enum MeshSource {
+    File(PathBuf),
+    Generated(String),
+}
+
+fn build_surface(
+    s: &SurfaceToml,
+    base: Option<&Path>,
+) -> Result<(Surface, SurfaceRef), (String, String)> {
     let positive = |v: Option<f64>, k: &str| -> Result<f64, (String, String)> {
         let x = need(v, k)?;
         if x > 0.0 {
@@ -444,13 +650,7 @@ fn build_surface(s: &SurfaceToml, base: &Path) -> Result<(Surface, SurfaceRef), 
             height: positive(s.height, "height")?,
         },
         "mesh" => {
-            let rel = s
-                .path
-                .clone()
-                .ok_or(("path".to_string(), "required for a mesh".to_string()))?;
-            let path = base.join(rel);
-            let mut m =
-                TriMesh::load_obj(&path).map_err(|e| ("path".to_string(), e.to_string()))?;
+            let (mut m, source) = mesh_source(s, base)?;
             let (lo, hi) = m.bounds();
             let scale = match (s.fit_xy, s.scale) {
                 (Some(_), Some(_)) => {
@@ -474,16 +674,21 @@ fn build_surface(s: &SurfaceToml, base: &Path) -> Result<(Surface, SurfaceRef), 
             if s.flip_normals {
                 m.flip();
             }
-            let path = std::fs::canonicalize(&path).unwrap_or(path);
-            return Ok((
-                Surface::Mesh(Box::new(m)),
-                SurfaceRef::Mesh {
+            let r = match source {
+                MeshSource::File(path) => SurfaceRef::Mesh {
                     path,
                     scale,
                     translate,
                     flip_normals: s.flip_normals,
                 },
-            ));
+                MeshSource::Generated(generate) => SurfaceRef::Generated {
+                    generate,
+                    scale,
+                    translate,
+                    flip_normals: s.flip_normals,
+                },
+            };
+            return Ok((Surface::Mesh(Box::new(m)), r));
         }
         other => {
             return Err((

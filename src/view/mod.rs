@@ -25,6 +25,46 @@ mod server;
 
 pub use server::{bind, serve, DEFAULT_ADDRESS, PREVIEW_PERIOD};
 
+/// The forms `--view` and `[view] address` accept.
+pub const ADDRESS_FORMS: &str = "PORT (this machine only: 127.0.0.1:PORT), localhost:PORT, \
+     IP:PORT (0.0.0.0:PORT: every interface) or [IPv6]:PORT";
+
+/// Parses where the view is served: a port alone (on the loopback), `localhost:PORT`, or an
+/// IP address with its port. An error names the accepted forms.
+///
+/// ```
+/// use sfs::view::parse_address;
+/// assert_eq!(parse_address("8933").unwrap().to_string(), "127.0.0.1:8933");
+/// assert_eq!(parse_address("localhost:8933").unwrap().to_string(), "127.0.0.1:8933");
+/// assert_eq!(parse_address("[::1]:80").unwrap().to_string(), "[::1]:80");
+/// assert!(parse_address("localhost").unwrap_err().contains("localhost:PORT"));
+/// ```
+pub fn parse_address(s: &str) -> Result<std::net::SocketAddr, String> {
+    use std::net::{Ipv4Addr, SocketAddr};
+    let s = s.trim();
+    let port = |p: &str| {
+        p.parse::<u16>()
+            .map_err(|_| format!("{p:?} is not a port (0 to 65535)"))
+    };
+    let wrong = |why: String| format!("{s:?}: {why}; give {ADDRESS_FORMS}");
+    if s.chars().all(|c| c.is_ascii_digit()) && !s.is_empty() {
+        return port(s)
+            .map(|p| SocketAddr::from((Ipv4Addr::LOCALHOST, p)))
+            .map_err(wrong);
+    }
+    if let Some(p) = s.strip_prefix("localhost:") {
+        return port(p)
+            .map(|p| SocketAddr::from((Ipv4Addr::LOCALHOST, p)))
+            .map_err(wrong);
+    }
+    s.parse::<SocketAddr>().map_err(|_| {
+        wrong(match s.rsplit_once(':') {
+            None => "no port".into(),
+            Some(_) => "not an IP address and a port".into(),
+        })
+    })
+}
+
 use crate::link::LinkStats;
 use crate::metrics::SessionMetrics;
 use crate::report::{LiveReport, Percentiles};
