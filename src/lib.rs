@@ -41,11 +41,11 @@
 //! - [`shutdown`]: the stop signal passed into every long-running part; [`service`]: systemd's
 //!   readiness, status and watchdog (`deploy/sfs@.service`).
 //! - Tools beside the daemon: [`calibrate`] (`sfs calibrate`: ellipsoid and static-pose
-//!   fits), [`simulate`] (captures of known shapes: operator timeline, device models),
-//!   [`eval`] (`sfs eval`: scoring against a truth).
+//!   fits), [`simulate`] (captures of known shapes: the built-in scenes and the meshes the
+//!   project makes, operator timeline, device models), [`eval`] (`sfs eval`: scoring
+//!   against a truth).
 //!
-//! The modules import one another without cycles (checked with
-//! `../shared/tools/rust_imports.py`).
+//! The modules import one another without cycles (checked by `tests/layering.rs`).
 
 pub mod acquisition;
 pub mod atomic;
