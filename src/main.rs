@@ -145,8 +145,8 @@ fn run(a: RunArgs) -> i32 {
         (None, true) if saved.is_file() => Some(saved.clone()),
         (c, _) => c.clone(),
     };
-    if let (Some(given), true, Ok(kept)) = (&a.config, resume, std::fs::read_to_string(&saved)) {
-        if std::fs::read_to_string(given).ok().as_deref() != Some(config::kept_origin(&kept).1) {
+    if let (Some(given), true, Ok(kept)) = (&a.config, resume, config::read_config_file(&saved)) {
+        if config::read_config_file(given).ok().as_deref() != Some(config::kept_origin(&kept).1) {
             tracing::warn!(
                 "{} differs from the configuration the session started with ({}): the curves so far are rebuilt with the new one",
                 given.display(),
@@ -164,7 +164,7 @@ fn run(a: RunArgs) -> i32 {
     let start = if resume {
         session::Start::Resume
     } else {
-        match config.as_deref().map(|f| (f, std::fs::read_to_string(f))) {
+        match config.as_deref().map(|f| (f, config::read_config_file(f))) {
             Some((f, Ok(text))) => session::Start::NewWithConfig(config::kept_config(&text, f)),
             _ => session::Start::New,
         }
@@ -417,8 +417,9 @@ fn simulate(a: SimulateArgs) -> i32 {
         Ok(s) => s,
         Err(e) => {
             complain!("sfs: {e}");
-            // A file or mesh that cannot be read is the input; anything else, the usage.
-            let unreadable = (scene::is_path(arg) && !Path::new(arg).is_file())
+            // A file or mesh that is not there is the input; anything else (a directory, a
+            // FIFO, a device, an oversized file, a wrong key), the usage.
+            let unreadable = (scene::is_path(arg) && !Path::new(arg).exists())
                 || matches!(e.key.as_deref(), Some("surface.paper" | "surface.path"));
             return if unreadable { exit::INPUT } else { exit::USAGE };
         }
@@ -505,20 +506,8 @@ fn plural(n: usize, word: &str) -> String {
     format!("{n} {word}{}", if n == 1 { "" } else { "s" })
 }
 
-/// `sfs config check`: a replayed capture must exist (`sfs run` would fail to open it).
-fn replay_exists(settings: Settings, file: &Path) -> Result<Settings, ConfigError> {
-    match &settings.source {
-        Some(SourceSpec::Replay { path, .. }) if !path.is_file() => Err(ConfigError::new(
-            file,
-            "source.path",
-            format!("{} is not a file", path.display()),
-        )),
-        _ => Ok(settings),
-    }
-}
-
 fn config_check(file: &Path) -> i32 {
-    match config::load(file).and_then(|s| replay_exists(s, file)) {
+    match config::load(file) {
         Ok(settings) => {
             say!("{}: ok", file.display());
             // What a monitoring configuration describes, to check it against the structure.

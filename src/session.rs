@@ -133,9 +133,15 @@ pub async fn run(
         let metrics = SessionMetrics::new(monitor.as_ref().map(|m| &m.metrics));
         crate::view::View::new(&description, metrics)
     });
-    let server = view
-        .as_ref()
-        .map(|v| crate::view::serve(listeners, v.clone(), server_stop.clone()));
+    let server = view.as_ref().map(|v| {
+        let access = &settings.view_access;
+        crate::view::serve(
+            listeners,
+            v.clone(),
+            server_stop.clone(),
+            (access.allowed_hosts.clone(), access.token.clone()),
+        )
+    });
     let _stop_server = StopOnDrop(server_stop.clone());
     tracing::info!(source = %description, out = %out_dir.display(), "session started");
     let started = Instant::now();

@@ -40,6 +40,16 @@ pub struct Settings {
     /// Keep serving the view (and the metrics) after the session ends, until interrupted
     /// (`sfs replay --view`, so a recorded session can be looked at).
     pub keep_serving: bool,
+    /// Who the view answers besides this machine's addresses and `localhost`
+    /// ([`crate::view::access`]).
+    pub view_access: ViewAccess,
+}
+
+/// `[view] allowed_hosts` and `[view] token`.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ViewAccess {
+    pub allowed_hosts: Vec<String>,
+    pub token: Option<String>,
 }
 
 /// A serial link's settings.
@@ -83,6 +93,7 @@ impl Default for Settings {
             capture_rotation: None,
             view: None,
             keep_serving: false,
+            view_access: ViewAccess::default(),
         }
     }
 }

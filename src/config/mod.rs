@@ -111,6 +111,8 @@
 //!
 //! [view]                             # the live view (a web page) while the session runs
 //! address = "127.0.0.1:8040"         # where to serve it (no view without it, or --view)
+//! allowed_hosts = ["scanner.lan"]    # names it answers besides localhost and addresses
+//! # token = "…"                      # every request must carry it (≥ 16 characters)
 //! ```
 
 mod acquisition;
@@ -178,9 +180,16 @@ struct ConfigFile {
 /// that never ends, like `/dev/zero`) is refused instead of read until memory runs out.
 pub const MAX_NAMED_FILE: u64 = 64 << 20;
 
-/// Reads the text of `path`, refusing it when it is longer than `limit` bytes.
+/// Reads the text of `path`, refusing it when it is not a regular file (a FIFO would block
+/// the open, a device never end) or is longer than `limit` bytes.
 fn read_limited(path: &Path, limit: u64) -> std::io::Result<String> {
     use std::io::Read;
+    if !std::fs::metadata(path)?.is_file() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a regular file",
+        ));
+    }
     let mut text = String::new();
     std::fs::File::open(path)?
         .take(limit + 1)
@@ -198,8 +207,8 @@ fn read_limited(path: &Path, limit: u64) -> std::io::Result<String> {
 pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
 
 /// Reads a configuration file: a regular file (never a FIFO or a device, which could block or
-/// never end) of at most [`MAX_CONFIG_BYTES`].
-fn read_config_file(path: &Path) -> Result<String, String> {
+/// never end) of at most [`MAX_CONFIG_BYTES`]; the error says why not.
+pub fn read_config_file(path: &Path) -> Result<String, String> {
     let meta = std::fs::metadata(path).map_err(|e| format!("cannot read: {e}"))?;
     if !meta.is_file() {
         return Err("cannot read: not a regular file".into());
@@ -218,7 +227,31 @@ fn read_config_file(path: &Path) -> Result<String, String> {
 /// so a shipped configuration works from any working directory.
 pub fn load(path: &Path) -> Result<Settings, ConfigError> {
     let text = read_config_file(path).map_err(|reason| ConfigError::new(path, "", reason))?;
-    from_text(&text, path)
+    from_text(&text, path).and_then(|s| files_named(s, path))
+}
+
+/// The files a configuration names, checked where the configuration is loaded (so that
+/// `sfs run` refuses what `sfs config check` refuses): a replayed capture must be a regular
+/// file (a device such as `/dev/zero` would be read for ever, a FIFO block).
+fn files_named(settings: Settings, file: &Path) -> Result<Settings, ConfigError> {
+    if let Some(crate::source::SourceSpec::Replay { path, .. }) = &settings.source {
+        if !path.is_file() {
+            return Err(ConfigError::new(
+                file,
+                "source.path",
+                format!(
+                    "{} is not a regular file{}",
+                    path.display(),
+                    if path.exists() {
+                        ""
+                    } else {
+                        " (it does not exist)"
+                    }
+                ),
+            ));
+        }
+    }
+    Ok(settings)
 }
 
 /// As [`load`], for the text of a file at `path`.
@@ -249,6 +282,7 @@ pub fn load_kept(path: &Path) -> Result<Settings, ConfigError> {
         (Some(origin), body) => from_text(body, &origin),
         (None, _) => from_text(&text, path),
     }
+    .and_then(|s| files_named(s, path))
 }
 
 impl ConfigFile {
@@ -276,6 +310,7 @@ impl ConfigFile {
             capture_rotation: self.capture_rotation(file)?,
             view: self.view_address(file)?,
             keep_serving: false,
+            view_access: self.view_access(file)?,
         };
         Ok(match monitor {
             Some(m) => settings.with_monitor(m),
@@ -493,8 +528,9 @@ mod tests {
         assert_eq!(m.reference.unwrap().curves[0].1.len(), 401);
         let cases = [
             ("reference_file = \"none.json\"", "none.json"),
-            // Issue 15 point 7: read with a size limit, not until memory runs out.
-            ("reference_file = \"/dev/zero\"", "longer than 64 MB"),
+            // Issue 15 point 7: read with a size limit, not until memory runs out; issue 31
+            // point 4: a device is not even opened.
+            ("reference_file = \"/dev/zero\"", "not a regular file"),
             ("reference_file = \"anchor.json\"", "anchored at node 1"),
             (
                 "reference_file = \"curve.json\"",
@@ -604,6 +640,8 @@ mod tests {
             ("[acquisition]\nloop_turn_deg = 400\n", "acquisition.loop_turn_deg", "out of range"),
             ("[view]\naddress = \"localhost\"\n", "view.address", "no port"),
             ("[view]\nport = 8040\n", "view.port", "unknown field"),
+            ("[view]\ntoken = \"short\"\n", "view.token", "at least 16"),
+            ("[view]\nallowed_hosts = [\"evil host\"]\n", "view.allowed_hosts[0]", "not a host name"),
             (
                 "[acquisition.segment_lengths]\nfirst = [0.3]\n",
                 "acquisition.segment_lengths.first",

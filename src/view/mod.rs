@@ -20,6 +20,7 @@
 //! bounded broadcast queue, and a client that falls behind it is dropped (its browser
 //! reconnects); the number of event streams and of requests in flight is limited.
 
+pub mod access;
 pub mod assets;
 mod server;
 

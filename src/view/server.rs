@@ -44,13 +44,22 @@ struct App {
     stop: Shutdown,
 }
 
-/// Serves `view` on every listener (from [`bind`]) until `stop`, with the status ticker.
-/// The returned task ends when every server has stopped.
+/// Serves `view` on every listener (from [`bind`]) until `stop`, with the status ticker,
+/// answering the hosts and wanting the token of `(allowed_hosts, token)`
+/// ([`super::access`]). The returned task ends when every server has stopped.
 pub fn serve(
     listeners: Vec<tokio::net::TcpListener>,
     view: View,
     stop: Shutdown,
+    (allowed_hosts, token): (Vec<String>, Option<String>),
 ) -> tokio::task::JoinHandle<()> {
+    let ports = listeners
+        .iter()
+        .filter_map(|l| l.local_addr().ok())
+        .map(|a| a.port())
+        .collect();
+    let exposed = token.is_none();
+    let access = Arc::new(super::access::Access::new(ports, allowed_hosts, token));
     let app = App {
         view: view.clone(),
         streams: Arc::new(AtomicUsize::new(0)),
@@ -77,6 +86,10 @@ pub fn serve(
             StatusCode::REQUEST_TIMEOUT,
             REQUEST_TIMEOUT,
         ))
+        .layer(axum::middleware::from_fn_with_state(
+            access,
+            super::access::check,
+        ))
         .layer(tower_http::set_header::SetResponseHeaderLayer::overriding(
             header::X_CONTENT_TYPE_OPTIONS,
             HeaderValue::from_static("nosniff"),
@@ -85,6 +98,12 @@ pub fn serve(
     for listener in listeners {
         if let Ok(addr) = listener.local_addr() {
             tracing::info!("view at http://{addr}/ (metrics at /metrics)");
+            if addr.ip().is_unspecified() {
+                tracing::warn!(
+                    "the view listens on every network interface ({addr}): anyone who can reach this machine can read the scan{}",
+                    if exposed { "; set [view] token to require a token" } else { " who has the token" }
+                );
+            }
         }
         let stop = stop.clone();
         let router = router.clone();
