@@ -136,7 +136,8 @@ async fn daemon_latency(capture: &Path, out: &Path, clients: usize) -> serde_jso
     for _ in 0..clients {
         use std::io::Write;
         if let Ok(mut s) = std::net::TcpStream::connect(("127.0.0.1", port)) {
-            let _ = s.write_all(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n");
+            let req = format!("GET /events HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n");
+            let _ = s.write_all(req.as_bytes());
             stalled.push(s);
         }
     }

@@ -123,14 +123,49 @@ impl Default for AcquisitionConfig {
     }
 }
 
-/// Warnings kept in a scan (and so in scan.json and report.json); the rest are counted.
-pub const MAX_WARNINGS: usize = 1000;
-
-/// Warnings of one kind logged in full; after them, a summary line at every power of two.
-pub const LOGGED_PER_KIND: u64 = 20;
+pub use crate::warning::{LOGGED_PER_KIND, MAX_WARNINGS};
 
 /// Largest wheel advance between consecutive samples taken as real motion, m.
 pub const MAX_WHEEL_STEP: f64 = 0.5;
+
+/// "curve ended" lines logged per minute of session time: an operator ends a curve every half
+/// minute or so, a key storm thousands; the rest are counted and said in one line.
+const CURVE_LINES_PER_MINUTE: u32 = 10;
+
+/// The log's rate limit for "curve ended" lines (session time, so a replay logs what the
+/// session did).
+#[derive(Debug, Default)]
+struct CurveLines {
+    window: f64,
+    logged: u32,
+    left_out: u64,
+}
+
+impl CurveLines {
+    /// Whether the line of a curve ended at session time `t` is logged.
+    fn allow(&mut self, t: f64) -> bool {
+        if !(self.window..self.window + 60.0).contains(&t) {
+            if self.left_out > 0 {
+                tracing::info!(
+                    curves = self.left_out,
+                    "{} more curves ended within a minute (their lines left out of the log)",
+                    self.left_out
+                );
+            }
+            *self = CurveLines {
+                window: t,
+                ..Default::default()
+            };
+        }
+        if self.logged < CURVE_LINES_PER_MINUTE {
+            self.logged += 1;
+            true
+        } else {
+            self.left_out += 1;
+            false
+        }
+    }
+}
 
 /// The curve being scanned ([`Acquisition::open_curve`]).
 #[derive(Debug, Clone, PartialEq)]
@@ -283,12 +318,14 @@ pub struct Acquisition {
     array_grid: Option<i64>,
     ahrs: Ahrs,
     last_sample_t: Option<f64>,
+    /// The log's rate limit for "curve ended" lines.
+    curve_lines: CurveLines,
     gap: bool,
     array: BTreeMap<u16, ArraySensor>,
     /// Per-curve segment lengths received after the curve ended (phone).
     late_lengths: BTreeMap<usize, BTreeMap<u16, f64>>,
-    /// Warnings so far, per kind.
-    warned: BTreeMap<&'static str, u64>,
+    /// The log's rate limit for the warnings.
+    warned: crate::warning::LogLimiter,
     /// Counts the sensor models taken from HELLOs (an open curve notes the one of its
     /// samples).
     model_generation: u64,
@@ -362,10 +399,11 @@ impl Acquisition {
             array_grid: None,
             ahrs,
             last_sample_t: None,
+            curve_lines: CurveLines::default(),
             gap: false,
             array: BTreeMap::new(),
             late_lengths: BTreeMap::new(),
-            warned: BTreeMap::new(),
+            warned: Default::default(),
             model_generation: 0,
             turned: 0.0,
             turn_anchor: None,
@@ -447,21 +485,13 @@ impl Acquisition {
     /// [`MAX_WARNINGS`] (the rest counted as `warnings_left_out`): a stuck key must not fill
     /// the log, the memory or report.json.
     fn note(&mut self, w: Warning) {
-        let n = self.warned.entry(w.code()).or_insert(0);
-        *n += 1;
-        if *n <= LOGGED_PER_KIND {
-            match &w {
-                Warning::Keypad(k) => tracing::warn!("keypad: {k}"),
-                w => tracing::warn!("{w}"),
-            }
-        } else if n.is_power_of_two() && *n >= 128 {
-            tracing::warn!(
-                kind = w.code(),
-                count = *n,
-                "{} warnings of this kind so far (only the first {LOGGED_PER_KIND} are logged); the latest: {w}",
-                *n
-            );
-        }
+        self.warned.log(&w);
+        *self
+            .scan
+            .counts
+            .warnings_by_code
+            .entry(w.code())
+            .or_insert(0) += 1;
         if self.scan.warnings.len() < MAX_WARNINGS {
             self.scan.warnings.push(w);
         } else {
@@ -1240,14 +1270,19 @@ impl Acquisition {
             c.invalid += (f & flags::INVALID != 0) as u64;
         }
         self.scan.field_reference = self.field.reference().map(|(n, d)| [n, d]);
-        tracing::info!(
-            curve = curve.index,
-            kind = %curve.kind,
-            nodes = ?curve.nodes(),
-            samples = n,
-            length_m = format!("{:.3}", curve.length()),
-            "curve ended"
-        );
+        if self
+            .curve_lines
+            .allow(self.last_sample_t.unwrap_or_default())
+        {
+            tracing::info!(
+                curve = curve.index,
+                kind = %curve.kind,
+                nodes = ?curve.nodes(),
+                samples = n,
+                length_m = format!("{:.3}", curve.length()),
+                "curve ended"
+            );
+        }
         curve
     }
 

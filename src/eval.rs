@@ -249,6 +249,12 @@ fn icp(
         let rms = (near.iter().map(|n| n.1 * n.1).sum::<f64>() / near.len() as f64).sqrt();
         let converged = (last_rms - rms).abs() <= 1e-9 * diag;
         last_rms = rms;
+        // Twice the residual any registration of the same shape leaves, after 20 iterations:
+        // no fit will come (another scene's truth); each further iteration would search far
+        // from every curve, where the grid is slow.
+        if it >= 20 && rms > 2.0 * MAX_RESIDUAL_PCT / 100.0 * diag {
+            break;
+        }
         let targets: Vec<Vector3<f64>> = near.iter().map(|n| n.0).collect();
         let Some((dr, dt)) = kabsch(&moved, &targets) else {
             break;

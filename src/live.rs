@@ -161,6 +161,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
     let mut settle_ms = Vec::new();
     let mut report = LiveReport::default();
     let mut last = None;
+    let mut status_log = StatusLog::default();
     loop {
         let (curves, posted, snapshot) = {
             let mut m = lock(&shared.mail);
@@ -207,7 +208,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
             lat: &lat,
         };
         update.publish(&products, &mut report, &posted);
-        status_lines(&scan, &products, &lat, compute_ms);
+        status_log.lines(&scan, &products, &lat, compute_ms);
         // A provisional update is settled at once while no curve waits (the operator sees the
         // quick one meanwhile), so the last update is always exact.
         let waiting = || !lock(&shared.mail).curves.is_empty();
@@ -291,7 +292,47 @@ impl Update<'_> {
     }
 }
 
-/// One line per curve the update brought in.
+/// Status lines logged per update: a session brings in one curve an update, a key storm
+/// thousands (the rest are said in one line).
+const STATUS_LINES_PER_UPDATE: usize = 5;
+
+/// Updates whose lines are all logged; after them, at most one update's lines a second.
+const UPDATES_LOGGED: u64 = 100;
+
+/// The log's rate limit for the status lines: every update's for the first
+/// [`UPDATES_LOGGED`] (a session has tens of curves), then at most one update's a second, the
+/// curves of the updates in between counted in the next lines.
+#[derive(Debug, Default)]
+struct StatusLog {
+    updates: u64,
+    last: Option<Instant>,
+    held: usize,
+}
+
+impl StatusLog {
+    fn lines(&mut self, scan: &Scan, p: &Products, lat: &[(usize, f64)], compute_ms: f64) {
+        self.updates += 1;
+        let recent = self
+            .last
+            .is_some_and(|t| t.elapsed() < std::time::Duration::from_secs(1));
+        if self.updates > UPDATES_LOGGED && recent {
+            self.held += lat.len();
+            return;
+        }
+        if self.held > 0 {
+            tracing::info!(
+                curves = self.held,
+                "{} more curves came into network.glb meanwhile (their lines left out of the log)",
+                self.held
+            );
+            self.held = 0;
+        }
+        self.last = Some(Instant::now());
+        status_lines(scan, p, lat, compute_ms);
+    }
+}
+
+/// One line per curve the update brought in (at most [`STATUS_LINES_PER_UPDATE`]).
 fn status_lines(scan: &Scan, p: &Products, lat: &[(usize, f64)], compute_ms: f64) {
     let (net_curves, samples, max_angle) = p.network.as_ref().map_or((0, 0, 0.0), |n| {
         (
@@ -300,7 +341,14 @@ fn status_lines(scan: &Scan, p: &Products, lat: &[(usize, f64)], compute_ms: f64
             n.report.max_node_normal_angle_deg,
         )
     });
-    for (index, latency) in lat {
+    if lat.len() > STATUS_LINES_PER_UPDATE {
+        tracing::info!(
+            curves = lat.len(),
+            "{} curves in network.glb in this update (the lines of the first {STATUS_LINES_PER_UPDATE} follow)",
+            lat.len()
+        );
+    }
+    for (index, latency) in lat.iter().take(STATUS_LINES_PER_UPDATE) {
         let c = scan.curves.iter().find(|c| c.index == *index);
         tracing::info!(
             curve = index,

@@ -94,6 +94,8 @@ impl Products {
 pub struct Pipeline {
     reconstructor: Reconstructor,
     surfacer: Surfacer,
+    /// The log's rate limit for the warnings of every run (the geometry logs none itself).
+    log: crate::warning::LogLimiter,
 }
 
 impl Pipeline {
@@ -128,11 +130,13 @@ impl Pipeline {
                 // failed solve).
                 out.warnings
                     .extend(why.warnings.into_iter().map(Warning::Network));
+                out.warnings.iter().for_each(|w| self.log.log(w));
                 return out;
             }
         };
         out.warnings
             .extend(net.warnings.iter().cloned().map(Warning::Network));
+        out.warnings.iter().for_each(|w| self.log.log(w));
         for (k, p) in &net.positions.nodes {
             out.nodes.insert(k.to_string(), crate::gltf_out::to_gltf(p));
         }
@@ -195,8 +199,9 @@ impl Pipeline {
                     Some(s)
                 }
                 Err(e) => {
-                    tracing::warn!("no surface: {e}");
-                    out.warnings.push(Warning::NoSurface(e));
+                    let w = Warning::NoSurface(e);
+                    self.log.log(&w);
+                    out.warnings.push(w);
                     None
                 }
             }

@@ -4,6 +4,15 @@
 use crate::link::LinkStats;
 use crate::scan::{Counts, Curve};
 use crate::warning::Warning;
+pub use crate::warning::MAX_WARNINGS;
+
+/// Curves listed in report.json (a session has tens; thousands are a key storm, which
+/// must not make the report large: they are all in scan.json).
+pub const MAX_CURVES_LISTED: usize = 1000;
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
+}
 use serde::Serialize;
 use std::path::Path;
 
@@ -19,15 +28,24 @@ pub struct Report {
     /// Wall-clock duration of the session in seconds.
     pub wall_time_s: f64,
     pub link: LinkStats,
-    /// One object per accepted curve, in scan order.
+    /// One object per accepted curve, in scan order: the first [`MAX_CURVES_LISTED`] (every
+    /// curve is in scan.json).
     pub curves: Vec<CurveSummary>,
+    /// Accepted curves past [`MAX_CURVES_LISTED`], not listed in `curves` (a key storm).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub curves_left_out: u64,
     /// What acquisition counted (samples, flags, discarded curves).
     pub acquisition: Counts,
-    /// Problems naming curve, node and time, as their texts.
+    /// Problems naming curve, node and time, as their texts: the first
+    /// [`MAX_WARNINGS`] of every layer together (acquisition's first).
     pub warnings: Vec<Warning>,
     /// The stable code of each of `warnings`, in the same order (`keypad_repeat`,
     /// `tag_detached`, `face_clockwise`, …).
     pub warning_codes: Vec<&'static str>,
+    /// Every warning raised, kept or not, by code.
+    pub warnings_by_code: std::collections::BTreeMap<&'static str, u64>,
+    /// Warnings raised but not listed in `warnings` (past [`MAX_WARNINGS`]).
+    pub warnings_left_out: u64,
     /// Reconstructed node positions in the glb's frame (y up), by node index.
     pub nodes: std::collections::BTreeMap<String, [f32; 3]>,
     /// Wall time per reconstruction stage, ms.
@@ -148,18 +166,32 @@ impl Report {
             .warnings
             .iter()
             .chain(&products.warnings)
+            .take(MAX_WARNINGS)
             .cloned()
             .collect();
+        let mut warnings_by_code = p.counts.warnings_by_code.clone();
+        for w in &products.warnings {
+            *warnings_by_code.entry(w.code()).or_insert(0) += 1;
+        }
+        let raised: u64 = warnings_by_code.values().sum();
         Report {
             sfs_version: env!("CARGO_PKG_VERSION"),
             source: p.source.to_owned(),
             ended: p.ended,
             wall_time_s: p.started.elapsed().as_secs_f64(),
             link: p.link.clone(),
-            curves: p.curves.iter().map(CurveSummary::from).collect(),
+            curves: p
+                .curves
+                .iter()
+                .take(MAX_CURVES_LISTED)
+                .map(CurveSummary::from)
+                .collect(),
+            curves_left_out: p.curves.len().saturating_sub(MAX_CURVES_LISTED) as u64,
             acquisition: p.counts.clone(),
             warning_codes: warnings.iter().map(Warning::code).collect(),
+            warnings_left_out: raised.saturating_sub(warnings.len() as u64),
             warnings,
+            warnings_by_code,
             nodes: products.nodes.clone(),
             timings_ms: network.map(|n| n.timings_ms.clone()),
             network: network.cloned(),

@@ -43,6 +43,10 @@ pub struct Counts {
     /// Warnings beyond the first `acquisition::MAX_WARNINGS`, counted but not kept.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub warnings_left_out: u64,
+    /// Every warning acquisition raised, by kind (kept or not; report.json's
+    /// `warnings_by_code` adds the reconstruction's).
+    #[serde(skip)]
+    pub warnings_by_code: std::collections::BTreeMap<&'static str, u64>,
 }
 
 fn is_zero(n: &u64) -> bool {

@@ -9,6 +9,7 @@ use device_protocol::DeviceKind;
 use sfs_geometry::network::NetworkWarning;
 use sfs_geometry::surface::fit::SurfaceError;
 use sfs_geometry::surface::SurfaceProblem;
+use std::collections::{BTreeMap, HashSet};
 
 /// A problem met by a session.
 #[derive(Debug, Clone, PartialEq)]
@@ -275,5 +276,53 @@ impl From<AcquisitionWarning> for Warning {
 impl From<NetworkWarning> for Warning {
     fn from(w: NetworkWarning) -> Self {
         Warning::Network(w)
+    }
+}
+
+/// Warnings kept in a scan and in report.json, of every layer together (acquisition's first);
+/// the rest are counted by kind (`warnings_by_code`, `warnings_left_out`).
+pub const MAX_WARNINGS: usize = 1000;
+
+/// Warnings of one kind logged in full; after them, a summary line at every power of two.
+pub const LOGGED_PER_KIND: u64 = 20;
+
+/// Distinct warning texts remembered (so that a warning every update repeats is logged once).
+const REMEMBERED: usize = 4096;
+
+/// The log's rate limit for warnings, the same for every kind and layer: the first
+/// [`LOGGED_PER_KIND`] of a kind in full, then one line at the 128th, 256th, … with the count;
+/// a text already logged is not logged again (a live session reconstructs the same curves'
+/// warnings after every curve).
+#[derive(Debug, Default)]
+pub struct LogLimiter {
+    counts: BTreeMap<&'static str, u64>,
+    seen: HashSet<String>,
+}
+
+impl LogLimiter {
+    /// Logs `w` at warn level if the limit allows.
+    pub fn log(&mut self, w: &Warning) {
+        let text = w.to_string();
+        if self.seen.contains(&text) {
+            return;
+        }
+        if self.seen.len() < REMEMBERED {
+            self.seen.insert(text.clone());
+        }
+        let n = self.counts.entry(w.code()).or_insert(0);
+        *n += 1;
+        if *n <= LOGGED_PER_KIND {
+            match w {
+                Warning::Keypad(k) => tracing::warn!("keypad: {k}"),
+                _ => tracing::warn!("{text}"),
+            }
+        } else if n.is_power_of_two() && *n >= 128 {
+            tracing::warn!(
+                kind = w.code(),
+                count = *n,
+                "{} warnings of this kind so far (only the first {LOGGED_PER_KIND} are logged); the latest: {text}",
+                *n
+            );
+        }
     }
 }

@@ -339,7 +339,9 @@ fn metrics_are_served_for_a_scraper_while_the_session_runs() {
     stdin.flush().unwrap();
     let get = || -> Option<String> {
         let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).ok()?;
-        s.write_all(b"GET /metrics HTTP/1.0\r\n\r\n").ok()?;
+        // A scraper names the host it asks (issue 31: a request without Host gets 421).
+        s.write_all(format!("GET /metrics HTTP/1.0\r\nHost: 127.0.0.1:{port}\r\n\r\n").as_bytes())
+            .ok()?;
         let mut out = String::new();
         s.read_to_string(&mut out).ok()?;
         Some(out)

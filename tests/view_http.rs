@@ -304,8 +304,8 @@ async fn issue_16_a_stalled_client_changes_nothing() {
         loop {
             if let Ok(mut s) = std::net::TcpStream::connect(("127.0.0.1", port)) {
                 use std::io::Write;
-                s.write_all(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n")
-                    .unwrap();
+                let req = format!("GET /events HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n");
+                s.write_all(req.as_bytes()).unwrap();
                 break s;
             }
             assert!(t0.elapsed() < Duration::from_secs(20));

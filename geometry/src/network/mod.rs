@@ -304,9 +304,6 @@ impl Reconstructor {
             if !curves.is_empty() {
                 warnings.push(NetworkWarning::NothingUsable);
             }
-            for w in &warnings {
-                tracing::warn!("{w}");
-            }
             return Err(Unreconstructed { warnings });
         }
         let closure = if p.no_closure_check {
@@ -425,9 +422,6 @@ impl Reconstructor {
                 poisson: (t3 - t2).as_secs_f64() * 1e3,
             },
         };
-        for w in &warnings {
-            tracing::warn!("{w}");
-        }
         Ok(Network {
             positions,
             report,
