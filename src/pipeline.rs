@@ -64,14 +64,21 @@ pub struct Products {
 }
 
 impl Products {
-    /// Replaces `dir/network.glb` atomically (nothing when there is no network).
+    /// Replaces `dir/network.glb` atomically; when there is no network, removes the one an
+    /// earlier update left, so that network.glb never describes another update than
+    /// report.json (which says why there is none).
     pub fn write_glb(&self, dir: &Path) -> Result<(), OutputError> {
+        let path = dir.join(NETWORK_FILE);
         match &self.glb {
             Some(bytes) => {
-                let path = dir.join(NETWORK_FILE);
                 crate::atomic::write_atomic(&path, bytes).map_err(OutputError::at(&path))
             }
-            None => Ok(()),
+            None => match std::fs::remove_file(&path) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    Err(OutputError::at(&path)(e))
+                }
+                _ => Ok(()),
+            },
         }
     }
 
@@ -175,7 +182,10 @@ impl Pipeline {
         out.warnings.retain(|w| {
             !matches!(
                 w,
-                Warning::Surface(_) | Warning::NoSurface(_) | Warning::GlbNotWritten(_)
+                Warning::Surface(_)
+                    | Warning::NoSurface(_)
+                    | Warning::SurfaceNotWritten(_)
+                    | Warning::GlbNotWritten(_)
             )
         });
         self.surface_into(out, surface.as_ref());
@@ -209,6 +219,21 @@ impl Pipeline {
         out.glb = None;
         match glb(&net.positions, surfaced.as_ref()) {
             Ok(bytes) => out.glb = Some(bytes),
+            // A surface that cannot be written never costs the network: network.glb holds
+            // the curves and no surface node, and the report says why.
+            Err(e) if surfaced.is_some() => match glb(&net.positions, None) {
+                Ok(bytes) => {
+                    let w = Warning::SurfaceNotWritten(e);
+                    self.log.log(&w);
+                    out.warnings.push(w);
+                    out.surface = None;
+                    out.glb = Some(bytes);
+                }
+                Err(e) => {
+                    tracing::error!("network.glb not written: {e}");
+                    out.warnings.push(Warning::GlbNotWritten(e));
+                }
+            },
             Err(e) => {
                 tracing::error!("network.glb not written: {e}");
                 out.warnings.push(Warning::GlbNotWritten(e));

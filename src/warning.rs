@@ -26,6 +26,8 @@ pub enum Warning {
     NoSurface(SurfaceError),
     /// `network.glb` could not be encoded.
     GlbNotWritten(crate::gltf_out::GltfError),
+    /// The surface could not be encoded: `network.glb` holds the curves alone.
+    SurfaceNotWritten(crate::gltf_out::GltfError),
 }
 
 impl Warning {
@@ -38,6 +40,7 @@ impl Warning {
             Warning::Surface(p) => p.code(),
             Warning::NoSurface(_) => "no_surface",
             Warning::GlbNotWritten(_) => "glb_not_written",
+            Warning::SurfaceNotWritten(_) => "surface_not_written",
         }
     }
 
@@ -70,6 +73,10 @@ impl std::fmt::Display for Warning {
             Warning::Surface(p) => write!(f, "surface: {p}"),
             Warning::NoSurface(e) => write!(f, "no surface: {e}"),
             Warning::GlbNotWritten(e) => write!(f, "network.glb not written: {e}"),
+            Warning::SurfaceNotWritten(e) => write!(
+                f,
+                "the surface is left out of network.glb (it holds the curves): {e}"
+            ),
         }
     }
 }

@@ -1422,9 +1422,13 @@ fn output(
     for t in &asm.triangles {
         let [a, b, cc] = t.map(|i| asm.positions[i]);
         let fnrm = (b - a).cross(&(cc - a));
+        // Degenerate once written in f32 (the glTF's coordinates) is degenerate too: a sliver
+        // between two curves that retrace each other can have an area in f64 and none in f32.
+        let [a32, b32, c32] = [a, b, cc].map(|p| p.map(|x| x as f32 as f64));
         if fnrm.norm().is_nan()
             || fnrm.norm() <= 1e-12 * scale
             || !fnrm.iter().all(|x| x.is_finite())
+            || (b32 - a32).cross(&(c32 - a32)).norm() <= 0.0
         {
             degenerate += 1;
             continue;

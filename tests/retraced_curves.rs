@@ -1,0 +1,103 @@
+//! Issue 31, point 6: a session whose curves retrace each other (the demo capture appended to
+//! itself: every curve scanned twice) keeps its network and its surface. The sliver faces
+//! between retraced curves made a triangle that was degenerate once written in f32, and
+//! network.glb was not written at all; a live session left the first curve's glb on disk
+//! while report.json described fourteen.
+
+mod common;
+use common::tmpdir;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The demo capture twice over (the second copy is a device reboot and the same curves again).
+fn twice() -> Vec<u8> {
+    let one = std::fs::read(root().join("replay-logs/cone-morphorider.bin")).unwrap();
+    [one.clone(), one].concat()
+}
+
+/// network.glb and report.json of `dir`, checked against each other: the same curves, the
+/// surface's triangles, none of them degenerate in the file's own coordinates.
+fn consistent(dir: &Path) -> (Vec<u8>, serde_json::Value) {
+    let glb = std::fs::read(dir.join("network.glb")).expect("network.glb written");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
+    let net = sfs::gltf_out::read_glb(&glb).unwrap();
+    assert_eq!(
+        net.curves.len() as u64,
+        report["network"]["curves_used"].as_u64().unwrap(),
+        "network.glb and report.json describe different updates"
+    );
+    let surface = net.surface.as_ref().expect("a surface");
+    assert_eq!(
+        surface.triangles.len() as u64,
+        report["surface"]["triangles"].as_u64().unwrap()
+    );
+    assert!(surface.triangles.len() > 1000);
+    for t in &surface.triangles {
+        let [a, b, c] = t.map(|i| surface.positions[i as usize]);
+        assert!(
+            (b - a).cross(&(c - a)).norm() > 0.0,
+            "a degenerate triangle"
+        );
+    }
+    let warnings: Vec<&str> = report["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|w| w.as_str())
+        .collect();
+    assert!(
+        !warnings.iter().any(|w| w.contains("not written")),
+        "{warnings:?}"
+    );
+    (glb, report)
+}
+
+#[test]
+fn issue_31_curves_scanned_twice_keep_their_network_and_surface() {
+    let dir = tmpdir("retraced");
+    let capture = dir.join("twice.bin");
+    std::fs::write(&capture, twice()).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "warn", "replay"])
+        .arg(&capture)
+        .arg("--out")
+        .arg(dir.join("replayed"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (replayed, report) = consistent(&dir.join("replayed"));
+    assert_eq!(report["curves"].as_array().unwrap().len(), 14);
+
+    // Live, after every curve: the final network.glb is the replay's, and report.json its.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "warn", "run", "--stdin", "--session"])
+        .arg(dir.join("live"))
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    std::io::Write::write_all(&mut stdin, &twice()).unwrap();
+    drop(stdin);
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (live, _) = consistent(&dir.join("live"));
+    assert!(
+        live == replayed,
+        "the live session's network.glb differs from the replay's"
+    );
+}
