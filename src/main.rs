@@ -30,6 +30,9 @@ fn main() {
         }
     };
     sfs::logging::init(cli.log_format, cli.log.as_deref());
+    // As many descriptors as the system allows this process (the view's connections are
+    // capped well under them, keeping a reserve for the session's files).
+    sfs::view::conn::raise_file_limit();
     std::process::exit(match cli.command {
         Command::Replay(a) => replay(a),
         Command::Run(a) => run(a),

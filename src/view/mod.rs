@@ -18,10 +18,13 @@
 //! The session and the live worker publish into a [`View`] (a lock and an assignment, never a
 //! wait); the server reads it. Nothing the server does can hold them up: events go through a
 //! bounded broadcast queue, and a client that falls behind it is dropped (its browser
-//! reconnects); the number of event streams and of requests in flight is limited.
+//! reconnects); the number of event streams and of requests in flight is limited. Who is
+//! answered is [`access`]'s (the `Host`, the token); how many connections, and how long one
+//! may hold its descriptor without reading, sending or draining, [`conn`]'s.
 
 pub mod access;
 pub mod assets;
+pub mod conn;
 mod server;
 
 pub use server::{bind, serve, DEFAULT_ADDRESS, PREVIEW_PERIOD};

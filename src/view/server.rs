@@ -94,6 +94,9 @@ pub fn serve(
             header::X_CONTENT_TYPE_OPTIONS,
             HeaderValue::from_static("nosniff"),
         ));
+    // One cap for every listener: the connections share the process's descriptors.
+    let cap = super::conn::connection_cap(super::conn::raise_file_limit());
+    let live = Arc::new(AtomicUsize::new(0));
     let mut servers = Vec::new();
     for listener in listeners {
         if let Ok(addr) = listener.local_addr() {
@@ -107,6 +110,7 @@ pub fn serve(
         }
         let stop = stop.clone();
         let router = router.clone();
+        let listener = super::conn::GuardedListener::new(listener, live.clone(), cap);
         servers.push(tokio::spawn(async move {
             let served = axum::serve(listener, router)
                 .with_graceful_shutdown(async move { stop.triggered().await })

@@ -1,0 +1,191 @@
+//! Issue 31, point 2: the view's connections cannot hold the session's descriptors. A request
+//! head sent a byte a second is closed after 10 s, an idle keep-alive connection after 30 s,
+//! and however many connections a client opens, the session's outputs are written (the
+//! connections are capped well under the file limit, which is raised to the hard one).
+
+mod common;
+use common::tmpdir;
+use common::view::{free_port, serve_replay_on_a_free_port};
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Waits until the server closes `s` (a read gives 0 bytes or an error); how long it took.
+fn closed_after(mut s: TcpStream, limit: Duration) -> Option<Duration> {
+    let t0 = Instant::now();
+    s.set_read_timeout(Some(Duration::from_millis(200)))
+        .unwrap();
+    let mut buf = [0u8; 4096];
+    while t0.elapsed() < limit {
+        match s.read(&mut buf) {
+            Ok(0) => return Some(t0.elapsed()),
+            Ok(_) => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
+            Err(_) => return Some(t0.elapsed()),
+        }
+    }
+    None
+}
+
+#[test]
+fn issue_31_slow_request_heads_and_idle_connections_are_closed() {
+    let dir = tmpdir("view-slow");
+    let (port, _served) = serve_replay_on_a_free_port(
+        &root().join("replay-logs/cone-morphorider.bin"),
+        &dir.join("out"),
+        None,
+        &[],
+    );
+    // A head a byte a second, on its own thread.
+    let slow = std::thread::spawn(move || {
+        let mut s = TcpStream::connect(("127.0.0.1", port)).unwrap();
+        let head = format!("GET /status HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nX-Slow: aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\r\n\r\n");
+        let t0 = Instant::now();
+        for b in head.bytes() {
+            if s.write_all(&[b]).is_err() {
+                return Some(t0.elapsed());
+            }
+            std::thread::sleep(Duration::from_secs(1));
+            if t0.elapsed() > Duration::from_secs(20) {
+                break;
+            }
+        }
+        let _ = s.set_nonblocking(false);
+        closed_after(s, Duration::from_secs(1)).map(|_| t0.elapsed())
+    });
+    // An idle keep-alive connection after one answered request.
+    let mut idle = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    idle.write_all(format!("GET /status HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n").as_bytes())
+        .unwrap();
+    let idle_closed = closed_after(idle, Duration::from_secs(40));
+    let slow_closed = slow.join().unwrap();
+    let slow_closed = slow_closed.expect("a head sent a byte a second was never closed");
+    assert!(
+        slow_closed < Duration::from_secs(14),
+        "the slow head was closed after {slow_closed:?}"
+    );
+    let idle_closed = idle_closed.expect("an idle connection was never closed");
+    assert!(
+        (Duration::from_secs(25)..Duration::from_secs(36)).contains(&idle_closed),
+        "the idle connection was closed after {idle_closed:?}"
+    );
+}
+
+#[test]
+fn issue_31_many_connections_never_make_an_output_write_fail() {
+    let dir = tmpdir("view-many");
+    let out = dir.join("out");
+    let port = free_port();
+    // A file limit of 300 (soft and hard): the cap is then 22 connections.
+    let sfs = env!("CARGO_BIN_EXE_sfs");
+    let capture = root().join("replay-logs/cone-morphorider.bin");
+    let mut child = Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -n 300 && exec '{sfs}' --log warn replay '{}' --out '{}' --pace x10 --view 127.0.0.1:{port}",
+            capture.display(),
+            out.display()
+        ))
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    let mut held = Vec::new();
+    let mut report = None;
+    while t0.elapsed() < Duration::from_secs(90) {
+        for _ in 0..50 {
+            if held.len() < 600 {
+                if let Ok(s) = TcpStream::connect(("127.0.0.1", port)) {
+                    held.push(s);
+                }
+            }
+        }
+        let r = std::fs::read(out.join("report.json"))
+            .ok()
+            .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok());
+        if let Some(r) = r.filter(|r| r["ended"] == "end_of_input") {
+            report = Some(r);
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let _ = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status();
+    let output = {
+        let t = Instant::now();
+        loop {
+            if child.try_wait().unwrap().is_some() || t.elapsed() > Duration::from_secs(20) {
+                let _ = child.kill();
+                break child.wait_with_output().unwrap();
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    };
+    let log = String::from_utf8_lossy(&output.stderr);
+    let report = report.unwrap_or_else(|| panic!("the session did not end: {log}"));
+    assert!(held.len() > 100, "only {} connections opened", held.len());
+    assert!(
+        !log.contains("Too many open files") && !log.contains("ERROR"),
+        "{log}"
+    );
+    assert_eq!(report["curves"].as_array().unwrap().len(), 7);
+    assert!(report["live"]["updates"].as_u64().unwrap() >= 1);
+    assert!(std::fs::metadata(out.join("network.glb")).unwrap().len() > 1000);
+}
+
+/// Point 1: 32 event streams whose clients never read hold every slot; each is dropped once
+/// it has not been drained for 10 s, and a new client is served within 15 s.
+#[test]
+fn issue_31_stalled_event_streams_are_dropped_and_a_new_client_is_served() {
+    let dir = tmpdir("view-stalled-streams");
+    let (port, _served) = serve_replay_on_a_free_port(
+        &root().join("replay-logs/cone-morphorider.bin"),
+        &dir.join("out"),
+        Some("realtime"),
+        &[],
+    );
+    let ask = || {
+        let mut s = TcpStream::connect(("127.0.0.1", port)).unwrap();
+        s.write_all(format!("GET /events HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n").as_bytes())
+            .unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        let mut head = [0u8; 12];
+        let ok = s.read_exact(&mut head).is_ok() && head.starts_with(b"HTTP/1.1 200");
+        (s, ok)
+    };
+    let t0 = Instant::now();
+    let stalled: Vec<TcpStream> = (0..32)
+        .map(|_| {
+            let (s, ok) = ask();
+            assert!(ok, "a stream slot was refused before they were all taken");
+            s
+        })
+        .collect();
+    let (_, ok) = ask();
+    assert!(!ok, "a 33rd stream was served while 32 were open");
+    let served = loop {
+        let (_, ok) = ask();
+        if ok {
+            break t0.elapsed();
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "no stream slot was freed in 30 s"
+        );
+        std::thread::sleep(Duration::from_millis(250));
+    };
+    assert!(served < Duration::from_secs(15), "served after {served:?}");
+    drop(stalled);
+}
