@@ -56,11 +56,11 @@ pub enum Command {
     /// Writes, once the capture has been read: DIR/report.json (the link statistics, the
     /// curves, the reconstruction's figures, every warning), DIR/scan.json (the tagged
     /// curves: orientations, distances, nodes) and DIR/network.glb (the curve network and
-    /// its surface, glTF 2.0); a sensor array's capture, replayed with a [monitor]
+    /// its surface, glTF 2.0); a sensor array's capture, replayed with a `[monitor]`
     /// configuration (--config), writes the monitoring outputs instead (metrics.csv,
     /// events.log, latest.glb, reference.json). The source is the capture file (the raw
     /// bytes a device sent: a session's capture.bin, or sfs simulate's PREFIX.bin); a
-    /// configuration's [source] is ignored. With --view the outputs are also rebuilt after
+    /// configuration's `[source]` is ignored. With --view the outputs are also rebuilt after
     /// every curve and shown in a browser. Exit codes: 0 done, 2 usage or configuration, 3
     /// the capture cannot be read, 4 an output cannot be written, 5 nothing usable in the
     /// capture (no packet).
@@ -69,13 +69,13 @@ pub enum Command {
     /// Read a live device, capture every byte to SESSION/capture.bin, and rebuild
     /// SESSION/network.glb and SESSION/report.json after every curve.
     ///
-    /// Sources, one of: a serial port (--serial PATH, or [source] kind = "serial" in the
+    /// Sources, one of: a serial port (--serial PATH, or `[source]` kind = "serial" in the
     /// configuration), standard input (--stdin, or kind = "stdin"), or a capture file
     /// replayed as if live (kind = "replay" with its path and pace, as config/demo.toml).
     /// Writes into SESSION: capture.bin (every byte, before it is decoded), config.toml (the
     /// configuration it started with, for --resume), network.glb and report.json (after
     /// every curve the operator ends with E, replaced atomically), scan.json (at the end);
-    /// with [monitor], metrics.csv, events.log, latest.glb and reference.json. A session is
+    /// with `[monitor]`, metrics.csv, events.log, latest.glb and reference.json. A session is
     /// stopped with Ctrl-C or SIGTERM (the outputs are finished first) and continued with
     /// --resume SESSION. Exit codes: 0 done, 2 usage or configuration, 3 the source cannot
     /// be opened, 4 an output cannot be written.
