@@ -189,3 +189,46 @@ fn issue_31_stalled_event_streams_are_dropped_and_a_new_client_is_served() {
     assert!(served < Duration::from_secs(15), "served after {served:?}");
     drop(stalled);
 }
+
+/// Point 2: the soft file limit is raised to the hard one at start.
+#[test]
+fn issue_31_the_soft_file_limit_is_raised_to_the_hard_one() {
+    let dir = tmpdir("view-nofile");
+    let port = free_port();
+    let sfs = env!("CARGO_BIN_EXE_sfs");
+    let capture = root().join("replay-logs/cone-morphorider.bin");
+    let mut child = Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -S -n 200 && exec '{sfs}' --log warn replay '{}' --out '{}' --view 127.0.0.1:{port}",
+            capture.display(),
+            dir.join("out").display()
+        ))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    let limits = loop {
+        let text =
+            std::fs::read_to_string(format!("/proc/{}/limits", child.id())).unwrap_or_default();
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("Max open files"))
+            .map(str::to_owned);
+        if let Some(l) = line.filter(|_| TcpStream::connect(("127.0.0.1", port)).is_ok()) {
+            break l;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(20),
+            "the view never served"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let _ = child.kill();
+    let _ = child.wait();
+    let v: Vec<&str> = limits.split_whitespace().collect();
+    // "Max open files SOFT HARD files"
+    assert_eq!(v[3], v[4], "{limits}");
+    assert_ne!(v[3], "200", "{limits}");
+}

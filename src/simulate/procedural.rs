@@ -2,7 +2,7 @@
 //! paper's LILIUM and BUMPY CUBE carry no licence that allows shipping them): a relief height
 //! field over a disk (`relief`, the kind of object LILIUM is) and a bumpy closed surface
 //! (`bumpy`, the kind BUMPY CUBE is). Both are deterministic functions of nothing, so a scene
-//! built from them, or from their OBJ files written by [`TriMesh::write_obj`], is the same
+//! built from them, or from their OBJ files written by [`TriMesh::to_obj`], is the same
 //! bit for bit.
 //!
 //! ```
