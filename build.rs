@@ -31,6 +31,7 @@ fn main() {
     }
     println!("cargo::rerun-if-changed=build.rs");
     println!("cargo::rerun-if-changed=tests/golden/outputs.txt");
+    println!("cargo::rerun-if-changed=tests/golden/simd_level.rs");
     for v in [
         "PATH",
         "SFS_PAPER_DATA",
@@ -85,22 +86,4 @@ fn main() {
     set("sfs_golden_simd", made_on == simd_level());
 }
 
-/// The x86-64 micro-architecture level faer's kernels dispatch on (the same test as
-/// `tests/outputs_unchanged.rs`; the build script runs on the machine that runs the tests).
-fn simd_level() -> &'static str {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            return "x86-64-v4";
-        }
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
-            return "x86-64-v3";
-        }
-        "x86-64"
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        std::env::consts::ARCH
-    }
-}
+include!("tests/golden/simd_level.rs");

@@ -36,8 +36,9 @@
 //!   latest.glb, gauges on the view's `/metrics`).
 //! - [`settings`]: everything a session runs with, resolved once; [`config`]: the
 //!   configuration file (`config/*.toml`), one module per section, resolved into settings;
-//!   [`cli`]: the raw flags; `main.rs` the thin binary over them; [`logging`]: the log
-//!   lines (human or JSON with the session, journald-aware).
+//!   [`cli`]: the raw flags; [`named_file`]: the files they name, read bounded; `main.rs`
+//!   the thin binary over them; [`logging`]: the log lines (human or JSON with the session,
+//!   journald-aware).
 //! - [`shutdown`]: the stop signal passed into every long-running part; [`service`]: systemd's
 //!   readiness, status and watchdog (`deploy/sfs@.service`).
 //! - Tools beside the daemon: [`calibrate`] (`sfs calibrate`: ellipsoid and static-pose
@@ -63,6 +64,7 @@ pub mod logging;
 pub mod memory;
 pub mod metrics;
 pub mod monitor;
+pub mod named_file;
 pub mod orientation;
 pub mod pipeline;
 pub mod ports;

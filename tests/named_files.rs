@@ -64,7 +64,7 @@ fn issue_31_a_configuration_that_is_no_regular_file_is_refused_at_once() {
         ("/dev/zero", "not a regular file"),
         ("fifo.toml", "not a regular file"),
         (".", "not a regular file"),
-        ("big.toml", "a configuration has at most"),
+        ("big.toml", "more than the 1048576 a configuration may have"),
     ] {
         let (code, err) = sfs(&["config", "check", file], &dir);
         assert_eq!(code, Some(2), "config check {file}: {err}");

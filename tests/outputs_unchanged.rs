@@ -35,24 +35,7 @@ fn paper_golden_path() -> PathBuf {
     root().join("tests/golden/outputs-paper.txt")
 }
 
-/// The x86-64 micro-architecture level faer's kernels dispatch on.
-fn simd_level() -> &'static str {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            return "x86-64-v4";
-        }
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
-            return "x86-64-v3";
-        }
-        "x86-64"
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        std::env::consts::ARCH
-    }
-}
+include!("golden/simd_level.rs");
 
 /// FNV-1a, 64 bits: enough to tell two outputs apart (nothing adversarial here).
 fn digest(bytes: &[u8]) -> String {

@@ -180,27 +180,9 @@ struct ConfigFile {
 /// that never ends, like `/dev/zero`) is refused instead of read until memory runs out.
 pub const MAX_NAMED_FILE: u64 = 64 << 20;
 
-/// Reads the text of `path`, refusing it when it is not a regular file (a FIFO would block
-/// the open, a device never end) or is longer than `limit` bytes.
+/// Reads a file a configuration names (a reference shape): regular, at most `limit` bytes.
 fn read_limited(path: &Path, limit: u64) -> std::io::Result<String> {
-    use std::io::Read;
-    if !std::fs::metadata(path)?.is_file() {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            "not a regular file",
-        ));
-    }
-    let mut text = String::new();
-    std::fs::File::open(path)?
-        .take(limit + 1)
-        .read_to_string(&mut text)?;
-    if text.len() as u64 > limit {
-        return Err(std::io::Error::other(format!(
-            "longer than {} MB: not a reference shape",
-            limit >> 20
-        )));
-    }
-    Ok(text)
+    crate::named_file::read_text(path, limit, "a reference shape")
 }
 
 /// Largest configuration file, bytes.
@@ -209,17 +191,8 @@ pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
 /// Reads a configuration file: a regular file (never a FIFO or a device, which could block or
 /// never end) of at most [`MAX_CONFIG_BYTES`]; the error says why not.
 pub fn read_config_file(path: &Path) -> Result<String, String> {
-    let meta = std::fs::metadata(path).map_err(|e| format!("cannot read: {e}"))?;
-    if !meta.is_file() {
-        return Err("cannot read: not a regular file".into());
-    }
-    if meta.len() > MAX_CONFIG_BYTES {
-        return Err(format!(
-            "{} bytes: a configuration has at most {MAX_CONFIG_BYTES}",
-            meta.len()
-        ));
-    }
-    read_limited(path, MAX_CONFIG_BYTES).map_err(|e| format!("cannot read: {e}"))
+    crate::named_file::read_text(path, MAX_CONFIG_BYTES, "a configuration")
+        .map_err(|e| format!("cannot read: {e}"))
 }
 
 /// Reads `path` and resolves it into the settings it describes (every key checked, each

@@ -301,23 +301,7 @@ pub const MAX_MESH_BYTES: u64 = 256 << 20;
 
 /// Reads a mesh file: a regular file of at most [`MAX_MESH_BYTES`].
 fn read_bounded(path: &Path) -> std::io::Result<String> {
-    let meta = std::fs::metadata(path)?;
-    if !meta.is_file() {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            "not a regular file",
-        ));
-    }
-    if meta.len() > MAX_MESH_BYTES {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            format!(
-                "{} bytes, more than the {MAX_MESH_BYTES} a mesh may have",
-                meta.len()
-            ),
-        ));
-    }
-    std::fs::read_to_string(path)
+    crate::named_file::read_text(path, MAX_MESH_BYTES, "a mesh")
 }
 
 /// One connected piece of a plane section.

@@ -447,17 +447,8 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
 }
 
 fn read_scene_file(path: &Path) -> Result<String, String> {
-    let meta = std::fs::metadata(path).map_err(|e| format!("cannot read the scene file: {e}"))?;
-    if !meta.is_file() {
-        return Err("not a regular file".into());
-    }
-    if meta.len() > MAX_SCENE_BYTES {
-        return Err(format!(
-            "{} bytes, more than the {MAX_SCENE_BYTES} a scene file may have",
-            meta.len()
-        ));
-    }
-    std::fs::read_to_string(path).map_err(|e| format!("cannot read the scene file: {e}"))
+    crate::named_file::read_text(path, MAX_SCENE_BYTES, "a scene file")
+        .map_err(|e| format!("cannot read the scene file: {e}"))
 }
 
 /// Builds a scene from its TOML text; `origin` names it in errors, `base` is the directory a

@@ -1,0 +1,19 @@
+/// The x86-64 micro-architecture level faer's kernels dispatch on (and so the rounding of the
+/// outputs): shared by `build.rs` and `tests/outputs_unchanged.rs` through `include!`.
+fn simd_level() -> &'static str {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            return "x86-64-v4";
+        }
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            return "x86-64-v3";
+        }
+        "x86-64"
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        std::env::consts::ARCH
+    }
+}
