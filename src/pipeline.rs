@@ -217,23 +217,22 @@ impl Pipeline {
             }
         });
         out.glb = None;
-        match glb(&net.positions, surfaced.as_ref()) {
-            Ok(bytes) => out.glb = Some(bytes),
-            // A surface that cannot be written never costs the network: network.glb holds
-            // the curves and no surface node, and the report says why.
-            Err(e) if surfaced.is_some() => match glb(&net.positions, None) {
-                Ok(bytes) => {
+        // A surface that cannot be written never costs the network: network.glb then holds
+        // the curves and no surface node, and the report says why.
+        let encoded = match glb(&net.positions, surfaced.as_ref()) {
+            Err(e) if surfaced.is_some() => glb(&net.positions, None).map(|b| (b, Some(e))),
+            r => r.map(|b| (b, None)),
+        };
+        match encoded {
+            Ok((bytes, surface_error)) => {
+                if let Some(e) = surface_error {
                     let w = Warning::SurfaceNotWritten(e);
                     self.log.log(&w);
                     out.warnings.push(w);
                     out.surface = None;
-                    out.glb = Some(bytes);
                 }
-                Err(e) => {
-                    tracing::error!("network.glb not written: {e}");
-                    out.warnings.push(Warning::GlbNotWritten(e));
-                }
-            },
+                out.glb = Some(bytes);
+            }
             Err(e) => {
                 tracing::error!("network.glb not written: {e}");
                 out.warnings.push(Warning::GlbNotWritten(e));

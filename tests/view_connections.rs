@@ -37,6 +37,30 @@ fn closed_after(mut s: TcpStream, limit: Duration) -> Option<Duration> {
     None
 }
 
+/// The demo capture replayed with its view on `port`, under `ulimit LIMIT` (a shell sets it,
+/// then becomes sfs), with `extra` flags; its standard error to `stderr`.
+fn replay_under_limit(
+    limit: &str,
+    out: &std::path::Path,
+    port: u16,
+    extra: &str,
+    stderr: Stdio,
+) -> std::process::Child {
+    let sfs = env!("CARGO_BIN_EXE_sfs");
+    let capture = root().join("replay-logs/cone-morphorider.bin");
+    Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit {limit} && exec '{sfs}' --log warn replay '{}' --out '{}' {extra} --view 127.0.0.1:{port}",
+            capture.display(),
+            out.display()
+        ))
+        .stdout(Stdio::null())
+        .stderr(stderr)
+        .spawn()
+        .unwrap()
+}
+
 #[test]
 fn issue_31_slow_request_heads_and_idle_connections_are_closed() {
     let dir = tmpdir("view-slow");
@@ -87,19 +111,7 @@ fn issue_31_many_connections_never_make_an_output_write_fail() {
     let out = dir.join("out");
     let port = free_port();
     // A file limit of 300 (soft and hard): the cap is then 22 connections.
-    let sfs = env!("CARGO_BIN_EXE_sfs");
-    let capture = root().join("replay-logs/cone-morphorider.bin");
-    let mut child = Command::new("sh")
-        .arg("-c")
-        .arg(format!(
-            "ulimit -n 300 && exec '{sfs}' --log warn replay '{}' --out '{}' --pace x10 --view 127.0.0.1:{port}",
-            capture.display(),
-            out.display()
-        ))
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = replay_under_limit("-n 300", &out, port, "--pace x10", Stdio::piped());
     let t0 = Instant::now();
     let mut held = Vec::new();
     let mut report = None;
@@ -195,19 +207,7 @@ fn issue_31_stalled_event_streams_are_dropped_and_a_new_client_is_served() {
 fn issue_31_the_soft_file_limit_is_raised_to_the_hard_one() {
     let dir = tmpdir("view-nofile");
     let port = free_port();
-    let sfs = env!("CARGO_BIN_EXE_sfs");
-    let capture = root().join("replay-logs/cone-morphorider.bin");
-    let mut child = Command::new("sh")
-        .arg("-c")
-        .arg(format!(
-            "ulimit -S -n 200 && exec '{sfs}' --log warn replay '{}' --out '{}' --view 127.0.0.1:{port}",
-            capture.display(),
-            dir.join("out").display()
-        ))
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut child = replay_under_limit("-S -n 200", &dir.join("out"), port, "", Stdio::null());
     let t0 = Instant::now();
     let limits = loop {
         let text =

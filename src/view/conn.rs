@@ -12,6 +12,7 @@
 //!   has not grown (a client that stopped reading; an event stream would otherwise fill the
 //!   kernel's buffers for a minute before a write blocked), or a write has been blocked.
 
+use std::future::Future;
 use std::io;
 use std::pin::Pin;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -209,6 +210,23 @@ impl Guarded {
         d
     }
 
+    /// After a write of `n` bytes: an error when the peer has stopped draining.
+    fn wrote(&mut self, n: usize) -> io::Result<usize> {
+        let now = Instant::now();
+        if n > 0 {
+            self.last_activity = now;
+            self.head_since = None;
+        }
+        self.blocked_since = None;
+        if self.drain.stalled(&self.io, now) {
+            return Err(io::Error::new(
+                io::ErrorKind::TimedOut,
+                "view connection closed: the client stopped reading",
+            ));
+        }
+        Ok(n)
+    }
+
     /// After the inner stream said Pending: an error once the deadline has passed, else
     /// Pending with the timer armed to wake this task then.
     fn pending_or_expired<T>(&mut self, cx: &mut Context<'_>) -> Poll<io::Result<T>> {
@@ -225,8 +243,6 @@ impl Guarded {
         }
     }
 }
-
-use std::future::Future;
 
 impl Drop for Guarded {
     fn drop(&mut self) {
@@ -253,25 +269,6 @@ impl AsyncRead for Guarded {
             Poll::Ready(Err(e)) => Poll::Ready(Err(e)),
             Poll::Pending => self.pending_or_expired(cx),
         }
-    }
-}
-
-impl Guarded {
-    /// After a write of `n` bytes: an error when the peer has stopped draining.
-    fn wrote(&mut self, n: usize) -> io::Result<usize> {
-        let now = Instant::now();
-        if n > 0 {
-            self.last_activity = now;
-            self.head_since = None;
-        }
-        self.blocked_since = None;
-        if self.drain.stalled(&self.io, now) {
-            return Err(io::Error::new(
-                io::ErrorKind::TimedOut,
-                "view connection closed: the client stopped reading",
-            ));
-        }
-        Ok(n)
     }
 }
 
