@@ -80,7 +80,7 @@ pub fn mixed_stream(target: usize, seed: u64) -> (Vec<u8>, usize) {
         let start = out.len();
         p.encode(seq, &mut out);
         seq = seq.wrapping_add(1);
-        if rng.next() % 1000 == 0 {
+        if rng.next().is_multiple_of(1000) {
             let i = start + (rng.next() as usize % (out.len() - start - 1));
             out[i] ^= 1 + (rng.next() % 255) as u8;
             corrupted += 1;

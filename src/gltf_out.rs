@@ -93,7 +93,7 @@ impl Builder {
         bytes: &[u8],
         target: json::buffer::Target,
     ) -> json::Index<json::buffer::View> {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let offset = self.bin.len();
@@ -330,7 +330,7 @@ pub fn network_glb(
             ..Default::default()
         }));
     }
-    while b.bin.len() % 4 != 0 {
+    while !b.bin.len().is_multiple_of(4) {
         b.bin.push(0);
     }
     if !b.bin.is_empty() {

@@ -11,6 +11,7 @@ use sfs::exit;
 use sfs::session::{self, Outcome, SessionError};
 use sfs::settings::Settings;
 use sfs::shutdown::Shutdown;
+use sfs::source::phone::{self, PhoneSpec};
 use sfs::source::{SerialSpec, SourceError, SourceSpec};
 use std::path::Path;
 use std::time::Duration;
@@ -191,14 +192,26 @@ fn resolve_run(a: &RunArgs, config: Option<&Path>) -> Result<(SourceSpec, Settin
         SourceSpec::Stdin
     } else if let Some(p) = &a.serial {
         SourceSpec::Serial(SerialSpec::new(p, settings.serial.baud))
+    } else if let Some(addr) = a.phone {
+        let mut phone = settings.phone.clone().unwrap_or_else(|| {
+            PhoneSpec::new(phone::DEFAULT_ADDRESS.parse().expect("the default address"))
+        });
+        if let Some(addr) = addr {
+            phone.addr = addr;
+        }
+        SourceSpec::Phone(phone)
     } else if let Some(s) = &settings.source {
         s.clone()
+    } else if let Some(p) = &settings.phone {
+        SourceSpec::Phone(p.clone())
     } else {
         return Err(cli_err(
             "--serial",
             match config {
-                Some(_) => "the configuration has no [source]: give --serial PATH or --stdin",
-                None => "give --serial PATH, --stdin or --config FILE",
+                Some(_) => {
+                    "the configuration has no [source] or [phone]: give --serial PATH, --phone or --stdin"
+                }
+                None => "give --serial PATH, --phone, --stdin or --config FILE",
             },
         ));
     };

@@ -58,6 +58,9 @@ pub struct Report {
     pub live: Option<LiveReport>,
     /// What monitoring did (epochs, alarms, the last metrics).
     pub monitor: Option<crate::monitor::run::MonitorReport>,
+    /// The phone page's link: connections, refusals, sample rate and jitter, latency.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub phone: Option<crate::source::phone::PhoneReport>,
 }
 
 /// A curve in `report.json`.
@@ -198,6 +201,7 @@ impl Report {
             surface: products.surface.clone(),
             live: None,
             monitor: None,
+            phone: None,
         }
     }
 

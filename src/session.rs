@@ -146,6 +146,10 @@ pub async fn run(
     tracing::info!(source = %description, out = %out_dir.display(), "session started");
     let started = Instant::now();
     let created = prepared.created;
+    let mut spec = spec;
+    if let SourceSpec::Phone(p) = &mut spec {
+        p.session_dir = out_dir.to_owned();
+    }
     let mut src = match source::spawn(spec, prepared.capture, shutdown.clone()) {
         Ok(s) => s,
         Err(e) => {
@@ -167,6 +171,10 @@ pub async fn run(
         });
         files.split_off(k)
     });
+    if let (Some(v), Some(p)) = (&view, &src.phone) {
+        let url = p.url().to_owned();
+        v.update(|s| s.phone_url = Some(url));
+    }
     let clock_start = match &prior {
         Some(files) => files[0].start.clone(),
         None => prepared.replay_start,
@@ -180,6 +188,7 @@ pub async fn run(
         started,
         view.clone(),
     )?;
+    flow.phone = src.phone.clone();
     // The service manager is told once the source is open (a resumed capture is decoded
     // after, with the watchdog fed as it goes).
     flow.notifier.ready(&format!("reading {description}"));
@@ -402,6 +411,8 @@ struct Flow {
     notifier: crate::service::Notifier,
     /// The watchdog test's fault injection ([`crate::service::stall_after_bytes`]).
     stall_after: Option<u64>,
+    /// The phone page, told the open curve and the latest warning.
+    phone: Option<std::sync::Arc<source::phone::Phone>>,
 }
 
 impl Flow {
@@ -451,6 +462,7 @@ impl Flow {
             preview_shown: false,
             notifier: crate::service::Notifier::from_env(),
             stall_after: crate::service::stall_after_bytes(),
+            phone: None,
         })
     }
 
@@ -479,6 +491,7 @@ impl Flow {
 
     /// Tells the view the link's counters, the curve being scanned and the new warnings.
     fn show(&mut self) {
+        self.tell_phone();
         let Some(v) = &self.view else { return };
         v.link(&self.stats, self.acq.session_time());
         let curve = self.acq.open_curve().map(|c| crate::view::CurrentCurve {
@@ -516,6 +529,25 @@ impl Flow {
             self.preview_at = Some(Instant::now());
             v.preview(preview);
         }
+    }
+
+    /// Tells the phone page the open curve, the curves so far, the latest warning and the
+    /// link's counters.
+    fn tell_phone(&self) {
+        let Some(p) = &self.phone else { return };
+        let scan = self.acq.scan();
+        p.tell(source::phone::Feedback {
+            curve: self.acq.open_curve().map(|c| source::phone::FeedbackCurve {
+                index: c.index,
+                kind: c.kind.name(),
+                nodes: c.nodes,
+            }),
+            curves: scan.curves.len(),
+            warning: scan.warnings.last().map(|w| w.to_string()),
+            packets: self.stats.packets.total(),
+            rejected: self.stats.rejected.total(),
+            lost: self.stats.lost_packets,
+        });
     }
 
     /// Resume: the same decoder and acquisition state as if the session had not stopped.
@@ -678,6 +710,7 @@ impl Flow {
             &products,
         );
         report.monitor = monitor_report;
+        report.phone = self.phone.as_ref().map(|p| p.report());
         let report_path = out_dir.join(REPORT_FILE);
         report.live = live_report;
         report
@@ -702,7 +735,7 @@ impl Flow {
 /// stops) and its thread is given a second to finish its final fsync; a thread blocked
 /// reading stdin is left.
 async fn stop_source(src: source::SourceHandle) {
-    let source::SourceHandle { events, thread } = src;
+    let source::SourceHandle { events, thread, .. } = src;
     drop(events);
     let join_deadline = Instant::now() + Duration::from_secs(1);
     while !thread.is_finished() && Instant::now() < join_deadline {

@@ -43,6 +43,9 @@ pub struct Settings {
     /// Who the view answers besides this machine's addresses and `localhost`
     /// ([`crate::view::access`]).
     pub view_access: ViewAccess,
+    /// `[phone]`: where the phone page is served and its certificate kept (`sfs run --phone`
+    /// and a configuration with `[phone]` and no `[source]` read the phone).
+    pub phone: Option<crate::source::phone::PhoneSpec>,
 }
 
 /// `[view] allowed_hosts` and `[view] token`.
@@ -94,6 +97,7 @@ impl Default for Settings {
             view: None,
             keep_serving: false,
             view_access: ViewAccess::default(),
+            phone: None,
         }
     }
 }

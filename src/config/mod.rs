@@ -120,6 +120,7 @@ mod curves;
 mod monitor;
 mod network;
 mod output;
+mod phone;
 mod source;
 mod surface;
 mod view;
@@ -172,6 +173,8 @@ struct ConfigFile {
     output: output::OutputToml,
     #[serde(default)]
     view: view::ViewToml,
+    /// The phone page (`sfs run --phone`).
+    phone: Option<phone::PhoneToml>,
     /// Monitoring of an instrumented structure (see the module documentation).
     monitor: Option<monitor::MonitorToml>,
 }
@@ -284,6 +287,7 @@ impl ConfigFile {
             view: self.view_address(file)?,
             keep_serving: false,
             view_access: self.view_access(file)?,
+            phone: self.phone(file)?,
         };
         Ok(match monitor {
             Some(m) => settings.with_monitor(m),

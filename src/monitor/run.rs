@@ -601,7 +601,11 @@ impl Monitor {
             return;
         }
         self.write_metrics_line(&line);
-        if self.report.epochs % self.cfg.latest_every as u64 == 0 {
+        if self
+            .report
+            .epochs
+            .is_multiple_of(self.cfg.latest_every as u64)
+        {
             self.write_latest(t, &shape.positions);
         }
         self.metrics

@@ -18,6 +18,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod phone;
 mod replay;
 mod serial;
 mod stdin;
@@ -44,6 +45,8 @@ pub enum SourceSpec {
     Replay { path: PathBuf, pace: Pace },
     /// Standard input.
     Stdin,
+    /// The phone page: a smartphone's browser streaming over HTTPS ([`phone`]).
+    Phone(phone::PhoneSpec),
 }
 
 /// A serial port and how to watch it.
@@ -84,6 +87,7 @@ impl SourceSpec {
             SourceSpec::Serial(s) => format!("serial {} @ {} baud", s.path.display(), s.baud),
             SourceSpec::Replay { path, pace } => format!("replay {} ({pace})", path.display()),
             SourceSpec::Stdin => "standard input".into(),
+            SourceSpec::Phone(p) => format!("phone page on {}", p.addr),
         }
     }
 }
@@ -142,6 +146,15 @@ pub enum SourceError {
     },
     #[error("cannot open serial port {}: {message}", path.display())]
     Serial { path: PathBuf, message: String },
+    #[error("cannot listen on {addr}: {source}")]
+    Bind {
+        addr: std::net::SocketAddr,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The phone page's certificate (made or read in `path`).
+    #[error("the phone page's certificate in {}: {message}", path.display())]
+    Phone { path: PathBuf, message: String },
     #[error("cannot start the source thread: {0}")]
     Thread(std::io::Error),
 }
@@ -151,6 +164,8 @@ pub enum SourceError {
 pub struct SourceHandle {
     pub events: mpsc::Receiver<SourceEvent>,
     pub thread: std::thread::JoinHandle<()>,
+    /// The phone source's feedback and statistics.
+    pub phone: Option<std::sync::Arc<phone::Phone>>,
 }
 
 /// Starts `spec` on its own thread. A live source appends to `capture` (if given) before
@@ -162,12 +177,22 @@ pub fn spawn(
 ) -> Result<SourceHandle, SourceError> {
     let (tx, rx) = mpsc::channel(CHANNEL_CHUNKS);
     let out = Out { tx, capture };
+    let mut phone = None;
     let thread = match spec {
         SourceSpec::Serial(s) => serial::spawn(s, out, shutdown)?,
         SourceSpec::Replay { path, pace } => replay::spawn(path, pace, out, shutdown)?,
         SourceSpec::Stdin => stdin::spawn(out, shutdown)?,
+        SourceSpec::Phone(p) => {
+            let (thread, shared) = phone::spawn(p, out, shutdown)?;
+            phone = Some(shared);
+            thread
+        }
     };
-    Ok(SourceHandle { events: rx, thread })
+    Ok(SourceHandle {
+        events: rx,
+        thread,
+        phone,
+    })
 }
 
 /// The sending side shared by the source threads: capture first, then the channel.

@@ -10,6 +10,31 @@ pub const INDEX: (&str, &[u8]) = (
 
 const JS: &str = "text/javascript; charset=utf-8";
 
+/// `(content type, bytes)` of the phone page (`GET /phone?token=…` on the phone port).
+pub const PHONE_PAGE: (&str, &[u8]) = (
+    "text/html; charset=utf-8",
+    include_bytes!("assets/phone.html"),
+);
+
+/// The phone page's own files, served at the phone port's root: `(name, content type, bytes)`.
+pub const PHONE_FILES: &[(&str, &str, &[u8])] = &[
+    ("phone.js", JS, include_bytes!("assets/phone.js")),
+    ("wire.js", JS, include_bytes!("assets/wire.js")),
+    (
+        "phone.css",
+        "text/css; charset=utf-8",
+        include_bytes!("assets/phone.css"),
+    ),
+];
+
+/// The phone page's file `name`: its content type and bytes.
+pub fn phone(name: &str) -> Option<(&'static str, &'static [u8])> {
+    PHONE_FILES
+        .iter()
+        .find(|(p, _, _)| *p == name)
+        .map(|(_, kind, body)| (*kind, *body))
+}
+
 /// Every file under `/assets/`: `(path, content type, bytes)`.
 pub const FILES: &[(&str, &str, &[u8])] = &[
     ("view.js", JS, include_bytes!("assets/view.js")),

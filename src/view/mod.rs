@@ -111,6 +111,10 @@ pub struct Status {
     /// How each curve of the latest network closes its loops, with the tags to rescan
     /// (`report.json` `network.closure` in brief); empty until the network has a loop.
     pub closure: Vec<ClosureStatus>,
+    /// The phone page's address with its token (`sfs run --phone`); its QR code is at
+    /// `/phone-qr.svg`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub phone_url: Option<String>,
 }
 
 /// One curve's closure misfit as the view shows it.

@@ -1,0 +1,108 @@
+//! The phone page's certificate: self-signed, made with rcgen on the first start and kept
+//! (`phone-cert.pem`, `phone-key.pem`, the key readable by its owner only), served by rustls
+//! with the ring provider (no OpenSSL).
+
+use rustls::pki_types::pem::PemObject;
+use rustls::pki_types::{CertificateDer, PrivateKeyDer};
+use std::path::Path;
+use std::sync::Arc;
+
+/// The certificate file's name.
+pub const CERT_FILE: &str = "phone-cert.pem";
+/// The private key's file name.
+pub const KEY_FILE: &str = "phone-key.pem";
+
+/// A certificate and its key, loaded.
+#[derive(Debug)]
+pub struct Certificate {
+    cert: CertificateDer<'static>,
+    key: PrivateKeyDer<'static>,
+    /// SHA-256 of the certificate's DER, upper-case hex pairs joined by `:`.
+    pub fingerprint: String,
+}
+
+impl Certificate {
+    /// The certificate kept in `dir`, or a new one made (and kept) there when `dir` holds
+    /// none. The error says which file and why.
+    pub fn load_or_make(dir: &Path) -> Result<Certificate, String> {
+        let (cert_path, key_path) = (dir.join(CERT_FILE), dir.join(KEY_FILE));
+        if !cert_path.exists() && !key_path.exists() {
+            make(dir)?;
+        }
+        let cert = CertificateDer::from_pem_file(&cert_path)
+            .map_err(|e| format!("{}: {e}", cert_path.display()))?;
+        let key = PrivateKeyDer::from_pem_file(&key_path)
+            .map_err(|e| format!("{}: {e}", key_path.display()))?;
+        Ok(Certificate {
+            fingerprint: fingerprint(&cert),
+            cert,
+            key,
+        })
+    }
+
+    /// A rustls server configuration serving it (TLS 1.2 and 1.3, HTTP/1.1).
+    pub fn server_config(&self) -> Result<Arc<rustls::ServerConfig>, String> {
+        let provider = Arc::new(rustls::crypto::ring::default_provider());
+        let mut config = rustls::ServerConfig::builder_with_provider(provider)
+            .with_safe_default_protocol_versions()
+            .map_err(|e| e.to_string())?
+            .with_no_client_auth()
+            .with_single_cert(vec![self.cert.clone()], self.key.clone_key())
+            .map_err(|e| format!("the certificate and its key: {e}"))?;
+        config.alpn_protocols = vec![b"http/1.1".to_vec()];
+        Ok(Arc::new(config))
+    }
+}
+
+/// Makes a self-signed certificate for `localhost`, this machine's name and its addresses.
+fn make(dir: &Path) -> Result<(), String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let mut names = vec!["localhost".to_owned(), "127.0.0.1".to_owned()];
+    if let Ok(h) = std::fs::read_to_string("/etc/hostname") {
+        let h = h.trim();
+        if !h.is_empty()
+            && h.len() < 254
+            && h.bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'.')
+        {
+            names.push(h.to_owned());
+        }
+    }
+    let lan = super::public_host("0.0.0.0:0".parse().expect("an address")).ip();
+    if !lan.is_loopback() {
+        names.push(lan.to_string());
+    }
+    let made = rcgen::generate_simple_self_signed(names)
+        .map_err(|e| format!("cannot make a certificate: {e}"))?;
+    let key_path = dir.join(KEY_FILE);
+    write_private(&key_path, made.signing_key.serialize_pem().as_bytes())
+        .map_err(|e| format!("{}: {e}", key_path.display()))?;
+    let cert_path = dir.join(CERT_FILE);
+    crate::atomic::write_atomic(&cert_path, made.cert.pem().as_bytes())
+        .map_err(|e| format!("{}: {e}", cert_path.display()))?;
+    tracing::info!(path = %cert_path.display(), "made a self-signed certificate for the phone page");
+    Ok(())
+}
+
+/// Writes `bytes` to a new file readable by its owner only.
+fn write_private(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(path)?;
+    f.write_all(bytes)?;
+    f.sync_all()
+}
+
+/// SHA-256 of `cert`, as `AB:CD:…`.
+pub fn fingerprint(cert: &CertificateDer<'_>) -> String {
+    ring::digest::digest(&ring::digest::SHA256, cert.as_ref())
+        .as_ref()
+        .iter()
+        .map(|b| format!("{b:02X}"))
+        .collect::<Vec<_>>()
+        .join(":")
+}
