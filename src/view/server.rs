@@ -69,6 +69,7 @@ pub fn serve(
         .route("/", get(index))
         .route("/assets/{*path}", get(asset))
         .route("/network.glb", get(glb))
+        .route("/phone-qr.svg", get(phone_qr))
         .route("/status", get(status))
         .route("/metrics", get(metrics))
         .route("/events", get(events))
@@ -196,6 +197,27 @@ async fn glb(State(app): State<App>) -> Response {
         )
             .into_response(),
         None => (StatusCode::NOT_FOUND, "no network yet\n").into_response(),
+    }
+}
+
+/// The phone page's address as a QR code (`sfs run --phone`), for the operator to scan from
+/// the view's screen.
+async fn phone_qr(State(app): State<App>) -> Response {
+    match app
+        .view
+        .status()
+        .phone_url
+        .and_then(|u| crate::source::phone::qr::svg(&u))
+    {
+        Some(svg) => (
+            [
+                (header::CONTENT_TYPE, "image/svg+xml"),
+                (header::CACHE_CONTROL, "no-store"),
+            ],
+            svg,
+        )
+            .into_response(),
+        None => (StatusCode::NOT_FOUND, "no phone page in this session\n").into_response(),
     }
 }
 

@@ -5,6 +5,8 @@
 use device_protocol::*;
 use std::path::PathBuf;
 
+#[allow(dead_code)]
+pub mod phone;
 pub mod pty;
 pub mod view;
 pub mod webdriver;

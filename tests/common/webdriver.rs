@@ -39,6 +39,12 @@ pub struct Browser {
 impl Browser {
     /// Starts chromedriver and a headless chromium with its profile in `profile`.
     pub async fn start(profile: &Path) -> Browser {
+        Browser::start_with(profile, false).await
+    }
+
+    /// As [`start`](Self::start); with `insecure_certs`, a self-signed certificate is
+    /// accepted (the phone page's, as the operator accepts it on the phone).
+    pub async fn start_with(profile: &Path, insecure_certs: bool) -> Browser {
         let port = super::view::free_port();
         let driver = Command::new(CHROMEDRIVER)
             .arg(format!("--port={port}"))
@@ -82,6 +88,7 @@ impl Browser {
         .collect::<Vec<_>>();
         let caps = serde_json::json!({ "capabilities": { "alwaysMatch": {
             "browserName": "chrome",
+            "acceptInsecureCerts": insecure_certs,
             "goog:chromeOptions": { "binary": CHROMIUM, "args": args },
         }}});
         let mut b = Browser {
@@ -123,6 +130,59 @@ impl Browser {
         let body = serde_json::json!({ "url": url });
         self.call(reqwest::Method::POST, &self.at("url"), Some(body))
             .await;
+    }
+
+    /// A DevTools protocol command, through chromedriver (`goog/cdp/execute`).
+    #[allow(dead_code)]
+    pub async fn cdp(&self, cmd: &str, params: serde_json::Value) -> serde_json::Value {
+        let body = serde_json::json!({ "cmd": cmd, "params": params });
+        self.call(
+            reqwest::Method::POST,
+            &self.at("goog/cdp/execute"),
+            Some(body),
+        )
+        .await
+    }
+
+    /// Runs `script` (a function body: `arguments` are `args`, its `return` the result).
+    #[allow(dead_code)]
+    pub async fn execute(&self, script: &str, args: serde_json::Value) -> serde_json::Value {
+        let body = serde_json::json!({ "script": script, "args": args });
+        self.call(reqwest::Method::POST, &self.at("execute/sync"), Some(body))
+            .await
+    }
+
+    /// Runs `script` asynchronously: its last argument is the callback that returns.
+    #[allow(dead_code)]
+    pub async fn execute_async(&self, script: &str, args: serde_json::Value) -> serde_json::Value {
+        let body = serde_json::json!({ "script": script, "args": args });
+        self.call(reqwest::Method::POST, &self.at("execute/async"), Some(body))
+            .await
+    }
+
+    /// The element `css` selects (its WebDriver reference).
+    #[allow(dead_code)]
+    pub async fn find(&self, css: &str) -> String {
+        let body = serde_json::json!({ "using": "css selector", "value": css });
+        let v = self
+            .call(reqwest::Method::POST, &self.at("element"), Some(body))
+            .await;
+        v.as_object()
+            .and_then(|o| o.values().next())
+            .and_then(|id| id.as_str())
+            .unwrap_or_else(|| panic!("no element {css}: {v}"))
+            .to_owned()
+    }
+
+    /// Clicks the element (as a pointer would: WebDriver's element click).
+    #[allow(dead_code)]
+    pub async fn click(&self, element: &str) {
+        self.call(
+            reqwest::Method::POST,
+            &self.at(&format!("element/{element}/click")),
+            Some(serde_json::json!({})),
+        )
+        .await;
     }
 
     /// `JSON.stringify(window.sfsView)`, parsed (null before the page's script has run).

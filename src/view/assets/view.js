@@ -276,6 +276,21 @@ function text(id, s, bad) {
 }
 
 let warningsShown = false;
+// The phone page's address and its QR code (a session reading the phone: sfs run --phone).
+let phoneShown = false;
+function showPhone(url) {
+  if (!url || phoneShown) return;
+  phoneShown = true;
+  const box = document.getElementById('phone');
+  box.hidden = false;
+  const img = document.getElementById('phone-qr');
+  img.src = '/phone-qr.svg';
+  const a = document.getElementById('phone-url');
+  a.textContent = url;
+  a.href = url;
+  state.phoneUrl = url;
+}
+
 function showStatus(s) {
   state.status = s;
   if (!warningsShown) {
@@ -294,6 +309,7 @@ function showStatus(s) {
     text('curve', 'no curve open');
   }
   text('accepted', `${s.curves_accepted} curve(s) accepted`);
+  showPhone(s.phone_url);
   const l = s.link;
   text('link', `link ${l.packets_per_s.toFixed(0)} pkt/s · ${l.rejected} rejected · ${l.lost} lost · ${l.reboots} reboots`, l.lost > 0 || l.disconnects > 0);
   if (s.device) {

@@ -1,0 +1,319 @@
+//! Issue 32, point 4: the phone page is the first route that takes input from another machine.
+//! Driven through a TLS client of the test's own (rustls, pinned to the session's certificate)
+//! and a WebSocket client (tokio-tungstenite):
+//! - without the token, or with a wrong one, the page and the WebSocket get 403, and past five
+//!   failures a minute from one address the answers slow down;
+//! - one phone at a time: a second WebSocket with the token is refused (409) while one streams;
+//! - a message over the size limit closes the connection (1009), and is counted;
+//! - plain HTTP on the port gets a 400 that names https;
+//! - the bytes the phone sent are in the capture exactly, and the token is in the log only in
+//!   the printed address; a new session gets a new token, a resumed one keeps its own;
+//! - the live view shows the page's address and its QR code.
+
+mod common;
+use common::phone::Daemon;
+use common::*;
+use futures_util::{SinkExt, StreamExt};
+use rustls::client::danger::{HandshakeSignatureValid, ServerCertVerified, ServerCertVerifier};
+use rustls::pki_types::pem::PemObject;
+use rustls::pki_types::{CertificateDer, ServerName, UnixTime};
+use rustls::{DigitallySignedStruct, SignatureScheme};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio_tungstenite::tungstenite::Message;
+
+/// Accepts exactly one certificate: the session's (what the operator checks by fingerprint).
+#[derive(Debug)]
+struct Pinned {
+    cert: Vec<u8>,
+    provider: Arc<rustls::crypto::CryptoProvider>,
+}
+
+impl ServerCertVerifier for Pinned {
+    fn verify_server_cert(
+        &self,
+        end_entity: &CertificateDer<'_>,
+        _: &[CertificateDer<'_>],
+        _: &ServerName<'_>,
+        _: &[u8],
+        _: UnixTime,
+    ) -> Result<ServerCertVerified, rustls::Error> {
+        if end_entity.as_ref() == self.cert.as_slice() {
+            Ok(ServerCertVerified::assertion())
+        } else {
+            Err(rustls::Error::General(
+                "not the session's certificate".into(),
+            ))
+        }
+    }
+
+    fn verify_tls12_signature(
+        &self,
+        message: &[u8],
+        cert: &CertificateDer<'_>,
+        dss: &DigitallySignedStruct,
+    ) -> Result<HandshakeSignatureValid, rustls::Error> {
+        rustls::crypto::verify_tls12_signature(
+            message,
+            cert,
+            dss,
+            &self.provider.signature_verification_algorithms,
+        )
+    }
+
+    fn verify_tls13_signature(
+        &self,
+        message: &[u8],
+        cert: &CertificateDer<'_>,
+        dss: &DigitallySignedStruct,
+    ) -> Result<HandshakeSignatureValid, rustls::Error> {
+        rustls::crypto::verify_tls13_signature(
+            message,
+            cert,
+            dss,
+            &self.provider.signature_verification_algorithms,
+        )
+    }
+
+    fn supported_verify_schemes(&self) -> Vec<SignatureScheme> {
+        self.provider
+            .signature_verification_algorithms
+            .supported_schemes()
+    }
+}
+
+struct Client {
+    tls: tokio_rustls::TlsConnector,
+    port: u16,
+}
+
+type Tls = tokio_rustls::client::TlsStream<tokio::net::TcpStream>;
+
+impl Client {
+    fn of(d: &Daemon) -> Client {
+        let cert = CertificateDer::from_pem_file(d.dir.join("phone-cert.pem")).unwrap();
+        let provider = Arc::new(rustls::crypto::ring::default_provider());
+        let config = rustls::ClientConfig::builder_with_provider(provider.clone())
+            .with_safe_default_protocol_versions()
+            .unwrap()
+            .dangerous()
+            .with_custom_certificate_verifier(Arc::new(Pinned {
+                cert: cert.to_vec(),
+                provider,
+            }))
+            .with_no_client_auth();
+        Client {
+            tls: tokio_rustls::TlsConnector::from(Arc::new(config)),
+            port: d.port,
+        }
+    }
+
+    async fn connect(&self) -> Tls {
+        let tcp = tokio::net::TcpStream::connect(("127.0.0.1", self.port))
+            .await
+            .unwrap();
+        self.tls
+            .connect(ServerName::try_from("localhost").unwrap(), tcp)
+            .await
+            .unwrap()
+    }
+
+    /// `GET path`: the status and the body.
+    async fn get(&self, path: &str) -> (u16, String) {
+        let mut s = self.connect().await;
+        let req = format!("GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n");
+        s.write_all(req.as_bytes()).await.unwrap();
+        let mut text = String::new();
+        let _ = s.read_to_string(&mut text).await;
+        let status = text
+            .split_whitespace()
+            .nth(1)
+            .and_then(|c| c.parse().ok())
+            .unwrap_or(0);
+        (status, text)
+    }
+
+    /// The WebSocket at `/phone/ws?token=…`: the socket, or the refusal's status.
+    async fn ws(&self, token: &str) -> Result<tokio_tungstenite::WebSocketStream<Tls>, u16> {
+        let url = format!("wss://127.0.0.1:{}/phone/ws?token={token}", self.port);
+        match tokio_tungstenite::client_async(url, self.connect().await).await {
+            Ok((ws, _)) => Ok(ws),
+            Err(tokio_tungstenite::tungstenite::Error::Http(r)) => Err(r.status().as_u16()),
+            Err(e) => panic!("WebSocket: {e}"),
+        }
+    }
+}
+
+/// A phone's first frames: HELLO and `n` samples.
+fn frames(n: u32) -> Vec<u8> {
+    use device_protocol::*;
+    let mut out = Vec::new();
+    Packet::Hello(Hello {
+        proto: 1,
+        kind: DeviceKind::Phone,
+        device_id: 7,
+        firmware: 1,
+        rate_hz: 60,
+        acc_scale: 0.0024,
+        gyro_scale: 0.001,
+        mag_scale: 0.15,
+        ticks_per_rev: 0,
+        wheel_circumference_um: 0,
+        sensors: 1,
+    })
+    .encode(0, &mut out);
+    for i in 0..n {
+        Packet::PhoneSample(PhoneSample {
+            t_us: 1000 + i * 16_667,
+            acc: [0, 0, 4096],
+            gyro: [0; 3],
+            mag: [0, 140, -287],
+        })
+        .encode((i + 1) as u8, &mut out);
+    }
+    out
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn issue_32_the_phone_port_refuses_what_it_must() {
+    let dir = tmpdir("phone-refusals");
+    let session = dir.join("session");
+    let view_port = common::view::free_port();
+    let d = Daemon::start(
+        &session,
+        false,
+        &["--view", &format!("127.0.0.1:{view_port}")],
+    );
+    let c = Client::of(&d);
+    let token = d.token().to_owned();
+
+    // The page: 403 without the token or with a wrong one, the page with it.
+    assert_eq!(c.get("/phone").await.0, 403);
+    assert_eq!(
+        c.get("/phone?token=0123456789abcdef0123456789abcdef")
+            .await
+            .0,
+        403
+    );
+    let (st, page) = c.get(&format!("/phone?token={token}")).await;
+    assert_eq!(st, 200);
+    assert!(page.contains("data-action=\"start\"") && page.contains("data-key=\"Enter\""));
+    assert!(page
+        .to_ascii_lowercase()
+        .contains("referrer-policy: no-referrer"));
+    // The WebSocket likewise.
+    assert_eq!(c.ws("").await.err(), Some(403));
+    assert_eq!(c.ws("wrong").await.err(), Some(403));
+
+    // One phone streams; a second is refused while it does.
+    let mut phone = c.ws(&token).await.unwrap();
+    let sent = frames(30);
+    for chunk in sent.chunks(100) {
+        phone.send(Message::binary(chunk.to_vec())).await.unwrap();
+    }
+    assert_eq!(c.ws(&token).await.err(), Some(409));
+    // The page is told the link's figures.
+    let status = loop {
+        match tokio::time::timeout(Duration::from_secs(5), phone.next()).await {
+            Ok(Some(Ok(Message::Text(t)))) => {
+                let v: serde_json::Value = serde_json::from_str(t.as_str()).unwrap();
+                if v["packets"].as_u64() == Some(31) {
+                    break v;
+                }
+            }
+            Ok(Some(Ok(_))) => {}
+            other => panic!("no status with the packets: {other:?}"),
+        }
+    };
+    assert_eq!(status["type"], "status");
+    assert_eq!(status["rejected"], 0);
+
+    // A message over the limit closes the connection with 1009.
+    phone
+        .send(Message::binary(vec![0u8; 100_000]))
+        .await
+        .unwrap();
+    let closed = loop {
+        match tokio::time::timeout(Duration::from_secs(5), phone.next()).await {
+            Ok(Some(Ok(Message::Close(f)))) => break f,
+            Ok(Some(Ok(_))) => {}
+            other => panic!("not closed: {other:?}"),
+        }
+    };
+    assert_eq!(u16::from(closed.unwrap().code), 1009);
+
+    // Plain HTTP: a 400 that names https.
+    let mut tcp = tokio::net::TcpStream::connect(("127.0.0.1", d.port))
+        .await
+        .unwrap();
+    tcp.write_all(format!("GET /phone?token={token} HTTP/1.1\r\nHost: x\r\n\r\n").as_bytes())
+        .await
+        .unwrap();
+    let mut text = String::new();
+    let _ = tcp.read_to_string(&mut text).await;
+    assert!(text.starts_with("HTTP/1.1 400"), "{text}");
+    assert!(text.contains("https://") && !text.contains(&token));
+
+    // Four failures so far: the fifth is answered at once, the next ones ever later
+    // (250 ms, 500 ms, 1 s, …).
+    let t0 = Instant::now();
+    assert_eq!(c.get("/phone?token=x").await.0, 403);
+    let t1 = Instant::now();
+    assert_eq!(c.get("/phone?token=x").await.0, 403);
+    let t2 = Instant::now();
+    assert_eq!(c.get("/phone?token=x").await.0, 403);
+    assert!(t1 - t0 < Duration::from_millis(200), "{:?}", t1 - t0);
+    assert!(t2 - t1 >= Duration::from_millis(240), "{:?}", t2 - t1);
+    assert!(
+        t2.elapsed() >= Duration::from_millis(490),
+        "{:?}",
+        t2.elapsed()
+    );
+
+    // The view shows the page's address and its QR code.
+    let view = format!("http://127.0.0.1:{view_port}");
+    let http = reqwest::Client::new();
+    let st: serde_json::Value = http
+        .get(format!("{view}/status"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(st["phone_url"], d.url.as_str());
+    let qr = http
+        .get(format!("{view}/phone-qr.svg"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(qr.status(), 200);
+    assert!(qr.text().await.unwrap().contains("<svg"));
+
+    let report = d.stop();
+    let refused = &report["phone"]["refused"];
+    assert_eq!(refused["token"], 7, "{refused}");
+    assert_eq!(refused["slowed"], 2, "{refused}");
+    assert_eq!(refused["busy"], 1, "{refused}");
+    assert_eq!(refused["plain_http"], 1, "{refused}");
+    assert_eq!(refused["oversized"], 1, "{refused}");
+    assert_eq!(report["link"]["connects"], 1);
+    assert_eq!(report["link"]["disconnects"], 1);
+    assert_eq!(report["link"]["packets"]["PHONE_SAMPLE"], 30);
+    // Every byte the phone sent, and nothing else, is in the capture.
+    assert_eq!(std::fs::read(session.join("capture.bin")).unwrap(), sent);
+    // The token is in the log once: in the printed address.
+    let log = std::fs::read_to_string(session.with_extension("log")).unwrap();
+    assert_eq!(log.matches(token.as_str()).count(), 1, "{log}");
+    assert!(log.contains(&format!("token={token}")));
+
+    // A resumed session keeps its token; a new one gets another.
+    let again = Daemon::start(&session, true, &[]);
+    assert_eq!(again.token(), token);
+    again.stop();
+    let other = Daemon::start(&dir.join("other"), false, &[]);
+    assert_ne!(other.token(), token);
+    assert_eq!(other.token().len(), 32);
+    other.stop();
+}
