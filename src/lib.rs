@@ -4,8 +4,9 @@
 //! # Layout, in the order the data flows
 //!
 //! - `device-protocol` (its own crate): bytes ⇄ packets, the wire format version 1.
-//! - [`source`]: where bytes come from (serial port, capture file, stdin), each on its own
-//!   thread behind one channel of [`source::SourceEvent`]s; [`ports`]: the serial ports with
+//! - [`source`]: where bytes come from (serial port, capture file, stdin, the phone page
+//!   served over HTTPS: [`source::phone`]), each on its own thread behind one channel of
+//!   [`source::SourceEvent`]s; [`ports`]: the serial ports with
 //!   their USB identity, probed for this protocol (`sfs ports`).
 //! - [`capture`]: lossless capture of live bytes, written before anything decodes them
 //!   (rotated with retention for unattended runs, each piece keeping the session's time);

@@ -311,7 +311,10 @@ async fn issue_32_the_phone_port_refuses_what_it_must() {
     // A resumed session keeps its token; a new one gets another.
     let again = Daemon::start(&session, true, &[]);
     assert_eq!(again.token(), token);
-    again.stop();
+    // It continues the capture: what the phone sent before is decoded again.
+    let resumed = again.stop();
+    assert_eq!(resumed["link"]["packets"]["PHONE_SAMPLE"], 30);
+    assert_eq!(std::fs::read(session.join("capture.bin")).unwrap(), sent);
     let other = Daemon::start(&dir.join("other"), false, &[]);
     assert_ne!(other.token(), token);
     assert_eq!(other.token().len(), 32);
