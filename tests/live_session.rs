@@ -38,23 +38,6 @@ fn signal(pid: u32, sig: &str) {
         .success());
 }
 
-/// `sfs eval` of a session's network against the truth.
-fn eval(truth: &Path, glb: &Path) -> serde_json::Value {
-    let out = sfs()
-        .args(["--log", "off", "eval", "--truth"])
-        .arg(truth)
-        .arg("--glb")
-        .arg(glb)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
-
 #[test]
 fn issue7_pty_session_updates_after_every_curve_and_scores_within_target() {
     let dir = tmpdir("live-pty");

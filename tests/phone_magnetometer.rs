@@ -115,15 +115,7 @@ fn encode(play: &Play, sim: &[u8], rate: f64, mag: Mag) -> Vec<u8> {
 }
 
 fn curve_error(truth: &Path, glb: &Path) -> f64 {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
-        .args(["--log", "off", "eval", "--truth"])
-        .arg(truth)
-        .arg("--glb")
-        .arg(glb)
-        .output()
-        .unwrap();
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    v["curves"]["mean_pct"].as_f64().unwrap()
+    eval(truth, glb)["curves"]["mean_pct"].as_f64().unwrap()
 }
 
 #[test]

@@ -148,18 +148,6 @@ async fn perform(b: &Browser, play: &Play) -> usize {
     }
 }
 
-fn eval(truth: &Path, glb: &Path) -> serde_json::Value {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
-        .args(["--log", "off", "eval", "--truth"])
-        .arg(truth)
-        .arg("--glb")
-        .arg(glb)
-        .output()
-        .unwrap();
-    serde_json::from_slice(&out.stdout)
-        .unwrap_or_else(|e| panic!("sfs eval: {e}: {}", String::from_utf8_lossy(&out.stderr)))
-}
-
 /// `bytes` without their SEGMENT_LENGTH frames: what a phone sends that has no way to measure
 /// its segments (the page has none: its distances come from the segment timing). The decoder
 /// counts the frames cut out as lost packets.

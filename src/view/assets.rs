@@ -29,7 +29,15 @@ pub const PHONE_FILES: &[(&str, &str, &[u8])] = &[
 
 /// The phone page's file `name`: its content type and bytes.
 pub fn phone(name: &str) -> Option<(&'static str, &'static [u8])> {
-    PHONE_FILES
+    find(PHONE_FILES, name)
+}
+
+/// The file `name` of `files`: only those, no path reaches the file system.
+fn find(
+    files: &[(&str, &'static str, &'static [u8])],
+    name: &str,
+) -> Option<(&'static str, &'static [u8])> {
+    files
         .iter()
         .find(|(p, _, _)| *p == name)
         .map(|(_, kind, body)| (*kind, *body))
@@ -88,8 +96,5 @@ pub const FILES: &[(&str, &str, &[u8])] = &[
 /// The asset at `path` (below `/assets/`): its content type and bytes. Only the files of
 /// [`FILES`]: no path reaches the file system.
 pub fn get(path: &str) -> Option<(&'static str, &'static [u8])> {
-    FILES
-        .iter()
-        .find(|(p, _, _)| *p == path)
-        .map(|(_, kind, body)| (*kind, *body))
+    find(FILES, path)
 }

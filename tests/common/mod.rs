@@ -227,6 +227,23 @@ pub fn assert_link(link: &serde_json::Value, bytes: usize, exp: &Expected) {
     );
 }
 
+/// `sfs eval --truth TRUTH --glb GLB`, which must succeed: its JSON.
+pub fn eval(truth: &std::path::Path, glb: &std::path::Path) -> serde_json::Value {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "off", "eval", "--truth"])
+        .arg(truth)
+        .arg("--glb")
+        .arg(glb)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "sfs eval: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
 /// `sfs --log off replay CAPTURE --out OUT`, which must succeed.
 pub fn replay_to(capture: &std::path::Path, out: &std::path::Path) {
     let st = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
