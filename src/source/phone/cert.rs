@@ -72,8 +72,25 @@ fn make(dir: &Path) -> Result<(), String> {
     if !lan.is_loopback() {
         names.push(lan.to_string());
     }
-    let made = rcgen::generate_simple_self_signed(names)
+    let mut params = rcgen::CertificateParams::new(names)
         .map_err(|e| format!("cannot make a certificate: {e}"))?;
+    // What Apple and Chrome want of a server certificate, even one accepted by hand: at most
+    // 398 days of validity, and the server-authentication purpose.
+    let today = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs() / 86_400) as i64;
+    let ymd = |days: i64| {
+        let (y, m, d) = civil_from_days(days);
+        rcgen::date_time_ymd(y, m, d)
+    };
+    params.not_before = ymd(today - 1);
+    params.not_after = ymd(today + VALID_DAYS - 1);
+    params.extended_key_usages = vec![rcgen::ExtendedKeyUsagePurpose::ServerAuth];
+    let signing_key = rcgen::KeyPair::generate().map_err(|e| format!("cannot make a key: {e}"))?;
+    let cert = params
+        .self_signed(&signing_key)
+        .map_err(|e| format!("cannot make a certificate: {e}"))?;
+    let made = rcgen::CertifiedKey { cert, signing_key };
     let key_path = dir.join(KEY_FILE);
     write_private(&key_path, made.signing_key.serialize_pem().as_bytes())
         .map_err(|e| format!("{}: {e}", key_path.display()))?;
@@ -82,6 +99,25 @@ fn make(dir: &Path) -> Result<(), String> {
         .map_err(|e| format!("{}: {e}", cert_path.display()))?;
     tracing::info!(path = %cert_path.display(), "made a self-signed certificate for the phone page");
     Ok(())
+}
+
+/// Days a new certificate is valid (browsers refuse server certificates valid for longer than
+/// 398 days). An expired one is refused by the phone's browser: delete `phone-cert.pem` and
+/// `phone-key.pem` and the next start makes a new one.
+const VALID_DAYS: i64 = 397;
+
+/// The proleptic Gregorian date of `days` since 1970-01-01 (H. Hinnant's `civil_from_days`).
+fn civil_from_days(days: i64) -> (i32, u8, u8) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = (doy - (153 * mp + 2) / 5 + 1) as u8;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u8;
+    let y = (yoe + era * 400 + i64::from(m <= 2)) as i32;
+    (y, m, d)
 }
 
 /// Writes `bytes` to a new file readable by its owner only.
@@ -105,4 +141,15 @@ pub fn fingerprint(cert: &CertificateDer<'_>) -> String {
         .map(|b| format!("{b:02X}"))
         .collect::<Vec<_>>()
         .join(":")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn dates_from_days() {
+        assert_eq!(super::civil_from_days(0), (1970, 1, 1));
+        assert_eq!(super::civil_from_days(11_016), (2000, 2, 29));
+        assert_eq!(super::civil_from_days(20_790), (2026, 12, 3));
+        assert_eq!(super::civil_from_days(-1), (1969, 12, 31));
+    }
 }
