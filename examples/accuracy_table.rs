@@ -25,7 +25,7 @@ use sfs_geometry::network::{NetworkParams, Reconstructor};
 
 #[path = "shared/mod.rs"]
 mod shared;
-use shared::list;
+use shared::{config, list, parallel};
 
 const SCENES: &[&str] = &[
     "sphere-cube",
@@ -64,19 +64,6 @@ impl Variant {
         } else {
             parts.join(", ")
         }
-    }
-}
-
-/// The acquisition and network settings: `--config FILE`'s, or the defaults.
-fn config(args: &[String]) -> (AcquisitionConfig, NetworkParams) {
-    match args.iter().position(|a| a == "--config") {
-        Some(i) => {
-            let path = args.get(i + 1).expect("--config FILE");
-            let s = sfs::config::load(std::path::Path::new(path))
-                .unwrap_or_else(|e| panic!("--config {path}: {e}"));
-            (s.acquisition, s.network)
-        }
-        None => (AcquisitionConfig::default(), NetworkParams::default()),
     }
 }
 
@@ -172,30 +159,6 @@ fn main() {
         }
         println!();
     }
-}
-
-/// Runs `f` over `jobs` on two threads.
-fn parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec<R> {
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let results = std::sync::Mutex::new((0..jobs.len()).map(|_| None).collect::<Vec<_>>());
-    std::thread::scope(|sc| {
-        for _ in 0..2 {
-            sc.spawn(|| loop {
-                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                let Some(j) = jobs.get(i) else {
-                    return;
-                };
-                let r = f(j);
-                results.lock().unwrap()[i] = Some(r);
-            });
-        }
-    });
-    results
-        .into_inner()
-        .unwrap()
-        .into_iter()
-        .map(|r| r.expect("every job ran"))
-        .collect()
 }
 
 /// The fault study (`--study`): one table per device and profile, a column per variant, the

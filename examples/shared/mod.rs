@@ -1,4 +1,7 @@
-//! Helpers of the table examples (`accuracy_table`, `kinds_table`).
+//! Helpers of the table examples (`accuracy_table`, `kinds_table`, `validation_table`).
+
+use sfs::acquisition::AcquisitionConfig;
+use sfs_geometry::network::NetworkParams;
 
 /// The comma-separated values after `flag` in `args`, or `default`'s.
 pub fn list(args: &[String], flag: &str, default: &str) -> Vec<String> {
@@ -8,5 +11,44 @@ pub fn list(args: &[String], flag: &str, default: &str) -> Vec<String> {
         .map_or(default, |s| s.as_str())
         .split(',')
         .map(str::to_owned)
+        .collect()
+}
+
+#[allow(dead_code)]
+/// The acquisition and network settings: `--config FILE`'s, or the defaults.
+pub fn config(args: &[String]) -> (AcquisitionConfig, NetworkParams) {
+    match args.iter().position(|a| a == "--config") {
+        Some(i) => {
+            let path = args.get(i + 1).expect("--config FILE");
+            let s = sfs::config::load(std::path::Path::new(path))
+                .unwrap_or_else(|e| panic!("--config {path}: {e}"));
+            (s.acquisition, s.network)
+        }
+        None => (AcquisitionConfig::default(), NetworkParams::default()),
+    }
+}
+
+#[allow(dead_code)]
+/// Runs `f` over `jobs` on two threads.
+pub fn parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec<R> {
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let results = std::sync::Mutex::new((0..jobs.len()).map(|_| None).collect::<Vec<_>>());
+    std::thread::scope(|sc| {
+        for _ in 0..2 {
+            sc.spawn(|| loop {
+                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let Some(j) = jobs.get(i) else {
+                    return;
+                };
+                let r = f(j);
+                results.lock().unwrap()[i] = Some(r);
+            });
+        }
+    });
+    results
+        .into_inner()
+        .unwrap()
+        .into_iter()
+        .map(|r| r.expect("every job ran"))
         .collect()
 }
