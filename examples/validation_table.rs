@@ -5,7 +5,13 @@
 //! and its figure before the field-accuracy work (from that directory's README).
 //!
 //! `cargo run --release --example validation_table -- [--dir DIR] [--captures a,b]
-//! [--config FILE]`
+//! [--config FILE] [--study]`
+//!
+//! `--study`: where each capture's error comes from. The per-sample truth
+//! (`NAME.samples.csv.gz`, read through `gzip -dc`) is put into the acquired curves, matched by
+//! sample time within 0.1 ms: the true orientations (estimated distances), the true distances
+//! (estimated orientations), both. Rough captures shift their clock at each power-up, so a
+//! sample is matched only where the shift is none (their figures say how many were).
 //!
 //! Columns: the error now; the target (Morphorider rough 0.30, phone clean 0.40, phone rough
 //! 0.80); the figure before the field-accuracy work (baa97be) and at 1b493a8, both from the
@@ -38,21 +44,186 @@ fn readme_figures(dir: &Path) -> std::collections::HashMap<String, (f64, f64, f6
         .collect()
 }
 
-/// The curve mean error of one capture, % of the diagonal, or why there is none.
+/// One row of `NAME.samples.csv.gz`: time, phase (0 transit, 1 standing at a node, 2 turning
+/// in place, 3 moving), arc length from the curve's start node, the true frame `[w, x, y, z]`.
+struct TruthSample {
+    t: f64,
+    phase: u8,
+    arc: f64,
+    q: [f64; 4],
+}
+
+fn truth_samples(path: &Path) -> Result<Vec<TruthSample>, String> {
+    let out = std::process::Command::new("gzip")
+        .arg("-dc")
+        .arg(path)
+        .output()
+        .map_err(|e| format!("gzip: {e}"))?;
+    let text = String::from_utf8(out.stdout).map_err(|e| e.to_string())?;
+    Ok(text
+        .lines()
+        .skip(1)
+        .filter_map(|l| {
+            let f: Vec<f64> = l.split(',').map(|x| x.parse().unwrap_or(f64::NAN)).collect();
+            (f.len() == 9).then(|| TruthSample {
+                t: f[0],
+                phase: f[3] as u8,
+                arc: f[4],
+                q: [f[5], f[6], f[7], f[8]],
+            })
+        })
+        .collect())
+}
+
+/// Puts the truth into `curves` (orientations with `q`, distances from each curve's first
+/// tag with `d`), sample by sample where a truth row lies within 0.1 ms; returns the samples
+/// matched and all.
+fn put_truth(
+    curves: &mut [sfs_geometry::curve::Curve],
+    truth: &[TruthSample],
+    q: bool,
+    d: bool,
+) -> (usize, usize) {
+    let near = |t: f64| -> Option<usize> {
+        let i = truth.partition_point(|s| s.t < t);
+        [i.wrapping_sub(1), i]
+            .into_iter()
+            .filter(|&j| j < truth.len())
+            .min_by(|&a, &b| (truth[a].t - t).abs().total_cmp(&(truth[b].t - t).abs()))
+            .filter(|&j| (truth[j].t - t).abs() < 1e-4)
+    };
+    // The arc length at a key press (between two samples), interpolated.
+    let arc_at = |t: f64| -> Option<f64> {
+        let i = truth.partition_point(|s| s.t < t);
+        let (a, b) = (truth.get(i.checked_sub(1)?)?, truth.get(i)?);
+        (b.t - a.t < 0.05).then(|| a.arc + (b.arc - a.arc) * (t - a.t) / (b.t - a.t).max(1e-9))
+    };
+    let (mut matched, mut all) = (0, 0);
+    for c in curves {
+        let s0 = c.tags.first().and_then(|tag| arc_at(tag.t));
+        for i in 0..c.samples.len() {
+            all += 1;
+            let Some(j) = near(c.samples.t[i]) else {
+                continue;
+            };
+            matched += 1;
+            if q {
+                c.samples.q[i] = truth[j].q;
+            }
+            if let (true, Some(s0)) = (d, s0) {
+                c.samples.d[i] = truth[j].arc - s0;
+            }
+        }
+        if let (true, Some(s0)) = (d, s0) {
+            for tag in &mut c.tags {
+                if let Some(a) = arc_at(tag.t) {
+                    tag.d = a - s0;
+                }
+            }
+        }
+    }
+    (matched, all)
+}
+
+/// The curve mean error of one capture, % of the diagonal, or why there is none; with
+/// `put = Some((samples, q, d))` the truth put in first.
 fn score(
     bin: &Path,
     truth: &Path,
     settings: &(AcquisitionConfig, NetworkParams),
 ) -> Result<f64, String> {
+    score_with(bin, truth, settings, None).map(|(e, _)| e)
+}
+
+fn score_with(
+    bin: &Path,
+    truth: &Path,
+    settings: &(AcquisitionConfig, NetworkParams),
+    put: Option<(&[TruthSample], bool, bool)>,
+) -> Result<(f64, f64), String> {
     let bytes = std::fs::read(bin).map_err(|e| format!("{}: {e}", bin.display()))?;
     let truth = sfs::simulate::truth::Truth::load(truth).map_err(|e| e.to_string())?;
-    let scan = Acquisition::scan_bytes(&bytes, settings.0.clone());
+    let mut scan = Acquisition::scan_bytes(&bytes, settings.0.clone());
+    let mut share = 1.0;
+    if let Some((samples, q, d)) = put {
+        let (m, all) = put_truth(&mut scan.curves, samples, q, d);
+        share = m as f64 / all.max(1) as f64;
+    }
     let net = Reconstructor::new()
         .run(&scan.curves, &settings.1)
         .map_err(|e| format!("{:?}", e.warnings))?;
     let e = sfs::eval::evaluate(&truth, &sfs::gltf_out::as_read_network(&net.positions))
         .map_err(|e| e.to_string())?;
-    Ok(e.curves.mean_pct)
+    Ok((e.curves.mean_pct, share))
+}
+
+/// Seconds of the acquired curves' samples by (truth phase, flagged stationary): how the
+/// standing mask that the phone's distances rest on compares with what the operator did.
+fn standing_mask(bin: &Path, truth: &[TruthSample], settings: &(AcquisitionConfig, NetworkParams)) -> Result<[[f64; 2]; 4], String> {
+    let bytes = std::fs::read(bin).map_err(|e| format!("{}: {e}", bin.display()))?;
+    let scan = Acquisition::scan_bytes(&bytes, settings.0.clone());
+    let mut secs = [[0.0; 2]; 4];
+    for c in &scan.curves {
+        for i in 1..c.samples.len() {
+            let t = c.samples.t[i];
+            let k = truth.partition_point(|s| s.t < t);
+            let Some(s) = [k.wrapping_sub(1), k]
+                .into_iter()
+                .filter_map(|j| truth.get(j))
+                .find(|s| (s.t - t).abs() < 1e-4)
+            else {
+                continue;
+            };
+            let still = c.samples.flags[i] & sfs::orientation::flags::STATIONARY != 0;
+            secs[usize::from(s.phase.min(3))][usize::from(still)] += t - c.samples.t[i - 1];
+        }
+    }
+    Ok(secs)
+}
+
+/// `--study`: as is, true q, true d, both, per capture.
+fn study(dir: &Path, captures: &[String], settings: &(AcquisitionConfig, NetworkParams)) {
+    println!("| capture | as is | true q | true d | both | samples matched |");
+    println!("|---|---|---|---|---|---|");
+    let rows = parallel(captures, |c| {
+        let bin = dir.join(format!("{c}.bin"));
+        let truth = dir.join(format!("{c}.truth.json"));
+        let samples = truth_samples(&dir.join(format!("{c}.samples.csv.gz")))?;
+        let mut row = vec![score_with(&bin, &truth, settings, None)?];
+        for (q, d) in [(true, false), (false, true), (true, true)] {
+            row.push(score_with(&bin, &truth, settings, Some((&samples, q, d)))?);
+        }
+        Ok::<_, String>(row)
+    });
+    let masks = parallel(captures, |c| {
+        let samples = truth_samples(&dir.join(format!("{c}.samples.csv.gz")))?;
+        standing_mask(&dir.join(format!("{c}.bin")), &samples, settings)
+    });
+    for (c, r) in captures.iter().zip(rows) {
+        match r {
+            Ok(r) => println!(
+                "| {c} | {:.3} | {:.3} | {:.3} | {:.3} | {:.1} % |",
+                r[0].0,
+                r[1].0,
+                r[2].0,
+                r[3].0,
+                100.0 * r[3].1
+            ),
+            Err(e) => println!("| {c} | failed: {e} |"),
+        }
+    }
+    println!("\nSeconds of the acquired curves by what the operator did (truth phase) and whether the sample is flagged stationary (matched samples only):\n");
+    println!("| capture | standing: flagged / not | turning: flagged / not | moving: flagged / not |");
+    println!("|---|---|---|---|");
+    for (c, m) in captures.iter().zip(masks) {
+        match m {
+            Ok(m) => println!(
+                "| {c} | {:.1} / {:.1} | {:.1} / {:.1} | {:.1} / {:.1} |",
+                m[1][1], m[1][0], m[2][1], m[2][0], m[3][1], m[3][0]
+            ),
+            Err(e) => println!("| {c} | failed: {e} |"),
+        }
+    }
 }
 
 fn main() {
@@ -77,6 +248,9 @@ fn main() {
             .collect(),
     };
     captures.sort_by_key(|c| (c.contains("phone"), c.contains("rough"), c.clone()));
+    if args.iter().any(|a| a == "--study") {
+        return study(&dir, &captures, &settings);
+    }
     let results = parallel(&captures, |c| {
         score(
             &dir.join(format!("{c}.bin")),
