@@ -5,7 +5,10 @@
 //! and its figure before the field-accuracy work (from that directory's README).
 //!
 //! `cargo run --release --example validation_table -- [--dir DIR] [--captures a,b]
-//! [--config FILE] [--study]`
+//! [--config FILE] [--no-bridge] [--no-smooth] [--study]`
+//!
+//! `--no-bridge`, `--no-smooth`: the Morphorider's heading bridge across disturbed stretches,
+//! the phone's smoother, off (to find which mechanism a capture's error comes from).
 //!
 //! `--study`: where each capture's error comes from. The per-sample truth
 //! (`NAME.samples.csv.gz`, read through `gzip -dc`) is put into the acquired curves, matched by
@@ -64,7 +67,10 @@ fn truth_samples(path: &Path) -> Result<Vec<TruthSample>, String> {
         .lines()
         .skip(1)
         .filter_map(|l| {
-            let f: Vec<f64> = l.split(',').map(|x| x.parse().unwrap_or(f64::NAN)).collect();
+            let f: Vec<f64> = l
+                .split(',')
+                .map(|x| x.parse().unwrap_or(f64::NAN))
+                .collect();
             (f.len() == 9).then(|| TruthSample {
                 t: f[0],
                 phase: f[3] as u8,
@@ -159,7 +165,11 @@ fn score_with(
 
 /// Seconds of the acquired curves' samples by (truth phase, flagged stationary): how the
 /// standing mask that the phone's distances rest on compares with what the operator did.
-fn standing_mask(bin: &Path, truth: &[TruthSample], settings: &(AcquisitionConfig, NetworkParams)) -> Result<[[f64; 2]; 4], String> {
+fn standing_mask(
+    bin: &Path,
+    truth: &[TruthSample],
+    settings: &(AcquisitionConfig, NetworkParams),
+) -> Result<[[f64; 2]; 4], String> {
     let bytes = std::fs::read(bin).map_err(|e| format!("{}: {e}", bin.display()))?;
     let scan = Acquisition::scan_bytes(&bytes, settings.0.clone());
     let mut secs = [[0.0; 2]; 4];
@@ -213,7 +223,9 @@ fn study(dir: &Path, captures: &[String], settings: &(AcquisitionConfig, Network
         }
     }
     println!("\nSeconds of the acquired curves by what the operator did (truth phase) and whether the sample is flagged stationary (matched samples only):\n");
-    println!("| capture | standing: flagged / not | turning: flagged / not | moving: flagged / not |");
+    println!(
+        "| capture | standing: flagged / not | turning: flagged / not | moving: flagged / not |"
+    );
     println!("|---|---|---|---|");
     for (c, m) in captures.iter().zip(masks) {
         match m {
@@ -234,7 +246,14 @@ fn main() {
         .and_then(|i| args.get(i + 1))
         .map(PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/validation"));
-    let settings = shared::config(&args);
+    let mut settings = shared::config(&args);
+    // Mechanisms of the field-accuracy work that no configuration key turns off.
+    if args.iter().any(|a| a == "--no-bridge") {
+        settings.0.bridge_heading = false;
+    }
+    if args.iter().any(|a| a == "--no-smooth") {
+        settings.0.smooth = false;
+    }
     let figures = readme_figures(&dir);
     let mut captures: Vec<String> = match args.iter().any(|a| a == "--captures") {
         true => list(&args, "--captures", ""),
