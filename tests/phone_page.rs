@@ -302,37 +302,50 @@ async fn issue_32_the_pages_encoder_writes_the_shared_vectors() {
     d.stop();
 }
 
+/// A scene played into the page reconstructs within 2× the error of its serial capture without
+/// segment lengths, and the session's capture replays to the same outputs.
+async fn played_into_the_page_like_its_serial_capture(scene: &str, seed: u64) {
+    available();
+    let (e, session) = scan_through_the_page(scene, seed).await;
+    eprintln!(
+        "{scene}: curve error {:.3} % through the page; serial capture {:.3} % with the segment lengths, {:.3} % without",
+        e.page, e.serial, e.serial_timing
+    );
+    // The page has what a phone without a length measurement has: held to 2× the serial
+    // capture of the same information (BENCHMARKS.md gives the figures with lengths too).
+    assert!(
+        e.page <= 2.0 * e.serial_timing,
+        "{scene}: {:.3} % through the page, {:.3} % through the serial capture without segment lengths",
+        e.page,
+        e.serial_timing
+    );
+    let again = session.with_file_name(format!("{scene}-replayed"));
+    replay_to(&session.join("capture.bin"), &again);
+    assert_same_files(
+        &session,
+        &again,
+        &["network.glb", "scan.json"],
+        "the phone session and its replay",
+    );
+}
+
+// Two scenes, two tests: they play at once (each in real time: 54 s and 125 s).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[cfg_attr(
     not(sfs_chromium),
     ignore = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
 )]
-async fn issue_32_scans_played_into_the_page_reconstruct_like_their_serial_captures() {
-    available();
-    for (scene, seed) in [("torus-loops", 1), ("bumpy", 1)] {
-        let (e, session) = scan_through_the_page(scene, seed).await;
-        eprintln!(
-            "{scene}: curve error {:.3} % through the page; serial capture {:.3} % with the segment lengths, {:.3} % without",
-            e.page, e.serial, e.serial_timing
-        );
-        // The page has what a phone without a length measurement has: held to 2× the serial
-        // capture of the same information (BENCHMARKS.md gives the figures with lengths too).
-        assert!(
-            e.page <= 2.0 * e.serial_timing,
-            "{scene}: {:.3} % through the page, {:.3} % through the serial capture without segment lengths",
-            e.page,
-            e.serial_timing
-        );
-        // The session's capture replays to the same outputs.
-        let again = session.with_file_name(format!("{scene}-replayed"));
-        replay_to(&session.join("capture.bin"), &again);
-        assert_same_files(
-            &session,
-            &again,
-            &["network.glb", "scan.json"],
-            "the phone session and its replay",
-        );
-    }
+async fn issue_32_torus_loops_played_into_the_page_reconstructs_like_its_serial_capture() {
+    played_into_the_page_like_its_serial_capture("torus-loops", 1).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(sfs_chromium),
+    ignore = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
+)]
+async fn issue_32_bumpy_played_into_the_page_reconstructs_like_its_serial_capture() {
+    played_into_the_page_like_its_serial_capture("bumpy", 1).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
