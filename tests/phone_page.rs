@@ -395,7 +395,14 @@ async fn issue_32_a_reconnection_continues_the_session() {
         p["feedback"]["curves"] == 1
     })
     .await;
-    let sent = page_state(&b).await["sent_packets"].as_u64().unwrap();
+    // Streaming stopped, what the page sent is final (and all of it on its way).
+    b.execute("window.sfsPhone.stop()", serde_json::json!([]))
+        .await;
+    let sent = wait_page(&b, Duration::from_secs(5), |p| p["state"] == "stopped").await
+        ["sent_packets"]
+        .as_u64()
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
     b.close().await;
     let report = d.stop();
     eprintln!("before {before}\nafter {after}\nreport {}", report["link"]);

@@ -206,6 +206,17 @@ function connect() {
 // meanwhile): for tests, and for an operator trying a reconnection.
 phone.drop = () => { if (ws) ws.close(4000, 'dropped by the page'); };
 
+// Stops streaming for good: no more samples, what is queued sent, the link closed
+// (sent_packets is then final).
+phone.stop = () => {
+  window.removeEventListener('devicemotion', onMotion);
+  window.removeEventListener('deviceorientationabsolute', onOrientation);
+  window.removeEventListener('deviceorientation', onOrientation);
+  flush();
+  setState('stopped');
+  if (ws) ws.close(1000, 'stopped');
+};
+
 let wakeLock = null;
 async function keepAwake() {
   try {
