@@ -22,6 +22,8 @@
 //! before. Runs two captures at a time (about 20 s for the 14).
 
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
+use sfs::simulate::truth::Truth;
+use sfs_geometry::curve::Curve;
 use sfs_geometry::network::{NetworkParams, Reconstructor};
 use std::path::{Path, PathBuf};
 
@@ -131,49 +133,43 @@ fn put_truth(
     (matched, all)
 }
 
-/// The curve mean error of one capture, % of the diagonal, or why there is none; with
-/// `put = Some((samples, q, d))` the truth put in first.
+/// The curves acquired from a capture as `sfs replay` acquires them.
+fn acquire(
+    bin: &Path,
+    settings: &(AcquisitionConfig, NetworkParams),
+) -> Result<Vec<Curve>, String> {
+    let bytes = std::fs::read(bin).map_err(|e| format!("{}: {e}", bin.display()))?;
+    Ok(Acquisition::scan_bytes(&bytes, settings.0.clone()).curves)
+}
+
+fn load_truth(path: &Path) -> Result<Truth, String> {
+    Truth::load(path).map_err(|e| e.to_string())
+}
+
+/// The curve mean error of `curves` reconstructed, % of the diagonal, or why there is none.
+fn score_curves(curves: &[Curve], truth: &Truth, network: &NetworkParams) -> Result<f64, String> {
+    let net = Reconstructor::new()
+        .run(curves, network)
+        .map_err(|e| format!("{:?}", e.warnings))?;
+    let e = sfs::eval::evaluate(truth, &sfs::gltf_out::as_read_network(&net.positions))
+        .map_err(|e| e.to_string())?;
+    Ok(e.curves.mean_pct)
+}
+
+/// The curve mean error of one capture, % of the diagonal, or why there is none.
 fn score(
     bin: &Path,
     truth: &Path,
     settings: &(AcquisitionConfig, NetworkParams),
 ) -> Result<f64, String> {
-    score_with(bin, truth, settings, None).map(|(e, _)| e)
-}
-
-fn score_with(
-    bin: &Path,
-    truth: &Path,
-    settings: &(AcquisitionConfig, NetworkParams),
-    put: Option<(&[TruthSample], bool, bool)>,
-) -> Result<(f64, f64), String> {
-    let bytes = std::fs::read(bin).map_err(|e| format!("{}: {e}", bin.display()))?;
-    let truth = sfs::simulate::truth::Truth::load(truth).map_err(|e| e.to_string())?;
-    let mut scan = Acquisition::scan_bytes(&bytes, settings.0.clone());
-    let mut share = 1.0;
-    if let Some((samples, q, d)) = put {
-        let (m, all) = put_truth(&mut scan.curves, samples, q, d);
-        share = m as f64 / all.max(1) as f64;
-    }
-    let net = Reconstructor::new()
-        .run(&scan.curves, &settings.1)
-        .map_err(|e| format!("{:?}", e.warnings))?;
-    let e = sfs::eval::evaluate(&truth, &sfs::gltf_out::as_read_network(&net.positions))
-        .map_err(|e| e.to_string())?;
-    Ok((e.curves.mean_pct, share))
+    score_curves(&acquire(bin, settings)?, &load_truth(truth)?, &settings.1)
 }
 
 /// Seconds of the acquired curves' samples by (truth phase, flagged stationary): how the
 /// standing mask that the phone's distances rest on compares with what the operator did.
-fn standing_mask(
-    bin: &Path,
-    truth: &[TruthSample],
-    settings: &(AcquisitionConfig, NetworkParams),
-) -> Result<[[f64; 2]; 4], String> {
-    let bytes = std::fs::read(bin).map_err(|e| format!("{}: {e}", bin.display()))?;
-    let scan = Acquisition::scan_bytes(&bytes, settings.0.clone());
+fn standing_mask(curves: &[Curve], truth: &[TruthSample]) -> [[f64; 2]; 4] {
     let mut secs = [[0.0; 2]; 4];
-    for c in &scan.curves {
+    for c in curves {
         for i in 1..c.samples.len() {
             let t = c.samples.t[i];
             let k = truth.partition_point(|s| s.t < t);
@@ -188,7 +184,15 @@ fn standing_mask(
             secs[usize::from(s.phase.min(3))][usize::from(still)] += t - c.samples.t[i - 1];
         }
     }
-    Ok(secs)
+    secs
+}
+
+/// One capture of the study: its error as is, with true q, true d and both; the share of its
+/// samples the truth matched; its standing mask against the truth.
+struct Study {
+    errors: [f64; 4],
+    matched: f64,
+    mask: [[f64; 2]; 4],
 }
 
 /// `--study`: as is, true q, true d, both, per capture.
@@ -196,28 +200,35 @@ fn study(dir: &Path, captures: &[String], settings: &(AcquisitionConfig, Network
     println!("| capture | as is | true q | true d | both | samples matched |");
     println!("|---|---|---|---|---|---|");
     let rows = parallel(captures, |c| {
-        let bin = dir.join(format!("{c}.bin"));
-        let truth = dir.join(format!("{c}.truth.json"));
+        let curves = acquire(&dir.join(format!("{c}.bin")), settings)?;
+        let truth = load_truth(&dir.join(format!("{c}.truth.json")))?;
         let samples = truth_samples(&dir.join(format!("{c}.samples.csv.gz")))?;
-        let mut row = vec![score_with(&bin, &truth, settings, None)?];
-        for (q, d) in [(true, false), (false, true), (true, true)] {
-            row.push(score_with(&bin, &truth, settings, Some((&samples, q, d)))?);
+        let mut errors = [score_curves(&curves, &truth, &settings.1)?; 4];
+        let mut matched = 0.0;
+        for (k, (q, d)) in [(true, false), (false, true), (true, true)]
+            .into_iter()
+            .enumerate()
+        {
+            let mut put = curves.clone();
+            let (m, all) = put_truth(&mut put, &samples, q, d);
+            matched = m as f64 / all.max(1) as f64;
+            errors[k + 1] = score_curves(&put, &truth, &settings.1)?;
         }
-        Ok::<_, String>(row)
+        Ok::<_, String>(Study {
+            errors,
+            matched,
+            mask: standing_mask(&curves, &samples),
+        })
     });
-    let masks = parallel(captures, |c| {
-        let samples = truth_samples(&dir.join(format!("{c}.samples.csv.gz")))?;
-        standing_mask(&dir.join(format!("{c}.bin")), &samples, settings)
-    });
-    for (c, r) in captures.iter().zip(rows) {
+    for (c, r) in captures.iter().zip(&rows) {
         match r {
             Ok(r) => println!(
                 "| {c} | {:.3} | {:.3} | {:.3} | {:.3} | {:.1} % |",
-                r[0].0,
-                r[1].0,
-                r[2].0,
-                r[3].0,
-                100.0 * r[3].1
+                r.errors[0],
+                r.errors[1],
+                r.errors[2],
+                r.errors[3],
+                100.0 * r.matched
             ),
             Err(e) => println!("| {c} | failed: {e} |"),
         }
@@ -227,9 +238,9 @@ fn study(dir: &Path, captures: &[String], settings: &(AcquisitionConfig, Network
         "| capture | standing: flagged / not | turning: flagged / not | moving: flagged / not |"
     );
     println!("|---|---|---|---|");
-    for (c, m) in captures.iter().zip(masks) {
-        match m {
-            Ok(m) => println!(
+    for (c, r) in captures.iter().zip(&rows) {
+        match r {
+            Ok(Study { mask: m, .. }) => println!(
                 "| {c} | {:.1} / {:.1} | {:.1} / {:.1} | {:.1} / {:.1} |",
                 m[1][1], m[1][0], m[2][1], m[2][0], m[3][1], m[3][0]
             ),

@@ -224,7 +224,7 @@ pub struct RunArgs {
     /// Scan with a phone: serve the phone page over HTTPS at ADDR (default `[phone] address`,
     /// else 0.0.0.0:8443, every interface) and read what it streams. Prints the page's address
     /// (also as a QR code, and into SESSION/phone.url) and the certificate's fingerprint.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, conflicts_with_all = ["stdin", "serial"], value_parser = parse_phone_address)]
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, conflicts_with_all = ["stdin", "serial"], value_parser = crate::source::phone::parse_address)]
     pub phone: Option<Option<std::net::SocketAddr>>,
     /// Session directory of a new session (created if missing; refused if it already holds
     /// a capture: continue that one with --resume).
@@ -245,16 +245,6 @@ pub struct RunArgs {
     /// overrides `[view] address`.
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::view::DEFAULT_ADDRESS, value_parser = crate::view::parse_address)]
     pub view: Option<std::net::SocketAddr>,
-}
-
-/// `--phone`'s address: `IP:PORT`, or a port alone (every interface).
-fn parse_phone_address(s: &str) -> Result<std::net::SocketAddr, String> {
-    if let Ok(port) = s.parse::<u16>() {
-        return Ok(std::net::SocketAddr::from(([0, 0, 0, 0], port)));
-    }
-    s.parse().map_err(|_| {
-        format!("{s:?} is not an address: give IP:PORT (0.0.0.0:8443) or a port (8443)")
-    })
 }
 
 #[derive(Debug, Subcommand)]

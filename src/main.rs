@@ -11,7 +11,7 @@ use sfs::exit;
 use sfs::session::{self, Outcome, SessionError};
 use sfs::settings::Settings;
 use sfs::shutdown::Shutdown;
-use sfs::source::phone::{self, PhoneSpec};
+use sfs::source::phone::PhoneSpec;
 use sfs::source::{SerialSpec, SourceError, SourceSpec};
 use std::path::Path;
 use std::time::Duration;
@@ -193,9 +193,10 @@ fn resolve_run(a: &RunArgs, config: Option<&Path>) -> Result<(SourceSpec, Settin
     } else if let Some(p) = &a.serial {
         SourceSpec::Serial(SerialSpec::new(p, settings.serial.baud))
     } else if let Some(addr) = a.phone {
-        let mut phone = settings.phone.clone().unwrap_or_else(|| {
-            PhoneSpec::new(phone::DEFAULT_ADDRESS.parse().expect("the default address"))
-        });
+        let mut phone = settings
+            .phone
+            .clone()
+            .unwrap_or_else(PhoneSpec::at_default_address);
         if let Some(addr) = addr {
             phone.addr = addr;
         }

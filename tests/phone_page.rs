@@ -47,9 +47,10 @@ async fn open_page(d: &Daemon, profile: &Path) -> Browser {
         )
         .await;
     }
-    b.cdp(
-        "Emulation.setSensorOverrideReadings",
-        serde_json::json!({ "type": "linear-acceleration", "reading": { "xyz": { "x": 0, "y": 0, "z": 0 } } }),
+    override_reading(
+        &b,
+        "linear-acceleration",
+        serde_json::json!({ "xyz": { "x": 0, "y": 0, "z": 0 } }),
     )
     .await;
     set(&b, &rest()).await;
@@ -66,21 +67,22 @@ async fn open_page(d: &Daemon, profile: &Path) -> Browser {
 /// Sets the three readings of `r`.
 async fn set(b: &Browser, r: &Reading) {
     let xyz = |v: [f64; 3]| serde_json::json!({ "xyz": { "x": v[0], "y": v[1], "z": v[2] } });
-    b.cdp(
-        "Emulation.setSensorOverrideReadings",
-        serde_json::json!({ "type": "accelerometer", "reading": xyz(r.acc) }),
-    )
-    .await;
-    b.cdp(
-        "Emulation.setSensorOverrideReadings",
-        serde_json::json!({ "type": "gyroscope", "reading": xyz(r.gyro) }),
-    )
-    .await;
     let [x, y, z, w] = r.q;
+    let orientation = serde_json::json!({ "quaternion": { "x": x, "y": y, "z": z, "w": w } });
+    for (sensor, reading) in [
+        ("accelerometer", xyz(r.acc)),
+        ("gyroscope", xyz(r.gyro)),
+        ("absolute-orientation", orientation),
+    ] {
+        override_reading(b, sensor, reading).await;
+    }
+}
+
+/// One sensor's reading, through the DevTools protocol.
+async fn override_reading(b: &Browser, sensor: &str, reading: serde_json::Value) {
     b.cdp(
         "Emulation.setSensorOverrideReadings",
-        serde_json::json!({ "type": "absolute-orientation",
-            "reading": { "quaternion": { "x": x, "y": y, "z": z, "w": w } } }),
+        serde_json::json!({ "type": sensor, "reading": reading }),
     )
     .await;
 }

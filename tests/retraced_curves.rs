@@ -5,9 +5,8 @@
 //! while report.json described fourteen.
 
 mod common;
-use common::tmpdir;
+use common::{replay_to, run_stdin, tmpdir};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -62,39 +61,17 @@ fn issue_31_curves_scanned_twice_keep_their_network_and_surface() {
     let dir = tmpdir("retraced");
     let capture = dir.join("twice.bin");
     std::fs::write(&capture, twice()).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_sfs"))
-        .args(["--log", "warn", "replay"])
-        .arg(&capture)
-        .arg("--out")
-        .arg(dir.join("replayed"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    replay_to(&capture, &dir.join("replayed"));
     let (replayed, report) = consistent(&dir.join("replayed"));
     assert_eq!(report["curves"].as_array().unwrap().len(), 14);
 
     // Live, after every curve: the final network.glb is the replay's, and report.json its.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_sfs"))
-        .args(["--log", "warn", "run", "--stdin", "--session"])
-        .arg(dir.join("live"))
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = run_stdin(&["--session"], &dir.join("live"));
     let mut stdin = child.stdin.take().unwrap();
     std::io::Write::write_all(&mut stdin, &twice()).unwrap();
     drop(stdin);
-    let out = child.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let status = child.wait().unwrap();
+    assert!(status.success(), "sfs run --stdin: {status}");
     let (live, _) = consistent(&dir.join("live"));
     assert!(
         live == replayed,

@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PhoneToml {
-    /// Where to serve the page (default `0.0.0.0:8443`: every interface, since the phone is
-    /// another machine on the network).
+    /// Where to serve the page: `IP:PORT` or a port (default `0.0.0.0:8443`: every interface,
+    /// since the phone is another machine on the network).
     pub address: Option<String>,
     /// Where the self-signed certificate is kept (default: the session directory). One
     /// directory for every session keeps one certificate, so the phone's browser accepts it
@@ -24,18 +24,11 @@ impl ConfigFile {
         let Some(p) = &self.phone else {
             return Ok(None);
         };
-        let addr = match p.address.as_deref() {
-            None => crate::source::phone::DEFAULT_ADDRESS
-                .parse()
-                .expect("the default address parses"),
-            Some(a) => a.parse().map_err(|_| {
-                ConfigError::new(
-                    file,
-                    "phone.address",
-                    format!("{a:?} is not an IP address and a port (e.g. \"0.0.0.0:8443\")"),
-                )
-            })?,
-        };
+        let mut spec = PhoneSpec::at_default_address();
+        if let Some(a) = p.address.as_deref() {
+            spec.addr = crate::source::phone::parse_address(a)
+                .map_err(|e| ConfigError::new(file, "phone.address", e))?;
+        }
         let base = file.parent().unwrap_or(Path::new(""));
         let cert_dir = match &p.cert_dir {
             Some(d) if d.as_os_str().is_empty() => {
@@ -44,9 +37,7 @@ impl ConfigFile {
             Some(d) if d.is_relative() => Some(base.join(d)),
             other => other.clone(),
         };
-        Ok(Some(PhoneSpec {
-            cert_dir,
-            ..PhoneSpec::new(addr)
-        }))
+        spec.cert_dir = cert_dir;
+        Ok(Some(spec))
     }
 }

@@ -152,8 +152,8 @@ pub enum SourceError {
         #[source]
         source: std::io::Error,
     },
-    /// The phone page's certificate (made or read in `path`).
-    #[error("the phone page's certificate in {}: {message}", path.display())]
+    /// The phone page's certificate or token (made or read in `path`).
+    #[error("the phone page in {}: {message}", path.display())]
     Phone { path: PathBuf, message: String },
     #[error("cannot start the source thread: {0}")]
     Thread(std::io::Error),

@@ -106,6 +106,9 @@ pub struct Reading {
     pub acc: [f64; 3],
     /// Gyroscope, phone axes, rad/s.
     pub gyro: [f64; 3],
+    /// The simulated magnetometer, phone axes, µT (not played into the page: browsers give
+    /// none).
+    pub mag: [f64; 3],
     /// Absolute orientation, phone → Earth (x east, y north, z up): `[x, y, z, w]`.
     pub q: [f64; 4],
 }
@@ -114,6 +117,8 @@ pub struct Reading {
 pub struct Play {
     pub readings: Vec<Reading>,
     pub keys: Vec<(f64, u8)>,
+    /// The simulated device's clock at scan time 0, µs.
+    pub clock_offset_us: i64,
 }
 
 /// A simulated phone scan as readings: the accelerometer and gyroscope the simulated phone
@@ -127,7 +132,7 @@ pub fn play_of(sim: &sfs::simulate::Simulation) -> Play {
         UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(frame_from_sensor));
     let truth = &sim.samples;
     let mut decoder = Decoder::new();
-    let (mut acc_lsb, mut gyro_lsb) = (0.0, 0.0);
+    let (mut acc_lsb, mut gyro_lsb, mut mag_lsb) = (0.0, 0.0, 0.0);
     let mut offset: Option<i64> = None;
     let by_us: std::collections::HashMap<i64, usize> = truth
         .t
@@ -138,13 +143,17 @@ pub fn play_of(sim: &sfs::simulate::Simulation) -> Play {
     let mut play = Play {
         readings: Vec::new(),
         keys: Vec::new(),
+        clock_offset_us: 0,
     };
     for e in decoder.feed(&sim.bytes) {
         let Event::Packet { packet, .. } = e else {
             continue;
         };
         match packet {
-            Packet::Hello(h) => (acc_lsb, gyro_lsb) = (h.acc_scale as f64, h.gyro_scale as f64),
+            Packet::Hello(h) => {
+                (acc_lsb, gyro_lsb, mag_lsb) =
+                    (h.acc_scale as f64, h.gyro_scale as f64, h.mag_scale as f64)
+            }
             Packet::PhoneSample(s) if acc_lsb > 0.0 => {
                 let off = *offset.get_or_insert(s.t_us as i64 - (truth.t[0] * 1e6).round() as i64);
                 let Some(&j) = by_us.get(&(s.t_us as i64 - off)) else {
@@ -156,6 +165,7 @@ pub fn play_of(sim: &sfs::simulate::Simulation) -> Play {
                     t: truth.t[j],
                     acc: v(s.acc, acc_lsb),
                     gyro: v(s.gyro, gyro_lsb),
+                    mag: v(s.mag, mag_lsb),
                     q: [q.i, q.j, q.k, q.w],
                 });
             }
@@ -173,6 +183,7 @@ pub fn play_of(sim: &sfs::simulate::Simulation) -> Play {
         play.readings.len(),
         truth.t.len()
     );
+    play.clock_offset_us = offset.unwrap_or(0);
     play
 }
 
@@ -197,6 +208,7 @@ pub fn rest() -> Reading {
         t: 0.0,
         acc: [0.0, 0.0, 9.81],
         gyro: [0.0; 3],
+        mag: [0.0, 21.04, -43.14],
         q: [q.i, q.j, q.k, q.w],
     }
 }

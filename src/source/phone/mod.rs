@@ -53,7 +53,22 @@ pub struct PhoneSpec {
     pub session_dir: PathBuf,
 }
 
+/// A phone page's address: `IP:PORT`, or a port alone (every interface).
+pub fn parse_address(s: &str) -> Result<SocketAddr, String> {
+    if let Ok(port) = s.parse::<u16>() {
+        return Ok(SocketAddr::from(([0, 0, 0, 0], port)));
+    }
+    s.parse().map_err(|_| {
+        format!("{s:?} is not an address: give IP:PORT (0.0.0.0:8443) or a port (8443)")
+    })
+}
+
 impl PhoneSpec {
+    /// At [`DEFAULT_ADDRESS`], the certificate in the session directory.
+    pub fn at_default_address() -> PhoneSpec {
+        PhoneSpec::new(parse_address(DEFAULT_ADDRESS).expect("the default address parses"))
+    }
+
     pub fn new(addr: SocketAddr) -> PhoneSpec {
         PhoneSpec {
             addr,
@@ -159,9 +174,9 @@ pub(super) fn spawn(
     let url_path = spec.session_dir.join(URL_FILE);
     let token = token_of(&url_path)
         .map_or_else(new_token, Ok)
-        .map_err(|e| SourceError::Open {
-            path: PathBuf::from("/dev/urandom"),
-            source: e,
+        .map_err(|e| SourceError::Phone {
+            path: spec.session_dir.clone(),
+            message: format!("cannot make the page's token: {e}"),
         })?;
     let url = format!("https://{}/phone?token={token}", public_host(bound));
     crate::atomic::write_atomic(&url_path, format!("{url}\n").as_bytes()).map_err(|source| {
