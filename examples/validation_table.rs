@@ -14,7 +14,10 @@
 //! (`NAME.samples.csv.gz`, read through `gzip -dc`) is put into the acquired curves, matched by
 //! sample time within 0.1 ms: the true orientations (estimated distances), the true distances
 //! (estimated orientations), both. Rough captures shift their clock at each power-up, so a
-//! sample is matched only where the shift is none (their figures say how many were).
+//! sample is matched only where the shift is none (their figures say how many were). On phone
+//! captures also the true standing mask (phases standing and turning in place) with the
+//! distances made from it as the phone's were before issue 33 (a constant speed between the
+//! stands): what the best standing mask alone could give.
 //!
 //! Columns: the error now; the target (Morphorider rough 0.30, phone clean 0.40, phone rough
 //! 0.80); the figure before the field-accuracy work (baa97be) and at 1b493a8, both from the
@@ -133,6 +136,32 @@ fn put_truth(
     (matched, all)
 }
 
+/// Puts the truth's standing (phases standing and turning in place) into `curves` as their
+/// stationary flags where a truth row lies within 0.1 ms, and makes the phone's distances
+/// from them again.
+fn put_stands(curves: &mut [Curve], truth: &[TruthSample], nominal_speed: f64) {
+    use sfs::orientation::flags::STATIONARY;
+    for c in curves.iter_mut() {
+        for i in 0..c.samples.len() {
+            let t = c.samples.t[i];
+            let k = truth.partition_point(|s| s.t < t);
+            if let Some(s) = [k.wrapping_sub(1), k]
+                .into_iter()
+                .filter_map(|j| truth.get(j))
+                .find(|s| (s.t - t).abs() < 1e-4)
+            {
+                let f = &mut c.samples.flags[i];
+                *f = if matches!(s.phase, 1 | 2) {
+                    *f | STATIONARY
+                } else {
+                    *f & !STATIONARY
+                };
+            }
+        }
+        sfs::acquisition::phone_distances(c, nominal_speed);
+    }
+}
+
 /// The curves acquired from a capture as `sfs replay` acquires them.
 fn acquire(
     bin: &Path,
@@ -191,14 +220,17 @@ fn standing_mask(curves: &[Curve], truth: &[TruthSample]) -> [[f64; 2]; 4] {
 /// samples the truth matched; its standing mask against the truth.
 struct Study {
     errors: [f64; 4],
+    /// The error with the true standing mask (phases standing and turning) and the
+    /// distances made from it as the phone's are; NaN for a Morphorider.
+    true_stands: f64,
     matched: f64,
     mask: [[f64; 2]; 4],
 }
 
 /// `--study`: as is, true q, true d, both, per capture.
 fn study(dir: &Path, captures: &[String], settings: &(AcquisitionConfig, NetworkParams)) {
-    println!("| capture | as is | true q | true d | both | samples matched |");
-    println!("|---|---|---|---|---|---|");
+    println!("| capture | as is | true q | true d | both | true stands | samples matched |");
+    println!("|---|---|---|---|---|---|---|");
     let rows = parallel(captures, |c| {
         let curves = acquire(&dir.join(format!("{c}.bin")), settings)?;
         let truth = load_truth(&dir.join(format!("{c}.truth.json")))?;
@@ -214,8 +246,16 @@ fn study(dir: &Path, captures: &[String], settings: &(AcquisitionConfig, Network
             matched = m as f64 / all.max(1) as f64;
             errors[k + 1] = score_curves(&put, &truth, &settings.1)?;
         }
+        let true_stands = if c.contains("phone") {
+            let mut put = curves.clone();
+            put_stands(&mut put, &samples, settings.0.nominal_speed);
+            score_curves(&put, &truth, &settings.1)?
+        } else {
+            f64::NAN
+        };
         Ok::<_, String>(Study {
             errors,
+            true_stands,
             matched,
             mask: standing_mask(&curves, &samples),
         })
@@ -223,11 +263,12 @@ fn study(dir: &Path, captures: &[String], settings: &(AcquisitionConfig, Network
     for (c, r) in captures.iter().zip(&rows) {
         match r {
             Ok(r) => println!(
-                "| {c} | {:.3} | {:.3} | {:.3} | {:.3} | {:.1} % |",
+                "| {c} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.1} % |",
                 r.errors[0],
                 r.errors[1],
                 r.errors[2],
                 r.errors[3],
+                r.true_stands,
                 100.0 * r.matched
             ),
             Err(e) => println!("| {c} | failed: {e} |"),

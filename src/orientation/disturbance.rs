@@ -240,8 +240,8 @@ fn heading(q: &nalgebra::UnitQuaternion<f64>) -> f64 {
 /// is not the Earth's, and a TRIAD orientation turns with it about the vertical, by tens of
 /// degrees in a magnet's reach. Each stretch with clean samples on both sides gets the heading
 /// interpolated between theirs along `x` (the distance travelled, or time), its tilt kept; a
-/// stretch at an end of the curve keeps the heading of its one clean side; a curve disturbed
-/// throughout is left alone. Returns how many samples were changed.
+/// stretch at an end of the curve (one clean side) and a curve disturbed throughout are left
+/// as measured. Returns how many samples were changed.
 pub fn bridge_heading(
     q: &mut [nalgebra::UnitQuaternion<f64>],
     x: &[f64],
@@ -267,9 +267,11 @@ pub fn bridge_heading(
                     - std::f64::consts::PI;
                 (h0, h0 + d, x[a], x[b])
             }
-            (Some(a), None) => (heading(&q[a]), heading(&q[a]), x[a], x[a] + 1.0),
-            (None, Some(b)) => (heading(&q[b]), heading(&q[b]), x[b] - 1.0, x[b]),
-            (None, None) => continue,
+            // One clean end says nothing of how the curve turns beyond it: holding its heading
+            // would take the stretch as straight (issue 33: a 28 cm stretch at the start of a
+            // lilium section, curving, held at its one clean end's heading). The measured
+            // headings stay.
+            (Some(_), None) | (None, Some(_)) | (None, None) => continue,
         };
         for k in start..i {
             let u = if x1 > x0 {
@@ -338,6 +340,24 @@ mod tests {
 
     /// A frame turning steadily about the vertical, a stretch of it turned by a magnet by 30°:
     /// bridged back to within the interpolation's error; the clean samples untouched.
+    /// Issue 33: a disturbed stretch at the start of a curve has one clean side, which says
+    /// nothing of how the curve turns before it; it keeps its measured headings.
+    #[test]
+    fn issue_33_a_stretch_with_one_clean_side_is_left_as_measured() {
+        let q: Vec<UnitQuaternion<f64>> = (0..50)
+            .map(|i| UnitQuaternion::from_euler_angles(0.1, 0.0, 0.02 * i as f64))
+            .collect();
+        let x: Vec<f64> = (0..50).map(|i| i as f64 * 0.01).collect();
+        for disturbed in [
+            (0..50).map(|i| i < 20).collect::<Vec<bool>>(),
+            (0..50).map(|i| i >= 30).collect(),
+        ] {
+            let mut out = q.clone();
+            assert_eq!(bridge_heading(&mut out, &x, &disturbed), 0);
+            assert_eq!(out, q);
+        }
+    }
+
     #[test]
     fn bridge_heading_undoes_a_turn_of_the_field() {
         let truth: Vec<UnitQuaternion<f64>> = (0..100)

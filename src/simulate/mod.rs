@@ -45,7 +45,9 @@ pub enum Profile {
     /// the surface, wheel skids, a 0.3 s stall of the sample stream in the middle of a move, a
     /// wrong node index undone with U, a curve cancelled with C and rescanned, a device reboot
     /// (2 s of silence) while it is carried and turned between curves, the clock wrapping
-    /// mid-session, twice the link faults, and a capture that starts mid-packet.
+    /// mid-session, twice the link faults, a capture that starts mid-packet, and the hand
+    /// easing the device into and out of each node over half a second, standing 1.5 s after
+    /// each Enter.
     Field,
 }
 
@@ -104,11 +106,15 @@ pub enum Fault {
     Link,
     /// The capture starting mid-packet.
     MidPacket,
+    /// The hand easing the device into each node and out of it over half a second, and
+    /// standing 1.5 s after each Enter (issue 33: what an independent simulator's operator
+    /// does, and what no accelerometer pulse shows).
+    GentleStops,
 }
 
 impl Fault {
     /// Every fault of the field profile.
-    pub const ALL: [Fault; 14] = [
+    pub const ALL: [Fault; 15] = [
         Fault::Noise,
         Fault::Mounting,
         Fault::GyroBias,
@@ -123,6 +129,7 @@ impl Fault {
         Fault::Stall,
         Fault::Link,
         Fault::MidPacket,
+        Fault::GentleStops,
     ];
 
     /// A short name (`gyro-bias`, …).
@@ -142,6 +149,7 @@ impl Fault {
             Fault::Stall => "stall",
             Fault::Link => "link",
             Fault::MidPacket => "mid-packet",
+            Fault::GentleStops => "gentle-stops",
         }
     }
 }
@@ -219,6 +227,14 @@ pub fn run_without(
             );
         } else {
             op.turn_in_place_deg = 1e-12;
+        }
+        if on(Fault::GentleStops) {
+            op.stop_ramp = 0.5;
+            op.pause_after_enter = 1.5;
+            events.push(
+                "the hand eases the device into and out of each node over 0.5 s, and stands 1.5 s after each Enter"
+                    .into(),
+            );
         }
         if on(Fault::Mounting) {
             p.mounting = Rotation3::from_axis_angle(

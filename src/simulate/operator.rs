@@ -48,6 +48,10 @@ pub struct OperatorParams {
     pub turn_in_place_deg: f64,
     /// Duration of that turn, s. Default 0.8.
     pub turn_time: f64,
+    /// The hand slows the device to rest over about this long before each node and speeds
+    /// it up as gently after leaving one (a constant deceleration from the mean speed), s.
+    /// Default 0: it stops and starts at once.
+    pub stop_ramp: f64,
     /// Operator mistakes to act out (none by default).
     pub mistakes: Mistakes,
 }
@@ -78,6 +82,7 @@ impl Default for OperatorParams {
             typing_tilt_deg: 0.0,
             turn_in_place_deg: 0.0,
             turn_time: 0.8,
+            stop_ramp: 0.0,
             mistakes: Mistakes::default(),
         }
     }
@@ -384,14 +389,26 @@ impl Timeline<'_> {
         period: f64,
         phase: f64,
     ) -> f64 {
+        let from = s;
         while s < target {
             let v = op.speed
                 * (1.0
                     + op.speed_variation * (std::f64::consts::TAU * self.t / period + phase).sin());
+            let v = v.max(0.2 * op.speed);
+            // Easing in and out of the nodes: no faster than a constant deceleration from the
+            // mean speed over `stop_ramp` allows this close to either end (1 mm/s at least,
+            // so that the node is reached).
+            let v = if op.stop_ramp > 0.0 {
+                let a = op.speed / op.stop_ramp;
+                let ease = (2.0 * a * (s - from).min(target - s)).sqrt();
+                v.min(ease.max(0.001))
+            } else {
+                v
+            };
             // Over the sample's own interval: a step of the nominal interval at a jittered
             // instant would be a speed jittering by ±5 % from sample to sample (accelerations
             // of ±0.5 m/s² that no hand makes).
-            let step = v.max(0.2 * op.speed) * self.peek_dt();
+            let step = v * self.peek_dt();
             let ns = (s + step).min(target);
             self.wheel += ns - s;
             s = ns;

@@ -280,3 +280,32 @@ pub fn run_stdin(args: &[&str], session: &std::path::Path) -> std::process::Chil
         .spawn()
         .unwrap()
 }
+
+/// Mean curve error of a field-profile capture of a shipped scene, % of the diagonal: simulated
+/// without the faults `without`, acquired and reconstructed with the defaults, scored with
+/// the paper's metric against the simulator's truth.
+pub fn field_error(
+    name: &str,
+    device: DeviceKind,
+    seed: u64,
+    without: &[sfs::simulate::Fault],
+) -> f64 {
+    use sfs::acquisition::{Acquisition, AcquisitionConfig};
+    use sfs_geometry::network::{NetworkParams, Reconstructor};
+    let s = sfs::simulate::scene::builtin(name).expect("shipped scene");
+    let sim = sfs::simulate::run_without(
+        &s,
+        device,
+        sfs::simulate::Profile::Field,
+        seed,
+        &sfs::simulate::Mistakes::default(),
+        without,
+    );
+    let scan = Acquisition::scan_bytes(&sim.bytes, AcquisitionConfig::default());
+    let net = Reconstructor::new()
+        .run(&scan.curves, &NetworkParams::default())
+        .expect("the field capture reconstructs");
+    let e = sfs::eval::evaluate(&sim.truth, &sfs::gltf_out::as_read_network(&net.positions))
+        .expect("evaluates");
+    e.curves.mean_pct
+}

@@ -20,9 +20,10 @@
 //! Time: the device clock (`t_us`, wrapping, restarting at power-up) becomes a monotonic
 //! session time in seconds: increments are `t_us` differences (wraps included), and a reboot
 //! adds nothing. Distance: Morphorider, wheel ticks × circumference / ticks per revolution
-//! (backwards motion kept, a reboot's counter reset bridged); phone, time while moving, scaled
-//! per segment to its measured length (SEGMENT_LENGTH or configuration) or to the nominal
-//! speed.
+//! (backwards motion kept, a reboot's counter reset bridged); phone, the integral of the
+//! speed's shape between two tags (its start and stop fitted to the accelerometer, [`speed`];
+//! where no fit holds, time while moving by the standing mask), scaled per segment to its
+//! measured length (SEGMENT_LENGTH or configuration) or to the nominal speed.
 
 use crate::keypad::{CurveKind, KeyEvent, Keypad};
 use crate::orientation::ahrs::{Ahrs, AhrsParams};
@@ -40,6 +41,8 @@ use crate::warning::{AcquisitionWarning, Warning};
 use device_protocol::{DeviceKind, Event, Hello, Packet};
 use nalgebra::{UnitQuaternion, Vector3};
 use std::collections::BTreeMap;
+
+pub mod speed;
 
 /// Settings of acquisition (documented defaults; `[acquisition]` and `[calibration]` in the
 /// configuration).
@@ -63,7 +66,9 @@ pub struct AcquisitionConfig {
     /// second of sliding on each side of a node as standing on the simulated spheres and
     /// torus (BENCHMARKS.md, "Field accuracy"). Where the accelerometer shows the stop before
     /// the typing (or the start after it) within 3 s, the stand runs to that pulse instead,
-    /// still or not (the hand tilting the device, a turn in place).
+    /// still or not (the hand tilting the device, a turn in place). Since issue 33 a phone's
+    /// distances follow the speed fitted to the accelerometer ([`speed`]); this mask is their
+    /// fallback where no fit holds, and the samples' standing flags.
     pub stand_margin: f64,
     /// Phone: speed assumed where no segment length is known, m/s. Default 0.05.
     pub nominal_speed: f64,
@@ -1007,8 +1012,7 @@ impl Acquisition {
             curve.segment_lengths[s as usize] = Some(l);
         }
         if self.kind == Some(DeviceKind::Phone) {
-            let speed = self.cfg.nominal_speed;
-            phone_distances(curve, speed);
+            rescale_segments(curve);
         }
         Some(Update::CurveUpdated(index))
     }
@@ -1124,6 +1128,7 @@ impl Acquisition {
         }
         // Stationary.
         let w = self.cfg.stationary_window;
+        let mut speed_shape: Option<Vec<f64>> = None;
         if phone {
             let mut still = if smoothing {
                 let imu = [&gyros[..], &accs[..], &mags[..]];
@@ -1167,6 +1172,30 @@ impl Acquisition {
                 let threshold = (4.0 * floor / 20f64.sqrt()).max(0.3);
                 let pulse: Vec<bool> = wl.mean.iter().map(|m| m.norm() > threshold).collect();
                 stand_between_pulses(&s.t, &mut still, &o.typing, &pulse, PULSE_REACH);
+                // The speed between the stands: its start and stop fitted to the acceleration
+                // along the travel direction T (the frame's first axis); the mask above where
+                // no fit holds ([`speed`]).
+                let along: Vec<f64> = lin
+                    .iter()
+                    .zip(&s.q)
+                    .map(|(l, q)| l.dot(&(quat_of(q) * Vector3::x())))
+                    .collect();
+                let stretches: Vec<(f64, f64)> = o
+                    .tags
+                    .windows(2)
+                    .map(|p| {
+                        let next = o
+                            .typing
+                            .iter()
+                            .find(|ty| ty.1 == p[1].1)
+                            .map_or(p[1].1, |ty| ty.0);
+                        (p[0].1, next)
+                    })
+                    .collect();
+                let fallback: Vec<f64> = still.iter().map(|&x| if x { 0.0 } else { 1.0 }).collect();
+                if speed::sampled_fast_enough(&s.t) {
+                    speed_shape = Some(speed::speed_shape(&s.t, &along, &stretches, &fallback));
+                }
             }
             for (f, st) in s.flags.iter_mut().zip(still) {
                 if st {
@@ -1237,7 +1266,10 @@ impl Acquisition {
                     .copied()
                     .or_else(|| from_cfg.and_then(|v| v.get(k).copied()));
             }
-            phone_distances(&mut curve, self.cfg.nominal_speed);
+            match &speed_shape {
+                Some(v) => distances_by_speed(&mut curve, v, self.cfg.nominal_speed),
+                None => phone_distances(&mut curve, self.cfg.nominal_speed),
+            }
         } else if n > 0 {
             let start = interp(&curve.samples.t, &wheel, curve.tags[0].t);
             for (d, w) in curve.samples.d.iter_mut().zip(&wheel) {
@@ -1618,18 +1650,60 @@ fn clip_to_intervals(t: &[f64], mask: &mut [bool], intervals: &[(f64, f64)], mar
 
 /// Phone distances: within each segment (between consecutive tags), distance grows with the
 /// time spent moving (stationary samples add none), scaled to the segment's measured length,
-/// else to `nominal_speed` × moving time.
-fn phone_distances(c: &mut Curve, nominal_speed: f64) {
+/// else to `nominal_speed` × moving time. Public for the studies that put a true standing mask
+/// into acquired curves (`examples/validation_table.rs --study`).
+pub fn phone_distances(c: &mut Curve, nominal_speed: f64) {
+    let moving: Vec<f64> = c
+        .samples
+        .flags
+        .iter()
+        .map(|&f| if f & flags::STATIONARY == 0 { 1.0 } else { 0.0 })
+        .collect();
+    distances_by_speed(c, &moving, nominal_speed);
+}
+
+/// Phone: a curve's distances made again after a segment's length arrived late: each
+/// segment's distances, as its speed shape spread them, scaled to the length now known.
+fn rescale_segments(c: &mut Curve) {
+    let n = c.tags.len();
+    if n < 2 {
+        return;
+    }
+    let old: Vec<f64> = c.tags.iter().map(|g| g.d).collect();
+    let mut new = old.clone();
+    for k in 0..n - 1 {
+        let len = c.segment_lengths.get(k).copied().flatten();
+        new[k + 1] = new[k] + len.unwrap_or(old[k + 1] - old[k]);
+    }
+    let s = &mut c.samples;
+    for d in &mut s.d {
+        // The segment the distance lies in (the last one that starts at or before it).
+        let k = old[..n - 1].partition_point(|&x| x <= *d).saturating_sub(1);
+        let span = old[k + 1] - old[k];
+        *d = if span > 0.0 {
+            new[k] + (*d - old[k]) * (new[k + 1] - new[k]) / span
+        } else {
+            new[k] + (*d - old[k])
+        };
+    }
+    for (g, d) in c.tags.iter_mut().zip(new) {
+        g.d = d;
+    }
+}
+
+/// Phone distances from a speed shape (`speed`, one per sample, ≥ 0: [`speed::speed_shape`]):
+/// within each segment distance grows with the time integral of the shape, scaled to the
+/// segment's measured length, else to `nominal_speed` × the integral.
+fn distances_by_speed(c: &mut Curve, speed: &[f64], nominal_speed: f64) {
     let s = &mut c.samples;
     let n = s.t.len();
     if n == 0 || c.tags.len() < 2 {
         return;
     }
-    // Moving time at each sample.
+    // The shape's integral at each sample.
     let mut tau = vec![0.0; n];
     for i in 1..n {
-        let moving = s.flags[i] & flags::STATIONARY == 0;
-        tau[i] = tau[i - 1] + if moving { s.t[i] - s.t[i - 1] } else { 0.0 };
+        tau[i] = tau[i - 1] + speed[i] * (s.t[i] - s.t[i - 1]);
     }
     let tag_tau: Vec<f64> = c.tags.iter().map(|g| interp(&s.t, &tau, g.t)).collect();
     let mut start_d = vec![0.0; c.tags.len()];
@@ -1726,6 +1800,65 @@ mod tests {
         let mut none = vec![false; t.len()];
         clip_to_intervals(&t, &mut none, &[(1.0, 2.0)], 2.0);
         assert!(none.iter().all(|m| !m));
+    }
+
+    /// Issue 33: a segment length that arrives after the curve ended scales that segment's
+    /// distances as the speed shape spread them (a gentle ramp stays gentle), and moves the
+    /// later segments by the difference.
+    #[test]
+    fn issue_33_a_late_segment_length_scales_its_segment() {
+        let t: Vec<f64> = (0..=40).map(|i| i as f64 * 0.1).collect();
+        // A speed shape: standing, a ramp, cruising, standing; two segments of 2 s.
+        let speed: Vec<f64> = t
+            .iter()
+            .map(|&x| {
+                let u = x % 2.0;
+                (u / 0.5).min(1.0) * if u > 1.8 { 0.0 } else { 1.0 }
+            })
+            .collect();
+        let n = t.len();
+        let mut c = Curve {
+            index: 0,
+            kind: CurveKind::Interior,
+            closed: false,
+            tags: [0.0, 2.0, 4.0]
+                .iter()
+                .enumerate()
+                .map(|(k, &t)| Tag {
+                    node: k as u32,
+                    d: 0.0,
+                    t,
+                    uncertain: false,
+                })
+                .collect(),
+            segment_lengths: vec![Some(0.3), None],
+            samples: Samples {
+                t: t.clone(),
+                d: vec![0.0; n],
+                q: vec![[1.0, 0.0, 0.0, 0.0]; n],
+                flags: vec![0; n],
+                w: vec![1.0; n],
+            },
+        };
+        distances_by_speed(&mut c, &speed, 0.05);
+        let before = c.samples.d.clone();
+        let second = c.tags[2].d - c.tags[1].d;
+        c.segment_lengths[0] = Some(0.6);
+        rescale_segments(&mut c);
+        assert!((c.tags[1].d - 0.6).abs() < 1e-12);
+        assert!((c.tags[2].d - c.tags[1].d - second).abs() < 1e-12);
+        for i in 0..n {
+            let want = if t[i] <= 2.0 {
+                2.0 * before[i]
+            } else {
+                before[i] + 0.3
+            };
+            assert!(
+                (c.samples.d[i] - want).abs() < 1e-9,
+                "sample {i}: {} vs {want}",
+                c.samples.d[i]
+            );
+        }
     }
 
     #[test]

@@ -1,0 +1,457 @@
+//! A phone's speed along a segment, from the accelerometer: where it starts and stops, and how
+//! gently.
+//!
+//! A phone measures no distance. Between two node tags the operator stands (typing the index),
+//! sets off, slides, slows down and stands again to type the next one; the segment's length is
+//! measured (SEGMENT_LENGTH) or assumed, and is spread over the segment's samples in proportion
+//! to the speed. This module finds that speed's *shape* in `[0, 1]`: zero while standing, one
+//! while cruising, and the two ramps between, fitted to the acceleration along the device's
+//! travel direction `T`.
+//!
+//! Model, for one stretch `[e, f]` (Enter of one tag to the first digit of the next):
+//! `v(t) = c · min(S((t − a)/τₐ), S((b − t)/τ_b))`, `S(x) = (1 − cos πx)/2` on `[0, 1]`
+//! (0 below, 1 above). The acceleration along `T` is then a half-sine pulse of area `c` over
+//! `[a, a + τₐ]` (setting off) and one of area `−c` over `[b − τ_b, b]` (stopping), zero
+//! between, plus a leak `β₀ + β₁t` (gravity through the orientation's error, drifting as the
+//! error does) and noise.
+//! Each pulse is found by least squares over a grid of `a` (10 ms) and `τ` (20 ms, an abrupt
+//! start, to 1 s, a gentle one), the other pulse subtracted (two rounds). A hand that stops the
+//! phone at once and one that eases it to rest over half a second give the same fit; only the
+//! ramp's width differs.
+//!
+//! Why not a standing mask: a phone sliding straight and slowly into a node turns no more than
+//! a standing one, so any still test takes the last half second of a gentle stop as standing;
+//! and even the true standing mask with a constant speed between is wrong by the ramps (the
+//! independent simulator's bumpy cube: 0.80 % with its true mask, BENCHMARKS.md "Validation
+//! on the independent simulator's captures").
+
+use std::f64::consts::PI;
+
+/// The lowest sample rate the fit is made at, Hz. A hand stops a phone at once within 20–50 ms;
+/// slower sampling delivers instantaneous readings that catch that pulse or miss it by chance
+/// (the phone page's 60 Hz through Chromium: the bumpy cube 4.1 % with the fit, 0.56 %
+/// without), so below it the distances keep the standing mask ([`sampled_fast_enough`]).
+pub const MIN_RATE_HZ: f64 = 100.0;
+
+/// Whether samples at `t` come at [`MIN_RATE_HZ`] or faster (their median interval).
+pub fn sampled_fast_enough(t: &[f64]) -> bool {
+    let mut dt: Vec<f64> = t
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d > 0.0)
+        .collect();
+    if dt.is_empty() {
+        return false;
+    }
+    let mid = dt.len() / 2;
+    let (_, m, _) = dt.select_nth_unstable_by(mid, f64::total_cmp);
+    *m <= 1.0 / MIN_RATE_HZ
+}
+
+/// Widths of ramp tried, s: from a phone stopped by the hand at once to one eased to rest.
+const TAUS: [f64; 9] = [0.02, 0.05, 0.1, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0];
+/// The least ratio of the speeds the two ends of a stretch find for one to be believed.
+const AGREE: f64 = 0.5;
+/// A fitted stretch is refused where its moving time falls short of the standing mask's by
+/// more than the stand the mask may miss (`MISSED_STAND`, s: it clips a stand to a second
+/// after Enter, an operator may stand four) and a quarter of the rest, or exceeds it by more
+/// than that stand.
+const MISSED_STAND: f64 = 3.0;
+const MISSED_SHARE: f64 = 0.25;
+/// How many noise variances a pulse's gain must reach to stand out of the noise.
+const SIGNIFICANT: f64 = 25.0;
+/// The fewest samples a pulse may span (at 60 Hz the narrowest width spans one).
+const MIN_SUPPORT: usize = 3;
+/// Grid of ramp starts, s.
+const STEP: f64 = 0.01;
+
+/// One ramp: starts at `at`, lasts `tau` (s); `c` is the speed it reaches (m/s, fitted) and
+/// `gain` the residual's drop it explains (m²/s⁴, over the stretch).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ramp {
+    pub at: f64,
+    pub tau: f64,
+    pub c: f64,
+    pub gain: f64,
+}
+
+/// The fitted start and stop of one stretch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stretch {
+    pub start: Ramp,
+    pub stop: Ramp,
+    /// Whether each end (start, stop) was found: an end fitted again with the other's speed
+    /// that explains nothing of the signal (its `gain` not above zero) was not.
+    pub found: (bool, bool),
+}
+
+/// `S(x)`: 0 below 0, `(1 − cos πx)/2` on `[0, 1]`, 1 above.
+fn smoothstep(x: f64) -> f64 {
+    if x <= 0.0 {
+        0.0
+    } else if x >= 1.0 {
+        1.0
+    } else {
+        0.5 * (1.0 - (PI * x).cos())
+    }
+}
+
+/// `dS/dt` of a ramp of width `tau` at `x = (t − a)/τ`: a half sine of area 1.
+fn pulse(x: f64, tau: f64) -> f64 {
+    if (0.0..=1.0).contains(&x) {
+        0.5 * PI / tau * (PI * x).sin()
+    } else {
+        0.0
+    }
+}
+
+/// The best pulse of sign `sign` (+1 setting off, −1 stopping) in `y` (samples at `t`), with
+/// its start `at` within `[lo, hi]` and the pulse inside `[t₀, t_last]`; its area (the speed)
+/// fitted, or `fixed` if given. `None` if none has the sign.
+fn best_pulse(
+    t: &[f64],
+    y: &[f64],
+    sign: f64,
+    (lo, hi): (f64, f64),
+    fixed: Option<f64>,
+    trend: bool,
+) -> Option<Ramp> {
+    let n = t.len();
+    if n < 3 {
+        return None;
+    }
+    let nf = n as f64;
+    let (t0, t1) = (t[0], t[n - 1]);
+    // The background, a constant leak or (`trend`) one drifting linearly (1 and u, centred
+    // time: orthogonal), projected out of y once; a pulse g is then scored by Σg·y⊥ and
+    // ‖g⊥‖² = Σg² − (Σg)²/N − (Σgu)²/Σu².
+    let tm = t.iter().sum::<f64>() / nf;
+    let u: Vec<f64> = t.iter().map(|&x| x - tm).collect();
+    let suu: f64 = u.iter().map(|x| x * x).sum();
+    if suu <= 0.0 {
+        return None;
+    }
+    let ym = y.iter().sum::<f64>() / nf;
+    let slope = u.iter().zip(y).map(|(u, y)| u * y).sum::<f64>() / suu;
+    let (slope, suu) = if trend {
+        (slope, suu)
+    } else {
+        (0.0, f64::INFINITY)
+    };
+    let yp: Vec<f64> = y.iter().zip(&u).map(|(y, u)| y - ym - slope * u).collect();
+    let mut best: Option<Ramp> = None;
+    for &tau in &TAUS {
+        let steps = ((hi.min(t1 - tau) - lo) / STEP).floor();
+        if steps.is_nan() || steps < 0.0 {
+            continue;
+        }
+        for k in 0..=steps as usize {
+            let at = lo + k as f64 * STEP;
+            if at < t0 {
+                continue;
+            }
+            // Σg, Σg², Σg·u, Σg·y⊥ over the pulse's support.
+            let i0 = t.partition_point(|&x| x < at);
+            let (mut sg, mut sgg, mut sgu, mut sgy) = (0.0, 0.0, 0.0, 0.0);
+            let mut support = 0;
+            for i in i0..n {
+                let x = (t[i] - at) / tau;
+                if x > 1.0 {
+                    break;
+                }
+                support += 1;
+                let g = pulse(x, tau);
+                sg += g;
+                sgg += g * g;
+                sgu += g * u[i];
+                sgy += g * yp[i];
+            }
+            let norm = sgg - sg * sg / nf - sgu * sgu / suu;
+            // A pulse within fewer than MIN_SUPPORT samples is an outlier, not a motion.
+            if support < MIN_SUPPORT || norm <= 1e-9 * sgg {
+                continue;
+            }
+            let (c, gain) = match fixed {
+                // The residual's drop: ‖y⊥‖² − ‖y⊥ − c·g⊥‖².
+                Some(c) => {
+                    let c = c * sign;
+                    (c, 2.0 * c * sgy - c * c * norm)
+                }
+                None => (sgy / norm, sgy * sgy / norm),
+            };
+            if c * sign <= 0.0 {
+                continue;
+            }
+            if best.is_none_or(|b| gain > b.gain) {
+                best = Some(Ramp {
+                    at,
+                    tau,
+                    c: c * sign,
+                    gain,
+                });
+            }
+        }
+    }
+    best
+}
+
+/// The noise variance of `y` per sample, from its first differences (robust: the median of
+/// their absolute values; a difference of two samples has twice the variance).
+fn noise_variance(y: &[f64]) -> f64 {
+    let mut d: Vec<f64> = y.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    if d.is_empty() {
+        return 0.0;
+    }
+    let mid = d.len() / 2;
+    let (_, m, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
+    let sigma = *m / 0.6745;
+    sigma * sigma / 2.0
+}
+
+/// `y` less the pulse of `r` (sign `sign`).
+fn without(t: &[f64], y: &[f64], r: &Ramp, sign: f64) -> Vec<f64> {
+    t.iter()
+        .zip(y)
+        .map(|(&x, &v)| v - sign * r.c * pulse((x - r.at) / r.tau, r.tau))
+        .collect()
+}
+
+/// Fits the start and the stop of one stretch: `t` its sample times, `along` the acceleration
+/// along the travel direction (m/s², gravity taken off). `None` where no pulse of either sign
+/// is found (a stretch too short, or nothing in it).
+pub fn fit_stretch(t: &[f64], along: &[f64], trend: bool) -> Option<Stretch> {
+    let (&t0, &t1) = (t.first()?, t.last()?);
+    let mut start = best_pulse(t, along, 1.0, (t0, t1), None, trend)?;
+    let y = without(t, along, &start, 1.0);
+    let mut stop = best_pulse(t, &y, -1.0, (t0, t1), None, trend)?;
+    let mut fixed = (None, None);
+    // The weaker end's own pulse, when it is fitted again with the other's speed.
+    let mut weak: Option<Ramp> = None;
+    let mut stop_after = t0;
+    for _ in 0..4 {
+        // The start before the stop's ramp ends, the stop after the start's begins.
+        let hi = stop.at + stop.tau;
+        let y = without(t, along, &stop, -1.0);
+        start = best_pulse(t, &y, 1.0, (t0, hi), fixed.0, trend).unwrap_or(start);
+        let y = without(t, along, &start, 1.0);
+        stop =
+            best_pulse(t, &y, -1.0, (start.at.max(stop_after), t1), fixed.1, trend).unwrap_or(stop);
+        // The two ends see the same cruise: a pulse far smaller than the other end's is not
+        // this stretch's start or stop (a hand tilting the phone, a stall, a creeping
+        // approach); that end is fitted again with the other's speed. The larger speed is
+        // believed: a glitch makes a short pulse of little area, a ramp carries the cruise.
+        let mut again = false;
+        let unfixed = fixed.0.is_none() && fixed.1.is_none();
+        if unfixed && start.c.min(stop.c) < AGREE * start.c.max(stop.c) {
+            if start.c > stop.c {
+                fixed.1 = Some(start.c);
+                weak = Some(stop);
+            } else {
+                fixed.0 = Some(stop.c);
+                weak = Some(start);
+            }
+            again = true;
+        }
+        // Stopped, the device does not set off again before its node is typed: a setting off
+        // of the cruise's size after the stop makes the stop a slow-down in the middle, and
+        // the stop is looked for after it.
+        let end = stop.at + stop.tau;
+        let y = without(t, &without(t, along, &start, 1.0), &stop, -1.0);
+        match best_pulse(t, &y, 1.0, (end, t1), None, trend) {
+            Some(off) if off.c >= AGREE * start.c => stop_after = off.at + off.tau,
+            _ if again => {}
+            _ => break,
+        }
+    }
+    // An end fitted again is found where its pulse of the other's speed explains some of the
+    // signal; where it explains nothing, the end's own weaker pulse stands if it stood out of
+    // the noise (25 σ²: above what the best of the grid's candidates makes of noise alone: a
+    // stop slower than the start said); else nothing of that end is in the signal (a slow
+    // sampling that left out the one reading carrying an abrupt stop, say).
+    let seen = weak.filter(|w| w.gain >= SIGNIFICANT * noise_variance(along));
+    let mut found = (true, true);
+    if fixed.0.is_some() && start.gain <= 0.0 {
+        match seen {
+            Some(w) => start = w,
+            None => found.0 = false,
+        }
+    }
+    if fixed.1.is_some() && stop.gain <= 0.0 {
+        match seen {
+            Some(w) => stop = w,
+            None => found.1 = false,
+        }
+    }
+    Some(Stretch { start, stop, found })
+}
+
+/// The speed's shape at `t` in a stretch fitted as `s`: 0 standing, 1 cruising, the ramps
+/// between.
+pub fn shape(s: &Stretch, t: f64) -> f64 {
+    let (a, b) = (s.start, s.stop);
+    let up = smoothstep((t - a.at) / a.tau);
+    let down = 1.0 - smoothstep((t - b.at) / b.tau);
+    up.min(down)
+}
+
+/// The speed shape of every sample of a curve: `t` sample times, `along` the acceleration
+/// along the travel direction (m/s²), `stretches` the `(Enter, next first digit)` times of
+/// each segment. Samples outside every stretch (typing, before the first tag, after the last)
+/// get 0. A stretch where no pulse is found keeps `fallback` (1 moving, 0 standing).
+pub fn speed_shape(
+    t: &[f64],
+    along: &[f64],
+    stretches: &[(f64, f64)],
+    fallback: &[f64],
+) -> Vec<f64> {
+    let mut out = vec![0.0; t.len()];
+    for &(e, f) in stretches {
+        let i0 = t.partition_point(|&x| x < e);
+        let i1 = t.partition_point(|&x| x <= f);
+        if i1 <= i0 {
+            continue;
+        }
+        let (ts, ys) = (&t[i0..i1], &along[i0..i1]);
+        let fb = &fallback[i0..i1];
+        // The standing mask's moving time is rough (it takes a gentle stop's last half second
+        // as standing, a stand after Enter longer than its margin as moving) but never wrong
+        // by most of a stretch's cruise; a fit that is (a slow-down taken for the stop, a
+        // glitch for both pulses, a leak drifting as the orientation's error settles) is made
+        // again over a drifting leak, and failing that the stretch keeps the mask.
+        let moving = |v: &[f64]| -> f64 {
+            v.windows(2)
+                .zip(ts.windows(2))
+                .map(|(v, t)| v[1] * (t[1] - t[0]))
+                .sum()
+        };
+        let plausible = |v: &[f64]| {
+            let (m, mask) = (moving(v), moving(fb));
+            m >= mask * (1.0 - MISSED_SHARE) - MISSED_STAND && m <= mask + MISSED_STAND
+        };
+        // An end not found keeps the mask's edge there (a step: the mask's own model).
+        let first = fb.iter().position(|&x| x > 0.0).map_or(ts[0], |k| ts[k]);
+        let last = fb
+            .iter()
+            .rposition(|&x| x > 0.0)
+            .map_or(ts[ts.len() - 1], |k| ts[k]);
+        let fit = [false, true].into_iter().find_map(|trend| {
+            let mut s = fit_stretch(ts, ys, trend)?;
+            if !s.found.0 {
+                s.start = Ramp {
+                    at: first,
+                    tau: TAUS[0],
+                    c: f64::NAN,
+                    gain: 0.0,
+                };
+            }
+            if !s.found.1 {
+                s.stop = Ramp {
+                    at: last - TAUS[0],
+                    tau: TAUS[0],
+                    c: f64::NAN,
+                    gain: 0.0,
+                };
+            }
+            let v: Vec<f64> = ts.iter().map(|&x| shape(&s, x)).collect();
+            plausible(&v).then_some((s, v))
+        });
+        match fit {
+            Some((s, v)) => {
+                tracing::trace!(?s, e, f, "stretch fitted");
+                out[i0..i1].copy_from_slice(&v);
+            }
+            None => {
+                tracing::debug!(e, f, "no speed fit holds: the standing mask's");
+                out[i0..i1].copy_from_slice(fb)
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A stretch sampled at 200 Hz: standing 1 s, a ramp up of `tau_a` to 0.08 m/s, cruising,
+    /// a ramp down of `tau_b` ending 1 s before the end; the acceleration along T with a
+    /// constant leak and seeded noise.
+    fn stretch(tau_a: f64, tau_b: f64, noise: f64) -> (Vec<f64>, Vec<f64>, Stretch) {
+        let truth = Stretch {
+            start: Ramp {
+                at: 1.0,
+                tau: tau_a,
+                c: 0.08,
+                gain: 0.0,
+            },
+            stop: Ramp {
+                at: 4.0 - tau_b,
+                tau: tau_b,
+                c: 0.08,
+                gain: 0.0,
+            },
+            found: (true, true),
+        };
+        let t: Vec<f64> = (0..1000).map(|i| i as f64 * 0.005).collect();
+        let mut state = 0x9e3779b97f4a7c15u64;
+        let mut gauss = move || {
+            // Box–Muller over a xorshift generator: seeded, no crate.
+            let mut u = || {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let (u1, u2) = (u().max(1e-300), u());
+            (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos()
+        };
+        let y = t
+            .iter()
+            .map(|&x| {
+                0.08 * pulse((x - 1.0) / tau_a, tau_a)
+                    - 0.08 * pulse((x - truth.stop.at) / tau_b, tau_b)
+                    + 0.03
+                    + noise * gauss()
+            })
+            .collect();
+        (t, y, truth)
+    }
+
+    #[test]
+    fn gentle_and_abrupt_ramps_are_found_where_they_are() {
+        for (ta, tb) in [(0.5, 0.5), (0.05, 0.05), (0.6, 0.1)] {
+            let (t, y, truth) = stretch(ta, tb, 0.13);
+            let s = fit_stretch(&t, &y, false).expect("a fit");
+            // The distance the shape puts up to each time, against the truth's, as a fraction
+            // of the whole: what the phone's distances rest on.
+            let cum = |st: &Stretch| -> Vec<f64> {
+                let mut acc = 0.0;
+                let v: Vec<f64> = t
+                    .iter()
+                    .map(|&x| {
+                        acc += shape(st, x);
+                        acc
+                    })
+                    .collect();
+                v.iter().map(|x| x / acc).collect()
+            };
+            let (a, b) = (cum(&s), cum(&truth));
+            let worst = a
+                .iter()
+                .zip(&b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max);
+            assert!(worst < 0.02, "ramps {ta}/{tb}: fitted {s:?}, worst {worst}");
+            assert!((s.start.c - 0.08).abs() < 0.02, "{s:?}");
+        }
+    }
+
+    #[test]
+    fn standing_outside_the_ramps_has_no_speed() {
+        let (t, y, _) = stretch(0.5, 0.5, 0.13);
+        let s = fit_stretch(&t, &y, false).expect("a fit");
+        assert_eq!(shape(&s, 0.5), 0.0);
+        assert_eq!(shape(&s, 4.5), 0.0);
+        assert_eq!(shape(&s, 2.5), 1.0);
+    }
+}
