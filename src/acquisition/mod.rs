@@ -1175,25 +1175,15 @@ impl Acquisition {
                 // The speed between the stands: its start and stop fitted to the acceleration
                 // along the travel direction T (the frame's first axis); the mask above where
                 // no fit holds ([`speed`]).
-                let along: Vec<f64> = lin
-                    .iter()
-                    .zip(&s.q)
-                    .map(|(l, q)| l.dot(&(quat_of(q) * Vector3::x())))
-                    .collect();
-                let stretches: Vec<(f64, f64)> = o
-                    .tags
-                    .windows(2)
-                    .map(|p| {
-                        let next = o
-                            .typing
-                            .iter()
-                            .find(|ty| ty.1 == p[1].1)
-                            .map_or(p[1].1, |ty| ty.0);
-                        (p[0].1, next)
-                    })
-                    .collect();
-                let fallback: Vec<f64> = still.iter().map(|&x| if x { 0.0 } else { 1.0 }).collect();
                 if speed::sampled_fast_enough(&s.t) {
+                    let along: Vec<f64> = lin
+                        .iter()
+                        .zip(&s.q)
+                        .map(|(l, q)| l.dot(&(quat_of(q) * Vector3::x())))
+                        .collect();
+                    let stretches = stretches(&o.tags, &o.typing);
+                    let fallback: Vec<f64> =
+                        still.iter().map(|&x| if x { 0.0 } else { 1.0 }).collect();
                     speed_shape = Some(speed::speed_shape(&s.t, &along, &stretches, &fallback));
                 }
             }
@@ -1633,6 +1623,26 @@ fn stand_between_pulses(
             mask[k..hi].iter_mut().for_each(|m| *m = false);
         }
     }
+}
+
+/// The stretches of a phone curve between its stands: from the Enter of each tag to the first
+/// digit of the next (its Enter where no typing is known). `tags` are `(node, Enter time, _)`,
+/// `typing` the `(first digit, Enter)` of every tag typed, in order, undone ones included.
+fn stretches(tags: &[(u32, f64, bool)], typing: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let mut k = 0;
+    tags.windows(2)
+        .map(|p| {
+            // Both in time order: the typing that ends at the next tag's Enter.
+            while k < typing.len() && typing[k].1 < p[1].1 {
+                k += 1;
+            }
+            let next = typing
+                .get(k)
+                .filter(|ty| ty.1 == p[1].1)
+                .map_or(p[1].1, |ty| ty.0);
+            (p[0].1, next)
+        })
+        .collect()
 }
 
 /// Clears `mask` wherever `t` is more than `margin` from every interval (sorted by start).
