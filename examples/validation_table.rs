@@ -86,6 +86,17 @@ fn truth_samples(path: &Path) -> Result<Vec<TruthSample>, String> {
         .collect())
 }
 
+/// The truth row of the sample at time `t`: the nearest, if within 0.1 ms (`truth` in time
+/// order).
+fn truth_at(truth: &[TruthSample], t: f64) -> Option<&TruthSample> {
+    let i = truth.partition_point(|s| s.t < t);
+    [i.wrapping_sub(1), i]
+        .into_iter()
+        .filter_map(|j| truth.get(j))
+        .min_by(|a, b| (a.t - t).abs().total_cmp(&(b.t - t).abs()))
+        .filter(|s| (s.t - t).abs() < 1e-4)
+}
+
 /// Puts the truth into `curves` (orientations with `q`, distances from each curve's first
 /// tag with `d`), sample by sample where a truth row lies within 0.1 ms; returns the samples
 /// matched and all.
@@ -95,14 +106,6 @@ fn put_truth(
     q: bool,
     d: bool,
 ) -> (usize, usize) {
-    let near = |t: f64| -> Option<usize> {
-        let i = truth.partition_point(|s| s.t < t);
-        [i.wrapping_sub(1), i]
-            .into_iter()
-            .filter(|&j| j < truth.len())
-            .min_by(|&a, &b| (truth[a].t - t).abs().total_cmp(&(truth[b].t - t).abs()))
-            .filter(|&j| (truth[j].t - t).abs() < 1e-4)
-    };
     // The arc length at a key press (between two samples), interpolated.
     let arc_at = |t: f64| -> Option<f64> {
         let i = truth.partition_point(|s| s.t < t);
@@ -114,15 +117,15 @@ fn put_truth(
         let s0 = c.tags.first().and_then(|tag| arc_at(tag.t));
         for i in 0..c.samples.len() {
             all += 1;
-            let Some(j) = near(c.samples.t[i]) else {
+            let Some(row) = truth_at(truth, c.samples.t[i]) else {
                 continue;
             };
             matched += 1;
             if q {
-                c.samples.q[i] = truth[j].q;
+                c.samples.q[i] = row.q;
             }
             if let (true, Some(s0)) = (d, s0) {
-                c.samples.d[i] = truth[j].arc - s0;
+                c.samples.d[i] = row.arc - s0;
             }
         }
         if let (true, Some(s0)) = (d, s0) {
@@ -143,13 +146,7 @@ fn put_stands(curves: &mut [Curve], truth: &[TruthSample], nominal_speed: f64) {
     use sfs::orientation::flags::STATIONARY;
     for c in curves.iter_mut() {
         for i in 0..c.samples.len() {
-            let t = c.samples.t[i];
-            let k = truth.partition_point(|s| s.t < t);
-            if let Some(s) = [k.wrapping_sub(1), k]
-                .into_iter()
-                .filter_map(|j| truth.get(j))
-                .find(|s| (s.t - t).abs() < 1e-4)
-            {
+            if let Some(s) = truth_at(truth, c.samples.t[i]) {
                 let f = &mut c.samples.flags[i];
                 *f = if matches!(s.phase, 1 | 2) {
                     *f | STATIONARY
@@ -201,12 +198,7 @@ fn standing_mask(curves: &[Curve], truth: &[TruthSample]) -> [[f64; 2]; 4] {
     for c in curves {
         for i in 1..c.samples.len() {
             let t = c.samples.t[i];
-            let k = truth.partition_point(|s| s.t < t);
-            let Some(s) = [k.wrapping_sub(1), k]
-                .into_iter()
-                .filter_map(|j| truth.get(j))
-                .find(|s| (s.t - t).abs() < 1e-4)
-            else {
+            let Some(s) = truth_at(truth, t) else {
                 continue;
             };
             let still = c.samples.flags[i] & sfs::orientation::flags::STATIONARY != 0;

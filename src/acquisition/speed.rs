@@ -15,7 +15,7 @@
 //! between, plus a leak `β₀ + β₁t` (gravity through the orientation's error, drifting as the
 //! error does) and noise.
 //! Each pulse is found by least squares over a grid of `a` (10 ms) and `τ` (20 ms, an abrupt
-//! start, to 1 s, a gentle one), the other pulse subtracted (two rounds). A hand that stops the
+//! start, to 1 s, a gentle one), the other pulse subtracted (a few rounds, [`fit_stretch`]). A hand that stops the
 //! phone at once and one that eases it to rest over half a second give the same fit; only the
 //! ramp's width differs.
 //!
@@ -35,17 +35,14 @@ pub const MIN_RATE_HZ: f64 = 100.0;
 
 /// Whether samples at `t` come at [`MIN_RATE_HZ`] or faster (their median interval).
 pub fn sampled_fast_enough(t: &[f64]) -> bool {
-    let mut dt: Vec<f64> = t
-        .windows(2)
-        .map(|w| w[1] - w[0])
-        .filter(|d| *d > 0.0)
-        .collect();
-    if dt.is_empty() {
-        return false;
-    }
-    let mid = dt.len() / 2;
-    let (_, m, _) = dt.select_nth_unstable_by(mid, f64::total_cmp);
-    *m <= 1.0 / MIN_RATE_HZ
+    let dt = t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0);
+    median(dt.collect()).is_some_and(|m| m <= 1.0 / MIN_RATE_HZ)
+}
+
+/// The median of `v` (its upper middle value for an even count); `None` for none.
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    let mid = v.len() / 2;
+    (!v.is_empty()).then(|| *v.select_nth_unstable_by(mid, f64::total_cmp).1)
 }
 
 /// Widths of ramp tried, s: from a phone stopped by the hand at once to one eased to rest.
@@ -198,13 +195,8 @@ fn best_pulse(
 /// The noise variance of `y` per sample, from its first differences (robust: the median of
 /// their absolute values; a difference of two samples has twice the variance).
 fn noise_variance(y: &[f64]) -> f64 {
-    let mut d: Vec<f64> = y.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-    if d.is_empty() {
-        return 0.0;
-    }
-    let mid = d.len() / 2;
-    let (_, m, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
-    let sigma = *m / 0.6745;
+    let d = y.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    let sigma = median(d).unwrap_or(0.0) / 0.6745;
     sigma * sigma / 2.0
 }
 
@@ -324,8 +316,9 @@ pub fn speed_shape(
                 .map(|(v, t)| v[1] * (t[1] - t[0]))
                 .sum()
         };
+        let mask = moving(fb);
         let plausible = |v: &[f64]| {
-            let (m, mask) = (moving(v), moving(fb));
+            let m = moving(v);
             m >= mask * (1.0 - MISSED_SHARE) - MISSED_STAND && m <= mask + MISSED_STAND
         };
         // An end not found keeps the mask's edge there (a step: the mask's own model).
@@ -393,25 +386,14 @@ mod tests {
             found: (true, true),
         };
         let t: Vec<f64> = (0..1000).map(|i| i as f64 * 0.005).collect();
-        let mut state = 0x9e3779b97f4a7c15u64;
-        let mut gauss = move || {
-            // Box–Muller over a xorshift generator: seeded, no crate.
-            let mut u = || {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                (state >> 11) as f64 / (1u64 << 53) as f64
-            };
-            let (u1, u2) = (u().max(1e-300), u());
-            (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos()
-        };
+        let mut rng = sfs_geometry::rng::Rng::new(7);
         let y = t
             .iter()
             .map(|&x| {
                 0.08 * pulse((x - 1.0) / tau_a, tau_a)
                     - 0.08 * pulse((x - truth.stop.at) / tau_b, tau_b)
                     + 0.03
-                    + noise * gauss()
+                    + noise * rng.gauss()
             })
             .collect();
         (t, y, truth)
