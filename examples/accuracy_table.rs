@@ -4,10 +4,10 @@
 //! after rigid registration, % of the bounding-box diagonal).
 //!
 //! `cargo run --release --example accuracy_table -- [--seeds 1,2,3] [--devices morphorider,phone]
-//! [--profiles default,field] [--scenes a,b] [--study] [--config FILE]`
+//! [--profiles default,field] [--scenes a,b] [--study] [--config FILE] [--no-skids]`
 //!
 //! `--config FILE`: the acquisition and network settings of a configuration file instead of
-//! the defaults.
+//! the defaults. `--no-skids`: the Morphorider's wheel skids left unfilled.
 //!
 //! Each cell runs the library as `sfs simulate` + `sfs replay` + `sfs eval` do (in process,
 //! two cells at a time).

@@ -5,19 +5,21 @@
 //! and its figure before the field-accuracy work (from that directory's README).
 //!
 //! `cargo run --release --example validation_table -- [--dir DIR] [--captures a,b]
-//! [--config FILE] [--no-bridge] [--no-smooth] [--study]`
+//! [--config FILE] [--no-bridge] [--no-smooth] [--no-skids] [--study]`
 //!
-//! `--no-bridge`, `--no-smooth`: the Morphorider's heading bridge across disturbed stretches,
-//! the phone's smoother, off (to find which mechanism a capture's error comes from).
+//! `--no-bridge`, `--no-smooth`, `--no-skids`: the Morphorider's heading bridge across
+//! disturbed stretches, the phone's smoother, the filling of the Morphorider's wheel skids,
+//! off (to find which mechanism a capture's error comes from).
 //!
-//! `--study`: where each capture's error comes from. The per-sample truth
+//! `--study [--per-curve]`: where each capture's error comes from. The per-sample truth
 //! (`NAME.samples.csv.gz`, read through `gzip -dc`) is put into the acquired curves, matched by
 //! sample time within 0.1 ms: the true orientations (estimated distances), the true distances
-//! (estimated orientations), both. Rough captures shift their clock at each power-up, so a
-//! sample is matched only where the shift is none (their figures say how many were). On phone
-//! captures also the true standing mask (phases standing and turning in place) with the
+//! (estimated orientations), both. Rough captures shift their clock at each power-up: the
+//! shift is found per curve ([`clock_shift`]), and the share of samples matched is printed.
+//! On phone captures also the true standing mask (phases standing and turning in place) with the
 //! distances made from it as the phone's were before issue 33 (a constant speed between the
-//! stands): what the best standing mask alone could give.
+//! stands): what the best standing mask alone could give. `--per-curve` also prints each
+//! curve's segment lengths against the truth and its frames' error.
 //!
 //! Columns: the error now; the target (Morphorider rough 0.30, phone clean 0.40, phone rough
 //! 0.80); the figure before the field-accuracy work (baa97be) and at 1b493a8, both from the
@@ -56,6 +58,8 @@ fn readme_figures(dir: &Path) -> std::collections::HashMap<String, (f64, f64, f6
 /// in place, 3 moving), arc length from the curve's start node, the true frame `[w, x, y, z]`.
 struct TruthSample {
     t: f64,
+    /// Scan order of the truth curve being scanned (−1 in transit, −2 cancelled).
+    curve: i32,
     phase: u8,
     arc: f64,
     q: [f64; 4],
@@ -78,6 +82,7 @@ fn truth_samples(path: &Path) -> Result<Vec<TruthSample>, String> {
                 .collect();
             (f.len() == 9).then(|| TruthSample {
                 t: f[0],
+                curve: f[2] as i32,
                 phase: f[3] as u8,
                 arc: f[4],
                 q: [f[5], f[6], f[7], f[8]],
@@ -97,12 +102,70 @@ fn truth_at(truth: &[TruthSample], t: f64) -> Option<&TruthSample> {
         .filter(|s| (s.t - t).abs() < 1e-4)
 }
 
+/// The shift from a curve's sample clock to the truth's (`truth time = sample time + shift`):
+/// zero on clean captures; on rough ones constant per power-up, so found per curve: zero when
+/// it puts 90 % of the curve's samples on the truth's curve of the same scan order; else the
+/// candidates put the curve's first sample on a truth row within ±5 s of where the truth's
+/// curve of the same scan order starts; the one whose arc length follows the curve's distances
+/// best (mean |Δd − Δarc| between neighbouring samples of the curve, so that a skid
+/// costs only where it happens) wins. None when no candidate matches most samples.
+fn clock_shift(c: &Curve, k: usize, truth: &[TruthSample]) -> Option<f64> {
+    let n = c.samples.len();
+    let t0 = *c.samples.t.first()?;
+    // No shift where the sample clock is the truth's (every clean capture, and a rough one
+    // before its first power-up again).
+    let on_truth = c
+        .samples
+        .t
+        .iter()
+        .filter(|&&t| truth_at(truth, t).is_some_and(|s| s.curve == k as i32))
+        .count();
+    if 10 * on_truth >= 9 * n {
+        return Some(0.0);
+    }
+    let start = truth.iter().find(|s| s.curve == k as i32)?.t;
+    let lo = truth.partition_point(|s| s.t < start - 5.0);
+    let hi = truth.partition_point(|s| s.t < start + 5.0);
+    let step = (n / 200).max(1);
+    let mut best: Option<(f64, f64)> = None;
+    for row in &truth[lo..hi] {
+        let shift = row.t - t0;
+        let (mut cost, mut matched, mut tried) = (0.0, 0usize, 0usize);
+        let mut last: Option<(f64, f64)> = None;
+        for i in (0..n).step_by(step) {
+            tried += 1;
+            let Some(s) = truth_at(truth, c.samples.t[i] + shift) else {
+                last = None;
+                continue;
+            };
+            if s.curve != k as i32 {
+                last = None;
+                continue;
+            }
+            matched += 1;
+            if let Some((d0, a0)) = last {
+                cost += ((c.samples.d[i] - d0) - (s.arc - a0)).abs();
+            }
+            last = Some((c.samples.d[i], s.arc));
+        }
+        if 2 * matched < tried {
+            continue;
+        }
+        let cost = cost / matched as f64;
+        if best.is_none_or(|(_, b)| cost < b) {
+            best = Some((shift, cost));
+        }
+    }
+    best.map(|(s, _)| s)
+}
+
 /// Puts the truth into `curves` (orientations with `q`, distances from each curve's first
 /// tag with `d`), sample by sample where a truth row lies within 0.1 ms; returns the samples
 /// matched and all.
 fn put_truth(
     curves: &mut [sfs_geometry::curve::Curve],
     truth: &[TruthSample],
+    shifts: &[f64],
     q: bool,
     d: bool,
 ) -> (usize, usize) {
@@ -113,11 +176,11 @@ fn put_truth(
         (b.t - a.t < 0.05).then(|| a.arc + (b.arc - a.arc) * (t - a.t) / (b.t - a.t).max(1e-9))
     };
     let (mut matched, mut all) = (0, 0);
-    for c in curves {
-        let s0 = c.tags.first().and_then(|tag| arc_at(tag.t));
+    for (c, shift) in curves.iter_mut().zip(shifts) {
+        let s0 = c.tags.first().and_then(|tag| arc_at(tag.t + shift));
         for i in 0..c.samples.len() {
             all += 1;
-            let Some(row) = truth_at(truth, c.samples.t[i]) else {
+            let Some(row) = truth_at(truth, c.samples.t[i] + shift) else {
                 continue;
             };
             matched += 1;
@@ -130,7 +193,7 @@ fn put_truth(
         }
         if let (true, Some(s0)) = (d, s0) {
             for tag in &mut c.tags {
-                if let Some(a) = arc_at(tag.t) {
+                if let Some(a) = arc_at(tag.t + shift) {
                     tag.d = a - s0;
                 }
             }
@@ -142,11 +205,11 @@ fn put_truth(
 /// Puts the truth's standing (phases standing and turning in place) into `curves` as their
 /// stationary flags where a truth row lies within 0.1 ms, and makes the phone's distances
 /// from them again.
-fn put_stands(curves: &mut [Curve], truth: &[TruthSample], nominal_speed: f64) {
+fn put_stands(curves: &mut [Curve], truth: &[TruthSample], shifts: &[f64], nominal_speed: f64) {
     use sfs::orientation::flags::STATIONARY;
-    for c in curves.iter_mut() {
+    for (c, shift) in curves.iter_mut().zip(shifts) {
         for i in 0..c.samples.len() {
-            if let Some(s) = truth_at(truth, c.samples.t[i]) {
+            if let Some(s) = truth_at(truth, c.samples.t[i] + shift) {
                 let f = &mut c.samples.flags[i];
                 *f = if matches!(s.phase, 1 | 2) {
                     *f | STATIONARY
@@ -193,12 +256,12 @@ fn score(
 
 /// Seconds of the acquired curves' samples by (truth phase, flagged stationary): how the
 /// standing mask that the phone's distances rest on compares with what the operator did.
-fn standing_mask(curves: &[Curve], truth: &[TruthSample]) -> [[f64; 2]; 4] {
+fn standing_mask(curves: &[Curve], truth: &[TruthSample], shifts: &[f64]) -> [[f64; 2]; 4] {
     let mut secs = [[0.0; 2]; 4];
-    for c in curves {
+    for (c, shift) in curves.iter().zip(shifts) {
         for i in 1..c.samples.len() {
             let t = c.samples.t[i];
-            let Some(s) = truth_at(truth, t) else {
+            let Some(s) = truth_at(truth, t + shift) else {
                 continue;
             };
             let still = c.samples.flags[i] & sfs::orientation::flags::STATIONARY != 0;
@@ -219,6 +282,45 @@ struct Study {
     mask: [[f64; 2]; 4],
 }
 
+/// `--study --per-curve`: per acquired curve (on standard error), each segment's length as
+/// acquired and as the truth has it (mm), and the median and 90th percentile of the angle
+/// between the acquired and the true frames (degrees).
+fn per_curve(name: &str, curves: &[Curve], truth: &[TruthSample], shifts: &[f64]) {
+    let arc_before = |t: f64| truth.iter().rfind(|s| s.t <= t).map_or(f64::NAN, |s| s.arc);
+    for (c, shift) in curves.iter().zip(shifts) {
+        let segments: Vec<String> = c
+            .tags
+            .windows(2)
+            .map(|w| {
+                let truth_mm = 1e3 * (arc_before(w[1].t + shift) - arc_before(w[0].t + shift));
+                format!("{:.0}/{truth_mm:.0}", 1e3 * (w[1].d - w[0].d))
+            })
+            .collect();
+        let mut angles: Vec<f64> = (0..c.samples.len())
+            .filter_map(|i| {
+                let s = truth_at(truth, c.samples.t[i] + shift)?;
+                let a = c.samples.q[i];
+                let dot = (0..4).map(|k| a[k] * s.q[k]).sum::<f64>().abs().min(1.0);
+                Some(2.0 * dot.acos().to_degrees())
+            })
+            .collect();
+        angles.sort_by(f64::total_cmp);
+        let at = |p: usize| {
+            angles
+                .get(angles.len() * p / 100)
+                .copied()
+                .unwrap_or(f64::NAN)
+        };
+        eprintln!(
+            "{name} curve {} (shift {shift:.2} s): segments acquired/true mm {}; frame error median {:.1}°, p90 {:.1}°",
+            c.index,
+            segments.join(" "),
+            at(50),
+            at(90)
+        );
+    }
+}
+
 /// `--study`: as is, true q, true d, both, per capture.
 fn study(dir: &Path, captures: &[String], settings: &(AcquisitionConfig, NetworkParams)) {
     println!("| capture | as is | true q | true d | both | true stands | samples matched |");
@@ -228,19 +330,27 @@ fn study(dir: &Path, captures: &[String], settings: &(AcquisitionConfig, Network
         let truth = load_truth(&dir.join(format!("{c}.truth.json")))?;
         let samples = truth_samples(&dir.join(format!("{c}.samples.csv.gz")))?;
         let mut errors = [score_curves(&curves, &truth, &settings.1)?; 4];
+        let shifts: Vec<f64> = curves
+            .iter()
+            .enumerate()
+            .map(|(k, c)| clock_shift(c, k, &samples).unwrap_or(0.0))
+            .collect();
+        if std::env::args().any(|a| a == "--per-curve") {
+            per_curve(c, &curves, &samples, &shifts);
+        }
         let mut matched = 0.0;
         for (k, (q, d)) in [(true, false), (false, true), (true, true)]
             .into_iter()
             .enumerate()
         {
             let mut put = curves.clone();
-            let (m, all) = put_truth(&mut put, &samples, q, d);
+            let (m, all) = put_truth(&mut put, &samples, &shifts, q, d);
             matched = m as f64 / all.max(1) as f64;
             errors[k + 1] = score_curves(&put, &truth, &settings.1)?;
         }
         let true_stands = if c.contains("phone") {
             let mut put = curves.clone();
-            put_stands(&mut put, &samples, settings.0.nominal_speed);
+            put_stands(&mut put, &samples, &shifts, settings.0.nominal_speed);
             score_curves(&put, &truth, &settings.1)?
         } else {
             f64::NAN
@@ -249,7 +359,7 @@ fn study(dir: &Path, captures: &[String], settings: &(AcquisitionConfig, Network
             errors,
             true_stands,
             matched,
-            mask: standing_mask(&curves, &samples),
+            mask: standing_mask(&curves, &samples, &shifts),
         })
     });
     for (c, r) in captures.iter().zip(&rows) {

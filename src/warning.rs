@@ -103,6 +103,13 @@ pub enum AcquisitionWarning {
     KindChanged { kind: DeviceKind },
     /// The wheel counter jumped (said once per session; such jumps are ignored).
     WheelJump { t: f64, step_m: f64 },
+    /// The wheel skidded: its distance is filled from the speed either side.
+    WheelSkid {
+        curve: usize,
+        t: f64,
+        duration_s: f64,
+        added_m: f64,
+    },
     /// A SEGMENT_LENGTH that is not a positive length.
     BadSegmentLength { t: f64, segment: u16, length_m: f64 },
     /// A SEGMENT_LENGTH before any curve.
@@ -155,6 +162,7 @@ impl AcquisitionWarning {
             UnusableHello { .. } => "unusable_hello",
             KindChanged { .. } => "device_kind_changed",
             WheelJump { .. } => "wheel_jump",
+            WheelSkid { .. } => "wheel_skid",
             BadSegmentLength { .. } => "bad_segment_length",
             SegmentLengthWithoutCurve { .. } => "segment_length_without_curve",
             NoSuchSegment { .. } => "no_such_segment",
@@ -171,6 +179,7 @@ impl AcquisitionWarning {
         use AcquisitionWarning::*;
         match self {
             RebootInCurve { curve, .. }
+            | WheelSkid { curve, .. }
             | NoSuchSegment { curve, .. }
             | NoSamples { curve, .. }
             | WheelBack { curve, .. }
@@ -201,6 +210,16 @@ impl std::fmt::Display for AcquisitionWarning {
             WheelJump { t, step_m } => write!(
                 f,
                 "t = {t:.3} s: the wheel counter jumped {step_m:.3} m between two samples; such jumps are ignored"
+            ),
+            WheelSkid {
+                curve,
+                t,
+                duration_s,
+                added_m,
+            } => write!(
+                f,
+                "curve {curve}, t = {t:.3} s: the wheel skidded for {duration_s:.2} s (its speed fell and came back while the accelerometer says the device rolled on); {:.0} mm are added from the speed either side",
+                added_m * 1e3
             ),
             BadSegmentLength {
                 t,

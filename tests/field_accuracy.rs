@@ -54,3 +54,67 @@ fn issue_17_phone_field_accuracy_on_sphere_octa_and_torus() {
         );
     }
 }
+
+/// Issue 33: the field profile's wheel skids (about 25 mm each, as the independent
+/// simulator's) are found from the accelerometer and filled, and the network is the better for
+/// it. Sphere-octa, seed 1: the skids the acquisition reports each add 10–40 mm, at least two
+/// of the three are found, and nothing else is taken for one.
+#[test]
+fn issue_33_the_wheel_skids_are_found_and_filled() {
+    use sfs::acquisition::{Acquisition, AcquisitionConfig};
+    use sfs_geometry::network::{NetworkParams, Reconstructor};
+    let s = sfs::simulate::scene::builtin("sphere-octa").expect("shipped scene");
+    let sim = sfs::simulate::run(
+        &s,
+        DeviceKind::Morphorider,
+        sfs::simulate::Profile::Field,
+        1,
+    );
+    let skids_made = sim
+        .truth
+        .events
+        .iter()
+        .filter(|e| e.contains("wheel skid"))
+        .count();
+    assert_eq!(skids_made, 3, "{:?}", sim.truth.events);
+    let error = |fill: bool| {
+        let cfg = AcquisitionConfig {
+            fill_skids: fill,
+            ..AcquisitionConfig::default()
+        };
+        let scan = Acquisition::scan_bytes(&sim.bytes, cfg);
+        let net = Reconstructor::new()
+            .run(&scan.curves, &NetworkParams::default())
+            .expect("the field capture reconstructs");
+        let e = sfs::eval::evaluate(&sim.truth, &sfs::gltf_out::as_read_network(&net.positions))
+            .expect("evaluates");
+        (e.curves.mean_pct, scan.warnings)
+    };
+    let (filled, warnings) = error(true);
+    let skids: Vec<String> = warnings
+        .iter()
+        .filter(|w| w.code() == "wheel_skid")
+        .map(|w| w.to_string())
+        .collect();
+    eprintln!("{skids:#?}");
+    assert!(
+        (2..=3).contains(&skids.len()),
+        "{} skids found of 3: {skids:#?}",
+        skids.len()
+    );
+    for s in &skids {
+        let mm: f64 = s
+            .split("; ")
+            .nth(1)
+            .and_then(|x| x.split(' ').next())
+            .and_then(|x| x.parse().ok())
+            .unwrap_or_else(|| panic!("no mm in {s}"));
+        assert!((10.0..=40.0).contains(&mm), "{s}");
+    }
+    let (unfilled, _) = error(false);
+    eprintln!("sphere-octa morphorider field s1: {filled:.3} % filled, {unfilled:.3} % not");
+    assert!(
+        filled < unfilled,
+        "filled {filled:.3} %, unfilled {unfilled:.3} %"
+    );
+}

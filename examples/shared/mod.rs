@@ -15,9 +15,10 @@ pub fn list(args: &[String], flag: &str, default: &str) -> Vec<String> {
 }
 
 #[allow(dead_code)]
-/// The acquisition and network settings: `--config FILE`'s, or the defaults.
+/// The acquisition and network settings: `--config FILE`'s, or the defaults; `--no-skids`
+/// leaves the Morphorider's wheel skids unfilled ([`sfs::acquisition::skid`]).
 pub fn config(args: &[String]) -> (AcquisitionConfig, NetworkParams) {
-    match args.iter().position(|a| a == "--config") {
+    let mut settings = match args.iter().position(|a| a == "--config") {
         Some(i) => {
             let path = args.get(i + 1).expect("--config FILE");
             let s = sfs::config::load(std::path::Path::new(path))
@@ -25,7 +26,12 @@ pub fn config(args: &[String]) -> (AcquisitionConfig, NetworkParams) {
             (s.acquisition, s.network)
         }
         None => (AcquisitionConfig::default(), NetworkParams::default()),
+    };
+    // Issue 33: the Morphorider's wheel skids left unfilled (for comparisons).
+    if args.iter().any(|a| a == "--no-skids") {
+        settings.0.fill_skids = false;
     }
+    settings
 }
 
 #[allow(dead_code)]

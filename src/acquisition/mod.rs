@@ -20,7 +20,9 @@
 //! Time: the device clock (`t_us`, wrapping, restarting at power-up) becomes a monotonic
 //! session time in seconds: increments are `t_us` differences (wraps included), and a reboot
 //! adds nothing. Distance: Morphorider, wheel ticks × circumference / ticks per revolution
-//! (backwards motion kept, a reboot's counter reset bridged); phone, the integral of the
+//! (backwards motion kept, a reboot's counter reset bridged, a skid filled from the speed
+//! either side where the accelerometer says the device rolled on, [`skid`]); phone, the
+//! integral of the
 //! speed's shape between two tags (its start and stop fitted to the accelerometer, [`speed`];
 //! where no fit holds, time while moving by the standing mask), scaled per segment to its
 //! measured length (SEGMENT_LENGTH or configuration) or to the nominal speed.
@@ -42,6 +44,7 @@ use device_protocol::{DeviceKind, Event, Hello, Packet};
 use nalgebra::{UnitQuaternion, Vector3};
 use std::collections::BTreeMap;
 
+pub mod skid;
 pub mod speed;
 
 /// Settings of acquisition (documented defaults; `[acquisition]` and `[calibration]` in the
@@ -80,6 +83,9 @@ pub struct AcquisitionConfig {
     /// Morphorider: bridge the heading across stretches of a curve where the field is
     /// disturbed ([`bridge_heading`]), from their clean ends. Default on.
     pub bridge_heading: bool,
+    /// Morphorider: fill the stretches where the wheel skidded ([`skid`]) from the speed
+    /// either side. Default on.
+    pub fill_skids: bool,
     /// Phone: smooth each finished curve's orientations forward and backward ([`smoother`]);
     /// off, a curve keeps the causal filter's. Default on.
     pub smooth: bool,
@@ -116,6 +122,7 @@ impl Default for AcquisitionConfig {
             segment_lengths: BTreeMap::new(),
             ahrs: AhrsParams::default(),
             bridge_heading: true,
+            fill_skids: true,
             smooth: true,
             smoother: SmootherParams::default(),
             array_window: 1.0,
@@ -354,6 +361,10 @@ pub struct Acquisition {
 /// 90 MB here, 21 minutes of a 200 Hz phone): they keep the causal filter's orientations, and
 /// the log says so.
 const MAX_SMOOTHED_SAMPLES: usize = 250_000;
+
+/// Morphorider curves longer than this are not searched for wheel skids (the search keeps
+/// about 64 bytes per sample: 64 MB here, 2.8 hours at 100 Hz); the log says so.
+const MAX_SKID_CHECKED_SAMPLES: usize = 1_000_000;
 
 /// Most events held before the first HELLO. A device sends one every 5 s, so a receiver that
 /// joins mid-stream holds about 5 s (10 s if that HELLO is lost on the link) of a 200 Hz
@@ -1046,6 +1057,17 @@ impl Acquisition {
             );
         }
         let mut wheel: Vec<f64> = Vec::with_capacity(if phone { 0 } else { n });
+        // Morphorider: the accelerometer (for the skids).
+        let skid_check = !phone && self.cfg.fill_skids && n <= MAX_SKID_CHECKED_SAMPLES;
+        if !phone && self.cfg.fill_skids && !skid_check {
+            tracing::warn!(
+                curve = o.index,
+                samples = n,
+                "a curve of more than {MAX_SKID_CHECKED_SAMPLES} samples is not searched for \
+                 wheel skids"
+            );
+        }
+        let mut rider_acc: Vec<Vector3<f64>> = Vec::with_capacity(if skid_check { n } else { 0 });
         let mut nd: Vec<[f32; 2]> = Vec::with_capacity(if phone { 0 } else { n });
         let k = if smoothing { n } else { 0 };
         let (mut gyros, mut accs, mut mags) = (
@@ -1086,6 +1108,9 @@ impl Acquisition {
                 )))
             } else {
                 wheel.push(r.x[0]);
+                if skid_check {
+                    rider_acc.push(acc);
+                }
                 nd.push(norm_dip(&acc, &mag));
                 triad(&acc, &mag)
             };
@@ -1114,6 +1139,18 @@ impl Acquisition {
                 *q = first;
             }
         }
+        if skid_check {
+            let typed: Vec<f64> = o.tags.iter().map(|tag| tag.1).collect();
+            for sk in skid::fill_skids(&s.t, &mut wheel, &rider_acc, &typed) {
+                self.warn(AcquisitionWarning::WheelSkid {
+                    curve: o.index,
+                    t: sk.t,
+                    duration_s: sk.duration_s,
+                    added_m: sk.added_m,
+                });
+            }
+        }
+        drop(rider_acc);
         if !phone && self.cfg.bridge_heading {
             // The fringe of a magnet's reach, which the per-sample tests let through; the
             // heading across each disturbed stretch is bridged from its clean ends.

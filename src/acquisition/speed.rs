@@ -40,7 +40,7 @@ pub fn sampled_fast_enough(t: &[f64]) -> bool {
 }
 
 /// The median of `v` (its upper middle value for an even count); `None` for none.
-fn median(mut v: Vec<f64>) -> Option<f64> {
+pub(super) fn median(mut v: Vec<f64>) -> Option<f64> {
     let mid = v.len() / 2;
     (!v.is_empty()).then(|| *v.select_nth_unstable_by(mid, f64::total_cmp).1)
 }
