@@ -31,7 +31,7 @@ use crate::keypad::{CurveKind, KeyEvent, Keypad};
 use crate::orientation::ahrs::{Ahrs, AhrsParams};
 use crate::orientation::disturbance::{
     acc_motion, bridge_heading, disturbed_windows, mag_disturbed, norm_dip, FieldReference,
-    Thresholds,
+    Thresholds, END_SAMPLES,
 };
 use crate::orientation::flags;
 use crate::orientation::rest;
@@ -1508,8 +1508,9 @@ impl Acquisition {
 }
 
 /// Morphorider: bridges the heading across each run of `MAG_DISTURBED` samples of `s`
-/// ([`bridge_heading`], along the wheel distance `x`), converting only the run and its two
-/// clean neighbours (a long curve is not copied).
+/// ([`bridge_heading`], along the wheel distance `x`), converting only the run and up to
+/// [`END_SAMPLES`] clean neighbours each side (a long curve is not copied), and writing back
+/// only the run.
 fn bridge_disturbed(s: &mut Samples, x: &[f64]) {
     let n = s.len().min(x.len());
     let disturbed = |i: usize| s.flags[i] & flags::MAG_DISTURBED != 0;
@@ -1524,7 +1525,7 @@ fn bridge_disturbed(s: &mut Samples, x: &[f64]) {
         while i < n && disturbed(i) {
             i += 1;
         }
-        runs.push((start.saturating_sub(1), (i + 1).min(n)));
+        runs.push((start.saturating_sub(END_SAMPLES), (i + END_SAMPLES).min(n)));
     }
     for (a, b) in runs {
         let mut q: Vec<UnitQuaternion<f64>> = s.q[a..b].iter().map(quat_of).collect();
@@ -1532,7 +1533,12 @@ fn bridge_disturbed(s: &mut Samples, x: &[f64]) {
             .map(|k| s.flags[k] & flags::MAG_DISTURBED != 0)
             .collect();
         if bridge_heading(&mut q, &x[a..b], &flagged) > 0 {
-            for (dst, q) in s.q[a..b].iter_mut().zip(&q) {
+            for ((dst, q), _) in s.q[a..b]
+                .iter_mut()
+                .zip(&q)
+                .zip(&flagged)
+                .filter(|(_, &f)| f)
+            {
                 *dst = quat_array(q);
             }
         }
