@@ -171,6 +171,11 @@ pub struct SimulateArgs {
     /// `default` (documented noise, rare link faults) or `field` (what real sessions bring).
     #[arg(long, value_enum, default_value = "default")]
     pub profile: Profile,
+    /// Leave this fraction (0 to 1) of the crossings untagged on one of their curves: the
+    /// operator rolls through without typing there (chosen with the seed; never a curve's
+    /// first or last tag). The truth still names every crossing.
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.0)]
+    pub untagged: f64,
 }
 
 #[derive(Debug, Args)]

@@ -405,6 +405,17 @@ fn simulate(a: SimulateArgs) -> i32 {
         return exit::USAGE;
     };
     let (bin, truth) = (with_ext(out, ".bin"), with_ext(out, ".truth.json"));
+    if !(0.0..=1.0).contains(&a.untagged) {
+        complain!(
+            "sfs: --untagged {}: a fraction of the crossings, from 0 to 1",
+            a.untagged
+        );
+        return exit::USAGE;
+    }
+    if a.structure.is_some() && a.untagged > 0.0 {
+        complain!("sfs: --untagged applies to a scanned scene, not to a structure's sensor array");
+        return exit::USAGE;
+    }
     if let Some(kind) = a.structure {
         if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 7.0 * 86_400.0) {
             complain!(
@@ -441,7 +452,11 @@ fn simulate(a: SimulateArgs) -> i32 {
             return if unreadable { exit::INPUT } else { exit::USAGE };
         }
     };
-    let sim = simulate::run(&sc, a.device.0, a.profile, a.seed);
+    let mistakes = simulate::operator::Mistakes {
+        untagged: simulate::untagged_crossings(&sc, a.untagged, a.seed),
+        ..Default::default()
+    };
+    let sim = simulate::run_with(&sc, a.device.0, a.profile, a.seed, &mistakes);
     let json = match serde_json::to_vec(&sim.truth) {
         Ok(j) => j,
         Err(e) => {
@@ -463,6 +478,12 @@ fn simulate(a: SimulateArgs) -> i32 {
         sim.bytes.len(),
         sim.samples.t.last().copied().unwrap_or(0.0)
     );
+    if !mistakes.untagged.is_empty() {
+        say!(
+            "{} crossing(s) left untagged on one of their curves (listed in the truth's events)",
+            mistakes.untagged.len()
+        );
+    }
     say!("capture: {}\ntruth:   {}", bin.display(), truth.display());
     exit::OK
 }

@@ -376,3 +376,73 @@ fn issue_17_the_field_phone_has_an_uncalibrated_gyroscope() {
         }
     }
 }
+
+/// Issue 34, point 4: `--untagged FRACTION` leaves that fraction of the crossings untagged on
+/// one of their curves (the operator rolls through), chosen with the seed; every curve keeps
+/// its first and last tag, every node stays tagged on another curve, and the truth still names
+/// every crossing.
+#[test]
+fn issue_34_a_fraction_of_the_crossings_is_left_untagged_on_one_curve() {
+    let s = scene::builtin("sphere-octa").expect("shipped scene");
+    assert!(simulate::untagged_crossings(&s, 0.0, 1).is_empty());
+    // Six crossings of two closed great circles each; one is where two of them start and
+    // end (a curve's first and last tags stay), so five can be left out.
+    assert_eq!(simulate::untagged_crossings(&s, 1.0, 1).len(), 5);
+    let chosen = simulate::untagged_crossings(&s, 1.0 / 3.0, 1);
+    assert_eq!(chosen.len(), 2, "{chosen:?}");
+    assert_eq!(chosen, simulate::untagged_crossings(&s, 1.0 / 3.0, 1));
+    let specs = s.specs();
+    let mistakes = simulate::operator::Mistakes {
+        untagged: chosen.clone(),
+        ..Default::default()
+    };
+    let sim = simulate::run_with(&s, DeviceKind::Morphorider, Profile::Default, 1, &mistakes);
+    let (_, scan) = decode(&sim.bytes);
+    assert_eq!(scan.curves.len(), specs.len(), "{:?}", scan.warnings);
+    for (ci, spec) in specs.iter().enumerate() {
+        let tagged: Vec<u32> = spec
+            .tags
+            .iter()
+            .enumerate()
+            .filter(|&(k, _)| !chosen.contains(&(ci, k)))
+            .map(|(_, t)| t.1)
+            .collect();
+        assert_eq!(scan.curves[ci].nodes(), tagged, "curve {ci}");
+        // The truth names every node the curve passes.
+        let all: Vec<u32> = spec.tags.iter().map(|t| t.1).collect();
+        assert_eq!(sim.truth.curves[ci].nodes, all, "truth of curve {ci}");
+    }
+    for &(ci, k) in &chosen {
+        let node = specs[ci].tags[k].1;
+        assert!(
+            scan.curves
+                .iter()
+                .enumerate()
+                .any(|(cj, c)| cj != ci && c.nodes().contains(&node)),
+            "node {node} is tagged on no other curve"
+        );
+        assert!(
+            sim.truth
+                .events
+                .iter()
+                .any(|e| e.contains(&format!("curve {ci}: node {node} rolled through untagged"))),
+            "{:?}",
+            sim.truth.events
+        );
+    }
+    // The command line refuses what is not a fraction.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args([
+            "simulate",
+            "--scene",
+            "sphere-octa",
+            "--untagged",
+            "1.5",
+            "--out",
+        ])
+        .arg(std::env::temp_dir().join("sfs-untagged-refused"))
+        .output()
+        .expect("runs sfs");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--untagged 1.5"));
+}

@@ -283,7 +283,13 @@ pub fn run_without(
             "curve {c}: tag {k} typed twice, the repeat undone with U"
         ));
     }
+    m.untagged.clone_from(&more.untagged);
     let script = perform(&scene.specs(), &op, p.rate_hz, p.jitter, &mut rng);
+    for &(c, node) in &script.untagged {
+        events.push(format!(
+            "curve {c}: node {node} rolled through untagged (a crossing tagged on another curve only)"
+        ));
+    }
     let duration = script.states.last().map_or(0.0, |s| s.t);
     if profile == Profile::Field {
         // Reboot while carrying the device to the middle curve.
@@ -353,6 +359,59 @@ pub fn run_without(
         truth,
         samples,
     }
+}
+
+/// The crossings to leave untagged on one of their curves (issue 34). A crossing is a node
+/// that two or more curves pass through; it can be left out on a curve where it is neither
+/// the first nor the last tag and which passes it once (so every curve keeps its ends, and
+/// the node stays tagged on another curve). Of the crossings that can, `fraction` (rounded to
+/// the nearest count) are chosen with `seed`, each left out on one such curve. Returns
+/// `(curve, tag)` pairs for [`Mistakes::untagged`], in scene order.
+pub fn untagged_crossings(scene: &Scene, fraction: f64, seed: u64) -> Vec<(usize, usize)> {
+    let specs = scene.specs();
+    let mut curves_of: std::collections::BTreeMap<u32, Vec<(usize, usize)>> = Default::default();
+    for (ci, c) in specs.iter().enumerate() {
+        for (k, &(_, node)) in c.tags.iter().enumerate() {
+            curves_of.entry(node).or_default().push((ci, k));
+        }
+    }
+    // Per crossing: the (curve, tag) places it could be left out, on curves that pass it once.
+    let eligible: Vec<Vec<(usize, usize)>> = curves_of
+        .values()
+        .filter(|on| {
+            let mut cs: Vec<usize> = on.iter().map(|x| x.0).collect();
+            cs.dedup();
+            cs.len() >= 2
+        })
+        .map(|on| {
+            on.iter()
+                .copied()
+                .filter(|&(ci, k)| {
+                    let once = on.iter().filter(|x| x.0 == ci).count() == 1;
+                    once && k > 0 && k + 1 < specs[ci].tags.len()
+                })
+                .collect::<Vec<_>>()
+        })
+        .filter(|places| !places.is_empty())
+        .collect();
+    let count =
+        ((fraction.clamp(0.0, 1.0) * eligible.len() as f64).round() as usize).min(eligible.len());
+    // Its own stream: the scan's other draws stay those of the seed.
+    let mut rng = Rng::new(seed ^ 0x5eed_0034);
+    let mut order: Vec<usize> = (0..eligible.len()).collect();
+    for i in (1..order.len()).rev() {
+        let j = (rng.range(0.0, (i + 1) as f64) as usize).min(i);
+        order.swap(i, j);
+    }
+    let mut out: Vec<(usize, usize)> = order[..count]
+        .iter()
+        .map(|&e| {
+            let places = &eligible[e];
+            places[(rng.range(0.0, places.len() as f64) as usize).min(places.len() - 1)]
+        })
+        .collect();
+    out.sort_unstable();
+    out
 }
 
 fn truth_of(

@@ -67,6 +67,10 @@ pub struct Mistakes {
     /// `(curve, tag)`: after the right index and Enter there, type it again and Enter (a
     /// repeated tag), notice, `U` (which must undo the repeat, not the tag: issue 15).
     pub repeated_index: Option<(usize, usize)>,
+    /// `(curve, tag)`: roll through this node without standing or typing (a crossing left
+    /// untagged on this curve, issue 34). Not done at a curve's first or last tag, nor at a
+    /// corner (where the operator stands to turn); [`Script::untagged`] says where it was.
+    pub untagged: Vec<(usize, usize)>,
 }
 
 impl Default for OperatorParams {
@@ -126,6 +130,8 @@ pub struct Script {
     /// `(time, key)` in time order.
     pub keys: Vec<(f64, u8)>,
     pub curves: Vec<CurveTruth>,
+    /// `(curve, node)` rolled through untagged ([`Mistakes::untagged`]), in scan order.
+    pub untagged: Vec<(usize, u32)>,
 }
 
 /// Arc-length parametrised curve with smooth frames, but at corners.
@@ -534,6 +540,14 @@ pub fn perform(
             s = tl.roll(&p, ci, s, p.cum[pi], op, period, phase);
             // At a corner: stand still, type, turn in place to the way on.
             let corner = p.corner_turn(pi);
+            if op.mistakes.untagged.contains(&(ci, k))
+                && k > 0
+                && k + 1 < spec.tags.len()
+                && corner.is_none()
+            {
+                tl.script.untagged.push((ci, node));
+                continue;
+            }
             let still = OperatorParams {
                 stand_wobble: 0.0,
                 ..op.clone()
