@@ -355,6 +355,7 @@ mod tests {
             tangents: vec![t; m + 1],
             across: Vec::new(),
             nodes: vec![(0, nodes.0), (m, nodes.1)],
+            d: Vec::new(),
         }
     }
 

@@ -6,12 +6,14 @@
 //! - [`regression`]: the frames regressed on SO(3)ᴺ over the whole network.
 //! - [`poisson`]: positions of the whole network from its tangents, nodes shared.
 //! - [`crease`]: the other face of each crease curve, from the curves at its nodes.
+//! - [`join`]: nodes tagged on one curve only, joined to a curve that passes them (issue 34).
 //!
 //! [`Reconstructor::run`] runs them over a scan, leaving out (with a warning) what cannot be
 //! used, and keeps the symbolic factorisations between runs.
 
 pub mod closure;
 pub mod crease;
+pub mod join;
 pub mod poisson;
 pub mod prefilter;
 pub mod regression;

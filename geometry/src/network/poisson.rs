@@ -24,6 +24,9 @@ pub struct CurvePositions {
     pub across: Vec<Vector3<f64>>,
     /// `(sample index, node)`.
     pub nodes: Vec<(usize, u32)>,
+    /// The curve's own distance at every sample (the scan's `d`: the wheel's, or the phone's
+    /// from its speed), m; empty where the curve was not resampled from a scan.
+    pub d: Vec<f64>,
 }
 
 impl CurvePositions {
@@ -161,6 +164,7 @@ impl PoissonSolver {
                 tangents: tangents[ci].clone(),
                 across: Vec::new(),
                 nodes: c.nodes.clone(),
+                d: c.d.clone(),
             })
             .collect();
         Ok(Positions {
