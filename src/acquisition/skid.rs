@@ -221,7 +221,9 @@ fn noise_of(d: impl Iterator<Item = f64>) -> f64 {
 /// one is a stop, not a skid). Returns the skids filled, in time order.
 pub fn fill_skids(t: &[f64], wheel: &mut [f64], acc: &[Vector3<f64>], typed: &[f64]) -> Vec<Skid> {
     let n = t.len().min(wheel.len()).min(acc.len());
-    if n < 10 {
+    // The windows below search the times: they must be finite and in order (session times
+    // are; anything else is not searched).
+    if n < 10 || !t[..n].windows(2).all(|w| w[0].is_finite() && w[0] <= w[1]) {
         return Vec::new();
     }
     let t = &t[..n];
@@ -431,8 +433,8 @@ mod tests {
         assert!(fill_skids(&t, &mut wheel, &acc, &[0.0, 3.1, 5.99]).is_empty());
     }
 
-    /// Samples with no usable accelerometer reading (zero, NaN) neither panic nor invent a
-    /// skid.
+    /// Samples with no usable accelerometer reading (zero, NaN), or times out of order,
+    /// neither panic nor invent a skid.
     #[test]
     fn unusable_readings_invent_nothing() {
         let (t, mut wheel, mut acc) = rolled(f64::INFINITY, true, 2);
@@ -441,6 +443,10 @@ mod tests {
         }
         acc[100] = Vector3::zeros();
         assert!(fill_skids(&t, &mut wheel, &acc, &[0.0, 5.99]).is_empty());
+        let mut bad_t = t.clone();
+        bad_t[300] = f64::NAN;
+        bad_t[301] = -1.0;
+        assert!(fill_skids(&bad_t, &mut wheel, &acc, &[0.0, 5.99]).is_empty());
         assert!(fill_skids(&t[..5], &mut wheel[..5], &acc[..5], &[]).is_empty());
     }
 }
