@@ -286,7 +286,11 @@ struct Study {
 /// acquired and as the truth has it (mm), and the median and 90th percentile of the angle
 /// between the acquired and the true frames (degrees).
 fn per_curve(name: &str, curves: &[Curve], truth: &[TruthSample], shifts: &[f64]) {
-    let arc_before = |t: f64| truth.iter().rfind(|s| s.t <= t).map_or(f64::NAN, |s| s.arc);
+    let arc_before = |t: f64| {
+        truth[..truth.partition_point(|s| s.t <= t)]
+            .last()
+            .map_or(f64::NAN, |s| s.arc)
+    };
     for (c, shift) in curves.iter().zip(shifts) {
         let segments: Vec<String> = c
             .tags

@@ -56,7 +56,7 @@
 //! assert!((wheel[399] - 0.08 * 3.99).abs() < 0.001);
 //! ```
 
-use super::speed::median;
+use super::speed::{median, sd_of_differences};
 use nalgebra::Vector3;
 
 /// Half-width of the central difference that gives the wheel's speed, s.
@@ -208,10 +208,10 @@ impl Signals<'_> {
     }
 }
 
-/// The noise of one sample of a signal whose first differences are `d` (their median
-/// absolute value, for Gaussian noise; a difference has twice the variance).
+/// The noise of one sample of a signal whose first differences are `d` (absolute values; a
+/// difference has twice the variance).
 fn noise_of(d: impl Iterator<Item = f64>) -> f64 {
-    median(d.collect()).unwrap_or(0.0) / 0.6745 / std::f64::consts::SQRT_2
+    sd_of_differences(d) / std::f64::consts::SQRT_2
 }
 
 /// Finds the skids of one curve's samples and fills them (see the module docs): `t` sample

@@ -192,11 +192,16 @@ fn best_pulse(
     best
 }
 
-/// The noise variance of `y` per sample, from its first differences (robust: the median of
-/// their absolute values; a difference of two samples has twice the variance).
+/// The standard deviation of the differences `diffs` (their absolute values), robustly: the
+/// median over 0.6745, the median absolute value of a Gaussian's; 0 for none.
+pub(super) fn sd_of_differences(diffs: impl Iterator<Item = f64>) -> f64 {
+    median(diffs.collect()).unwrap_or(0.0) / 0.6745
+}
+
+/// The noise variance of `y` per sample, from its first differences (a difference of two
+/// samples has twice the variance).
 fn noise_variance(y: &[f64]) -> f64 {
-    let d = y.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-    let sigma = median(d).unwrap_or(0.0) / 0.6745;
+    let sigma = sd_of_differences(y.windows(2).map(|w| (w[1] - w[0]).abs()));
     sigma * sigma / 2.0
 }
 
