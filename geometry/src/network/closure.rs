@@ -108,6 +108,8 @@ struct Candidate {
 struct Drops {
     energy: f64,
     dof: f64,
+    /// Mean stiffness of the segments, 1/m² (to read an energy as a length).
+    mean_c: f64,
     tags: Vec<Candidate>,
     /// Per segment: its curve (position in the slice), `|e_s|` (m) and `c_s |e_s|²`.
     segments: Vec<(usize, f64, f64)>,
@@ -257,10 +259,45 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
         .collect();
     Some(Drops {
         energy,
+        mean_c,
         dof: (3 * loops).saturating_sub(3).max(1) as f64,
         tags,
         segments,
     })
+}
+
+/// How the loops a tag closes fit beside the network's other loops (issue 34's test of a
+/// join): see [`loop_test`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopFit {
+    /// The network's misfit without the tag: the root mean square, per degree of freedom of
+    /// its other loops, of what a segment of the network's mean stiffness misses by, m;
+    /// `None` when no other loop is left to compare with.
+    pub others_m: Option<f64>,
+    /// The same measure for the loops the tag closes alone (the energy it adds, over its 3
+    /// degrees of freedom), m.
+    pub own_m: f64,
+}
+
+/// For each of `tags` (`(curve position in curves, tag position in its nodes)`), how the
+/// loops it closes fit beside the others ([`LoopFit`]); `None` for a tag that frees nothing
+/// (its node held by its curve alone) or where the network has no loop.
+pub fn loop_test(curves: &[UniformCurve], tags: &[(usize, usize)]) -> Vec<Option<LoopFit>> {
+    let Some(d) = drops(curves) else {
+        return vec![None; tags.len()];
+    };
+    let length = |energy_per_dof: f64| (energy_per_dof.max(0.0) / d.mean_c).sqrt();
+    tags.iter()
+        .map(|&(ci, tag)| {
+            let c = d.tags.iter().find(|c| c.curve == ci && c.tag == tag)?;
+            // `d.dof` counts the loops but one: those left when the tag is let go.
+            let dof = d.dof;
+            Some(LoopFit {
+                others_m: (dof >= 3.0).then(|| length((d.energy - c.drop) / dof)),
+                own_m: length(c.drop / 3.0),
+            })
+        })
+        .collect()
 }
 
 /// Whether tag `tag` of `c` repeats a node the curve passes elsewhere (not the closing pair
@@ -285,6 +322,10 @@ pub struct ClosureReport {
     /// How each curve closes the network's loops once the tags are detached (empty when the
     /// network has no loop), in the order of the curves.
     pub curves: Vec<CurveMisfit>,
+    /// The network's closure misfit: the root mean square, per degree of freedom of its
+    /// loops, of what a segment of the network's mean stiffness misses by, m (the measure of
+    /// [`LoopFit`]); `None` without loops.
+    pub misfit_m: Option<f64>,
 }
 
 /// How one curve closes the network's loops: what the operator needs to know to decide what
@@ -479,6 +520,7 @@ pub fn detach_outlier_tags(
     };
     if let Some(d) = last {
         out.curves = curve_misfits(curves, &d, &out.detached);
+        out.misfit_m = Some((d.energy / d.dof / d.mean_c).max(0.0).sqrt());
     }
     out
 }

@@ -19,6 +19,7 @@ pub mod prefilter;
 pub mod regression;
 
 use crate::curve::Curve;
+use join::{Join, JoinReport, JoinSettings, RefusedJoin};
 use nalgebra::UnitQuaternion;
 use poisson::{PoissonSolver, Positions};
 use prefilter::{prefilter_with_kinks, PrefilterParams, UniformCurve};
@@ -64,6 +65,18 @@ pub struct NetworkReport {
     /// How each curve closes the network's loops (the loop-closure test's misfit, before the
     /// regression), with the tags that explain most of it marked; empty without loops.
     pub closure: Vec<closure::CurveMisfit>,
+    /// The network's closure misfit ([`closure::ClosureReport::misfit_m`]), m.
+    pub closure_misfit_m: Option<f64>,
+    /// Nodes tagged on one curve joined to another curve that passes them, and crossings
+    /// nobody tagged joined under fresh nodes (issue 34; [`Reconstructor::run_joined`]).
+    pub joined: Vec<join::JoinReport>,
+    /// Crossings nobody tagged, not joined (`join_untagged` off), for the operator to tag or
+    /// refuse.
+    pub proposed: Vec<join::Proposal>,
+    /// Joins undone, and why.
+    pub joins_refused: Vec<join::RefusedJoin>,
+    /// Reconstructions the joins took beyond the first (0 when nothing was joined).
+    pub join_passes: usize,
     pub timings_ms: Timings,
 }
 
@@ -74,6 +87,8 @@ pub struct Timings {
     pub prefilter: f64,
     pub regression: f64,
     pub poisson: f64,
+    /// The joins' passes and tests (issue 34), beyond the first reconstruction.
+    pub join: f64,
 }
 
 /// A problem the reconstruction met, naming the curve and node where it has them; its text
@@ -94,6 +109,10 @@ pub enum NetworkWarning {
     InParts { components: usize },
     /// A crease curve whose other face is unknown: surfaced as a smooth curve.
     CreaseUnknown(crease::CreaseUnknown),
+    /// A join undone: its loops do not close, or the operator refused it.
+    JoinRefused(join::RefusedJoin),
+    /// The joins still moved after [`join::MAX_PASSES`] reconstructions.
+    JoinsUnsettled { moved_m: f64 },
 }
 
 impl NetworkWarning {
@@ -107,6 +126,8 @@ impl NetworkWarning {
             NetworkWarning::PoissonFailed(_) => "poisson_failed",
             NetworkWarning::InParts { .. } => "network_in_parts",
             NetworkWarning::CreaseUnknown(_) => "crease_other_face_unknown",
+            NetworkWarning::JoinRefused(_) => "join_refused",
+            NetworkWarning::JoinsUnsettled { .. } => "joins_unsettled",
         }
     }
 
@@ -117,6 +138,7 @@ impl NetworkWarning {
             NetworkWarning::TagDetached(d) => Some(d.curve),
             NetworkWarning::TagRefused(r) => Some(r.curve),
             NetworkWarning::CreaseUnknown(c) => Some(c.curve()),
+            NetworkWarning::JoinRefused(r) => Some(r.curve),
             _ => None,
         }
     }
@@ -126,6 +148,7 @@ impl NetworkWarning {
         match self {
             NetworkWarning::TagDetached(d) => Some(d.node),
             NetworkWarning::TagRefused(r) => Some(r.node),
+            NetworkWarning::JoinRefused(r) => Some(r.node),
             _ => None,
         }
     }
@@ -146,6 +169,20 @@ impl std::fmt::Display for NetworkWarning {
                 "the network falls apart into {components} parts with no node in common: each is reconstructed on its own, their relative placement is arbitrary"
             ),
             NetworkWarning::CreaseUnknown(c) => c.fmt(f),
+            NetworkWarning::JoinRefused(r) => write!(
+                f,
+                "node {} not joined to curve {} ({:.1} mm from it): {}",
+                r.node,
+                r.curve,
+                r.distance_m * 1e3,
+                r.reason
+            ),
+            NetworkWarning::JoinsUnsettled { moved_m } => write!(
+                f,
+                "the joined nodes still moved {:.1} mm along their curves after {} reconstructions: kept where the last one put them",
+                moved_m * 1e3,
+                join::MAX_PASSES
+            ),
         }
     }
 }
@@ -170,6 +207,64 @@ impl std::fmt::Display for Unreconstructed {
         }
         Ok(())
     }
+}
+
+/// What the Poisson solve and the loop test say of one sliding tag (a join's).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Slide {
+    /// Where the loops put the node along its curve from the tag, m (one Gauss–Newton step).
+    sigma: f64,
+    /// How the loops the tag closes fit beside the others.
+    fit: Option<closure::LoopFit>,
+}
+
+/// A join in the passes of [`Reconstructor::run_joined`].
+#[derive(Debug, Clone)]
+struct Pending {
+    join: Join,
+    /// A crossing nobody tagged, under a fresh node.
+    untagged: bool,
+    /// How its loops fit in the last reconstruction.
+    fit: Option<closure::LoopFit>,
+    /// The distance its tag had in the last reconstruction, m.
+    used_d: f64,
+}
+
+impl Pending {
+    fn new(join: Join, untagged: bool) -> Self {
+        Pending {
+            used_d: join.d,
+            join,
+            untagged,
+            fit: None,
+        }
+    }
+}
+
+/// The join whose loops misfit most beyond [`join::REFUSE_RATIO`] × the network's other
+/// loops, if any.
+fn worst_join(joins: &[Pending]) -> Option<usize> {
+    joins
+        .iter()
+        .enumerate()
+        .filter_map(|(k, x)| {
+            let f = x.fit?;
+            let limit = join::REFUSE_RATIO * f.others_m?.max(join::MISFIT_FLOOR_M);
+            (f.own_m > limit).then_some((k, f.own_m / limit))
+        })
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|x| x.0)
+}
+
+/// The distances of the tags either side of `j`'s tag on its curve in `work`.
+fn segment_around(work: &[Curve], j: &Join) -> (f64, f64) {
+    work.iter()
+        .find(|c| c.index == j.curve)
+        .and_then(|c| {
+            let t = c.tags.iter().position(|t| t.node == j.node)?;
+            Some((c.tags.get(t.checked_sub(1)?)?.d, c.tags.get(t + 1)?.d))
+        })
+        .unwrap_or((j.d, j.d))
 }
 
 /// The reconstruction of a scan.
@@ -244,7 +339,7 @@ impl Reconstructor {
     /// reconstructed, the warnings that say why. The result depends only on `curves` and `p` (the caches change the time it takes, not the
     /// bits).
     pub fn run(&mut self, curves: &[Curve], p: &NetworkParams) -> Result<Network, Unreconstructed> {
-        self.run_inner(curves, p, false)
+        self.run_inner(curves, p, false, &[]).map(|(n, _)| n)
     }
 
     /// As [`run`](Self::run), with the regression warm-started from the previous run's
@@ -257,15 +352,243 @@ impl Reconstructor {
         curves: &[Curve],
         p: &NetworkParams,
     ) -> Result<Network, Unreconstructed> {
-        self.run_inner(curves, p, true)
+        self.run_inner(curves, p, true, &[]).map(|(n, _)| n)
     }
 
+    /// As [`run`](Self::run), with nodes joined after the fact (issue 34, [`join`]): a node
+    /// tagged on one curve only joins a curve that passes it ([`join::find_joins`]), and with
+    /// [`JoinSettings::untagged`] two curves that cross with no node there share a fresh one
+    /// ([`join::find_crossings`]); the others are proposed.
+    ///
+    /// The joins settle in passes, one reconstruction each: every joined tag slides along
+    /// its curve where the Poisson solve puts it ([`poisson::PoissonSolver::solve_sliding`],
+    /// the slides solved together), until none moves more than [`join::SETTLED_M`] (at most
+    /// [`join::MAX_PASSES`]); joins found in the moved network join in the next pass. Once
+    /// settled, the join whose loops misfit worst is refused when beyond
+    /// [`join::REFUSE_RATIO`] × the network's other loops, and the passes go on without it.
+    /// A refused join is never proposed again, so the passes end. Without any join the result
+    /// is [`run`](Self::run)'s, to the bit.
+    pub fn run_joined(
+        &mut self,
+        curves: &[Curve],
+        p: &NetworkParams,
+        js: &JoinSettings,
+    ) -> Result<Network, Unreconstructed> {
+        let (mut net, _) = self.run_inner(curves, p, false, &[])?;
+        if !js.enabled() {
+            return Ok(net);
+        }
+        let t0 = Instant::now();
+        // The reach of the joins: at least the set distance, and beyond the network's noise.
+        let mut js = js.clone();
+        js.params.distance_m = js
+            .params
+            .distance_m
+            .max(js.params.noise_factor * net.report.closure_misfit_m.unwrap_or(0.0));
+        let js = &js;
+        let mut fresh_node = curves
+            .iter()
+            .flat_map(|c| c.tags.iter().map(|t| t.node))
+            .filter(|&n| n < crate::curve::ANONYMOUS_NODE_BASE)
+            .max()
+            .map_or(0, |n| n + 1);
+        let mut joins: Vec<Pending> = Vec::new();
+        let mut refused: Vec<RefusedJoin> = Vec::new();
+        // (node, curve) refused, and pairs of curves whose untagged crossing was refused.
+        let mut refused_at: Vec<(u32, usize)> = Vec::new();
+        let mut refused_pairs: Vec<(usize, usize)> = Vec::new();
+        let mut passes = 0;
+        let mut moved = 0.0_f64;
+        loop {
+            let mut fresh = Vec::new();
+            // A network in parts: each part moved to where its lonely nodes fit first.
+            let placed;
+            let seen = if net.positions.components > 1 {
+                let mut moved = net.positions.clone();
+                join::place_parts(&mut moved, &js.params);
+                placed = moved;
+                &placed
+            } else {
+                &net.positions
+            };
+            for j in join::find_joins(seen, &js.params) {
+                if joins
+                    .iter()
+                    .any(|x| x.join.node == j.node && x.join.curve == j.curve)
+                    || refused_at.contains(&(j.node, j.curve))
+                {
+                    continue;
+                }
+                if js.refuses(j.home, j.curve) {
+                    refused_at.push((j.node, j.curve));
+                    refused.push(RefusedJoin::configured(&j));
+                    continue;
+                }
+                fresh.push(Pending::new(j, false));
+            }
+            if js.untagged {
+                for pr in join::find_crossings(seen, &js.params) {
+                    let [a, b] = pr.curves;
+                    if js.refuses(a, b) || refused_pairs.contains(&(a, b)) {
+                        continue;
+                    }
+                    for (k, (curve, home)) in [(a, b), (b, a)].into_iter().enumerate() {
+                        let j = Join {
+                            node: fresh_node,
+                            curve,
+                            home,
+                            d: pr.d[k],
+                            arc_length_m: 0.0,
+                            distance_m: pr.distance_m,
+                            normal_deg: pr.normal_deg,
+                        };
+                        fresh.push(Pending::new(j, true));
+                    }
+                    fresh_node += 1;
+                }
+            }
+            let mut refusing = false;
+            if fresh.is_empty() && moved <= join::SETTLED_M {
+                // Settled: the join whose loops misfit worst, if beyond the others' noise.
+                let Some(k) = worst_join(&joins) else { break };
+                let out = joins[k].clone();
+                let f = out.fit.expect("judged by its fit");
+                refused.push(RefusedJoin {
+                    node: out.join.node,
+                    curve: out.join.curve,
+                    distance_m: out.join.distance_m,
+                    misfit_before_m: f.others_m,
+                    misfit_after_m: Some(f.own_m),
+                    reason: format!(
+                        "the loops it closes miss by {:.1} mm, more than {} times the network's other loops ({:.1} mm): the curves pass there without crossing",
+                        f.own_m * 1e3,
+                        join::REFUSE_RATIO,
+                        f.others_m.unwrap_or(0.0) * 1e3
+                    ),
+                });
+                refused_at.push((out.join.node, out.join.curve));
+                if out.untagged {
+                    let (a, b) = (
+                        out.join.curve.min(out.join.home),
+                        out.join.curve.max(out.join.home),
+                    );
+                    refused_pairs.push((a, b));
+                }
+                // An untagged crossing's fresh node goes with both its tags.
+                joins.retain(|x| {
+                    x.join.node != out.join.node
+                        || (!out.untagged && x.join.curve != out.join.curve)
+                });
+                refusing = true;
+            } else if passes >= join::MAX_PASSES {
+                net.warnings
+                    .push(NetworkWarning::JoinsUnsettled { moved_m: moved });
+                break;
+            }
+            joins.extend(fresh);
+            passes += 1;
+            if joins.is_empty() {
+                net = self.run_inner(curves, p, false, &[])?.0;
+                break;
+            }
+            let mut work = curves.to_vec();
+            let now: Vec<Join> = joins.iter().map(|x| x.join.clone()).collect();
+            join::apply_joins(&mut work, &now);
+            let slides: Vec<(usize, u32)> = now.iter().map(|j| (j.curve, j.node)).collect();
+            let (n, slid) = match self.run_inner(&work, p, false, &slides) {
+                Ok(x) => x,
+                Err(e) => {
+                    // The joined network cannot be reconstructed: keep the last that could.
+                    for x in joins.drain(..) {
+                        refused.push(RefusedJoin {
+                            reason: format!("the joined network could not be reconstructed: {e}"),
+                            ..RefusedJoin::configured(&x.join)
+                        });
+                    }
+                    break;
+                }
+            };
+            net = n;
+            moved = if refusing { 1.0 } else { 0.0 };
+            let mut lost = Vec::new();
+            for (k, s) in slid.iter().enumerate() {
+                let x = &mut joins[k];
+                x.used_d = x.join.d;
+                let Some(s) = s else {
+                    lost.push(k);
+                    continue;
+                };
+                x.fit = s.fit;
+                let (lo, hi) = segment_around(&work, &x.join);
+                let margin = join::SLIDE_MARGIN_M.min(0.25 * (hi - lo));
+                let step = s.sigma.clamp(-js.params.distance_m, js.params.distance_m);
+                let d = (x.join.d + step).clamp(lo + margin, (hi - margin).max(lo + margin));
+                moved = moved.max((d - x.join.d).abs());
+                x.join.d = d;
+            }
+            for &k in lost.iter().rev() {
+                let x = joins.remove(k);
+                refused_at.push((x.join.node, x.join.curve));
+                refused.push(RefusedJoin {
+                    reason: "the loop-closure test detached the joined tag".into(),
+                    ..RefusedJoin::configured(&x.join)
+                });
+                moved = moved.max(1.0);
+            }
+        }
+        let at_d0: HashMap<usize, f64> = curves
+            .iter()
+            .filter_map(|c| Some((c.index, c.tags.first()?.d)))
+            .collect();
+        net.report.joined = joins
+            .iter()
+            .map(|x| JoinReport {
+                node: x.join.node,
+                curve: x.join.curve,
+                arc_length_m: x.used_d - at_d0.get(&x.join.curve).copied().unwrap_or(0.0),
+                distance_m: x.join.distance_m,
+                normal_deg: x.join.normal_deg,
+                misfit_before_m: x.fit.and_then(|f| f.others_m),
+                misfit_after_m: x.fit.map(|f| f.own_m),
+                untagged: x.untagged,
+            })
+            .collect();
+        net.report.proposed = join::find_crossings(&net.positions, &js.params)
+            .into_iter()
+            .filter(|pr| !js.refuses(pr.curves[0], pr.curves[1]))
+            .collect();
+        net.warnings
+            .extend(refused.iter().cloned().map(NetworkWarning::JoinRefused));
+        net.report.joins_refused = refused;
+        net.report.join_passes = passes;
+        net.report.timings_ms.join = t0.elapsed().as_secs_f64() * 1e3;
+        Ok(net)
+    }
+
+    /// The reconstruction with the tags `slides` (`(scan index of the curve, node)`) free to
+    /// slide along their curve: for each, the slide the Poisson solve gives it (m, one
+    /// Gauss–Newton step towards where the loops put the node), `None` for a tag not found.
+    /// What [`run_joined`](Self::run_joined) iterates.
+    pub fn run_sliding(
+        &mut self,
+        curves: &[Curve],
+        p: &NetworkParams,
+        slides: &[(usize, u32)],
+    ) -> Result<(Network, Vec<Option<f64>>), Unreconstructed> {
+        let (net, s) = self.run_inner(curves, p, false, slides)?;
+        Ok((net, s.iter().map(|x| x.map(|x| x.sigma)).collect()))
+    }
+
+    /// The reconstruction, with the tags `slides` (`(scan index of the curve, node)`, issue
+    /// 34's joins) free to slide along their curve in the Poisson solve: for each, where the
+    /// loops put it and how its loops fit ([`Slide`]).
     fn run_inner(
         &mut self,
         curves: &[Curve],
         p: &NetworkParams,
         warm: bool,
-    ) -> Result<Network, Unreconstructed> {
+        slides: &[(usize, u32)],
+    ) -> Result<(Network, Vec<Option<Slide>>), Unreconstructed> {
         let mut warnings = Vec::new();
         let t0 = Instant::now();
         let mut uniform: Vec<UniformCurve> = Vec::new();
@@ -388,7 +711,26 @@ impl Reconstructor {
             }
         }
         let t2 = Instant::now();
-        let mut positions = match self.poisson.solve(&uniform) {
+        // Each slide's curve (position) and the tag's position in its nodes.
+        let at: Vec<Option<(usize, usize)>> = slides
+            .iter()
+            .map(|&(curve, node)| {
+                let ci = uniform.iter().position(|u| u.index == curve)?;
+                let tag = uniform[ci].nodes.iter().position(|x| x.1 == node)?;
+                Some((ci, tag))
+            })
+            .collect();
+        let found: Vec<(usize, usize)> = at.iter().flatten().copied().collect();
+        let fits = if found.is_empty() {
+            Vec::new()
+        } else {
+            closure::loop_test(&uniform, &found)
+        };
+        let samples: Vec<(usize, usize)> = found
+            .iter()
+            .map(|&(ci, tag)| (ci, uniform[ci].nodes[tag].0))
+            .collect();
+        let (mut positions, sigma) = match self.poisson.solve_sliding(&uniform, &samples) {
             Ok(p) => p,
             Err(e) => {
                 tracing::error!("Poisson reconstruction failed: {e}");
@@ -417,18 +759,40 @@ impl Reconstructor {
             max_node_normal_angle_deg: max_node_normal_angle(&positions),
             provisional: regression.frames_moved < regression.frames,
             regression,
+            closure_misfit_m: closure.misfit_m,
             closure: closure.curves,
             timings_ms: Timings {
                 prefilter: (t1 - t0).as_secs_f64() * 1e3,
                 regression: (t2 - t1).as_secs_f64() * 1e3,
                 poisson: (t3 - t2).as_secs_f64() * 1e3,
+                join: 0.0,
             },
+            joined: Vec::new(),
+            proposed: Vec::new(),
+            joins_refused: Vec::new(),
+            join_passes: 0,
         };
-        Ok(Network {
-            positions,
-            report,
-            warnings,
-        })
+        let mut k = 0;
+        let slid = at
+            .iter()
+            .map(|a| {
+                a.map(|_| {
+                    k += 1;
+                    Slide {
+                        sigma: sigma[k - 1],
+                        fit: fits[k - 1],
+                    }
+                })
+            })
+            .collect();
+        Ok((
+            Network {
+                positions,
+                report,
+                warnings,
+            },
+            slid,
+        ))
     }
 }
 

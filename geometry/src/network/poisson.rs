@@ -58,6 +58,10 @@ struct Edge {
     v: Vector3<f64>,
 }
 
+/// Ridge on each slide, relative to its edges' weight: a slide no loop constrains stays
+/// within about a thousandth of its gap.
+const SLIDE_RIDGE: f64 = 1e-6;
+
 impl PoissonSolver {
     /// Symbolic factorisations computed so far (for tests and benchmarks).
     pub fn symbolic_count(&self) -> usize {
@@ -70,6 +74,24 @@ impl PoissonSolver {
 
     /// Reconstructs positions from the curves' frames.
     pub fn solve(&mut self, curves: &[UniformCurve]) -> Result<Positions, SolveError> {
+        self.solve_sliding(curves, &[]).map(|(p, _)| p)
+    }
+
+    /// As [`solve`](Self::solve), with some tags free to slide along their curve (issue 34's
+    /// joins): each of `slides`, `(curve position in curves, sample index of the tag)`, gets
+    /// an unknown `σ`, the node lying at `σ` along the curve's tangent from the curve's
+    /// sample there (the chain's point at the tag is `x_node − σ T`). Returns the positions
+    /// (the node at its own unknown) and the `σ` of each slide, m: where the curve's loops
+    /// put the node along it, to first order (one Gauss–Newton step of the tag's distance).
+    ///
+    /// The two edges at a sliding tag read `x_b − x_a − h t ± σ T`; `σ` is eliminated by its
+    /// Schur complement (`#slides` extra solves with the same factor, a `#slides` square
+    /// dense system), with a small ridge so that a tag no loop constrains stays put.
+    pub fn solve_sliding(
+        &mut self,
+        curves: &[UniformCurve],
+        slides: &[(usize, usize)],
+    ) -> Result<(Positions, Vec<f64>), SolveError> {
         // Unknowns: nodes first (in index order), then every other sample.
         let mut node_var: BTreeMap<u32, usize> = BTreeMap::new();
         for c in curves {
@@ -152,7 +174,8 @@ impl PoissonSolver {
         }
         let f = self.pattern.factor(n, entries, &vals)?;
         f.solve(&mut rhs);
-        let x: Vec<Vector3<f64>> = rhs.iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
+        let mut x: Vec<Vector3<f64>> = rhs.iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
+        let sigma = slide(&f, &mut x, curves, &var_of, &tangents, slides);
         let out_curves = curves
             .iter()
             .enumerate()
@@ -167,12 +190,112 @@ impl PoissonSolver {
                 d: c.d.clone(),
             })
             .collect();
-        Ok(Positions {
-            curves: out_curves,
-            nodes: node_var.iter().map(|(&nd, &v)| (nd, x[v])).collect(),
-            components: gauges.len(),
-        })
+        Ok((
+            Positions {
+                curves: out_curves,
+                nodes: node_var.iter().map(|(&nd, &v)| (nd, x[v])).collect(),
+                components: gauges.len(),
+            },
+            sigma,
+        ))
     }
+}
+
+/// The slides' `σ` by their Schur complement, and `x` (the solution without them, #unknowns
+/// by 3) corrected for them: `x ← x₀ − L⁻¹ C σ` with `(D − Cᵀ L⁻¹ C) σ = g − Cᵀ x₀`, where
+/// `C` (#unknowns by #slides, 3-vectors) couples each slide to the unknowns of its two edges,
+/// `D` its own weight and `g` its edges' data. A slide whose edges are missing (a tag at a
+/// curve's end) is 0.
+fn slide(
+    f: &crate::sparse_llt::SpdFactor,
+    x: &mut [Vector3<f64>],
+    curves: &[UniformCurve],
+    var_of: &[Vec<usize>],
+    tangents: &[Vec<Vector3<f64>>],
+    slides: &[(usize, usize)],
+) -> Vec<f64> {
+    let m = slides.len();
+    if m == 0 {
+        return Vec::new();
+    }
+    // Per slide: its coupling (unknown, 3-vector), its own weight and its data.
+    let mut coupling: Vec<Vec<(usize, Vector3<f64>)>> = vec![Vec::new(); m];
+    let mut dd = nalgebra::DMatrix::<f64>::zeros(m, m);
+    let mut g = nalgebra::DVector::<f64>::zeros(m);
+    // Edges at the slides: (slide, sign, edge's a, b, weight, data).
+    let mut at: Vec<(usize, f64, usize, usize, f64, Vector3<f64>)> = Vec::new();
+    for (k, &(ci, i)) in slides.iter().enumerate() {
+        let Some(c) = curves.get(ci) else { continue };
+        if i >= c.q.len() {
+            continue;
+        }
+        for (j, sign) in [(i.wrapping_sub(1), -1.0), (i, 1.0)] {
+            if j >= c.q.len().saturating_sub(1) {
+                continue;
+            }
+            let (a, b) = (var_of[ci][j], var_of[ci][j + 1]);
+            if a == b {
+                continue;
+            }
+            let h = c.edge_h(j);
+            let arriving = if c.kinked(j + 1) {
+                c.arriving(j + 1) * Vector3::x()
+            } else {
+                tangents[ci][j + 1]
+            };
+            let v = (tangents[ci][j] + arriving) * (0.5 * h);
+            at.push((k, sign, a, b, 1.0 / (h * h), v));
+        }
+    }
+    let tangent = |k: usize| tangents[slides[k].0][slides[k].1];
+    for &(k, sign, a, b, w, v) in &at {
+        let t = tangent(k);
+        coupling[k].push((b, t * (w * sign)));
+        coupling[k].push((a, t * (-w * sign)));
+        g[k] += w * sign * t.dot(&v);
+        // Other slides on the same edge (two joins one edge apart) couple with this one.
+        for &(l, sl, al, bl, _, _) in &at {
+            if al == a && bl == b {
+                dd[(k, l)] += w * sign * sl * t.dot(&tangent(l));
+            }
+        }
+    }
+    // L⁻¹ C, one solve per slide.
+    let mut y: Vec<Vec<[f64; 3]>> = Vec::with_capacity(m);
+    for ck in &coupling {
+        let mut col = vec![[0.0; 3]; x.len()];
+        for (v, c) in ck {
+            for d in 0..3 {
+                col[*v][d] += c[d];
+            }
+        }
+        f.solve(&mut col);
+        y.push(col);
+    }
+    let mut s = dd.clone();
+    for k in 0..m {
+        g[k] -= coupling[k].iter().map(|(v, c)| c.dot(&x[*v])).sum::<f64>();
+        for l in 0..m {
+            let cy: f64 = coupling[k]
+                .iter()
+                .map(|(v, c)| c.dot(&Vector3::from(y[l][*v])))
+                .sum();
+            s[(k, l)] -= cy;
+        }
+        s[(k, k)] += SLIDE_RIDGE * dd[(k, k)].max(1.0);
+    }
+    let Some(sigma) = s.clone().cholesky().map(|ch| ch.solve(&g)) else {
+        return vec![0.0; m];
+    };
+    if sigma.iter().any(|v| !v.is_finite()) {
+        return vec![0.0; m];
+    }
+    for (k, yk) in y.iter().enumerate() {
+        for (xi, yi) in x.iter_mut().zip(yk) {
+            *xi -= Vector3::from(*yi) * sigma[k];
+        }
+    }
+    sigma.iter().copied().collect()
 }
 
 #[cfg(test)]
