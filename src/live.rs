@@ -86,6 +86,8 @@ pub struct Live {
 pub struct LiveSettings {
     pub out_dir: PathBuf,
     pub network: sfs_geometry::network::NetworkParams,
+    /// Nodes joined after the fact (`[network] join_*`).
+    pub joins: sfs_geometry::network::join::JoinSettings,
     /// Surfacing settings; `None`: the network only.
     pub surface: Option<sfs_geometry::surface::fit::SurfaceParams>,
     /// Keep a copy of `network.glb` per curve (`snapshots/curve-NNN.glb`).
@@ -156,7 +158,7 @@ fn lock(m: &Mutex<Mail>) -> std::sync::MutexGuard<'_, Mail> {
 
 fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
     let mut scan = Scan::default();
-    let mut pipeline = Pipeline::new();
+    let mut pipeline = Pipeline::with_joins(settings.joins.clone());
     let mut update_ms = Vec::new();
     let mut settle_ms = Vec::new();
     let mut report = LiveReport::default();

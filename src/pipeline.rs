@@ -10,6 +10,7 @@
 use crate::atomic::OutputError;
 use crate::scan::Curve;
 use crate::warning::Warning;
+use sfs_geometry::network::join::JoinSettings;
 use sfs_geometry::network::poisson::Positions;
 use sfs_geometry::network::{Network, NetworkParams, Reconstructor};
 use sfs_geometry::surface::cycles::NetworkSegments;
@@ -100,14 +101,25 @@ impl Products {
 #[derive(Debug, Default)]
 pub struct Pipeline {
     reconstructor: Reconstructor,
+    /// Nodes joined after the fact ([`Reconstructor::run_joined`]).
+    joins: JoinSettings,
     surfacer: Surfacer,
     /// The log's rate limit for the warnings of every run (the geometry logs none itself).
     log: crate::warning::LogLimiter,
 }
 
 impl Pipeline {
+    /// With the default joins ([`JoinSettings::default`]).
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// With the joins of `joins` (`[network] join_*`).
+    pub fn with_joins(joins: JoinSettings) -> Self {
+        Pipeline {
+            joins,
+            ..Self::default()
+        }
     }
 
     /// Reconstructs the network of `curves`, and its surface when `surface` is given.
@@ -125,7 +137,7 @@ impl Pipeline {
     /// The network of `curves` alone (no surface, no glb yet).
     fn reconstruct(&mut self, curves: &[Curve], network: &NetworkParams) -> Products {
         let t0 = Instant::now();
-        let net = self.reconstructor.run(curves, network);
+        let net = self.reconstructor.run_joined(curves, network, &self.joins);
         let mut out = Products {
             network_ms: t0.elapsed().as_secs_f64() * 1e3,
             ..Default::default()

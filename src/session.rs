@@ -432,6 +432,7 @@ impl Flow {
                 crate::live::Live::spawn(crate::live::LiveSettings {
                     out_dir: out_dir.to_owned(),
                     network: settings.network,
+                    joins: settings.joins.clone(),
                     surface: settings.surface,
                     snapshots: settings.snapshots,
                     source: description.to_owned(),
@@ -679,7 +680,7 @@ impl Flow {
                 curves,
             }) if curves == scan.curves.len() => (p, Some(report), false),
             other => (
-                Pipeline::new().run(
+                Pipeline::with_joins(settings.joins.clone()).run(
                     &scan.curves,
                     &crate::pipeline::exact_network(&settings.network),
                     settings

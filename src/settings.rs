@@ -25,6 +25,8 @@ pub struct Settings {
     pub serial: SerialSettings,
     pub acquisition: AcquisitionConfig,
     pub network: NetworkParams,
+    /// Nodes joined after the fact (`[network] join_*`, `refuse`; issue 34).
+    pub joins: sfs_geometry::network::join::JoinSettings,
     /// Surfacing settings; `None` writes the network only.
     pub surface: Option<SurfaceParams>,
     /// Reconstruct after every finished curve (the live worker), not only at the end.
@@ -85,6 +87,7 @@ impl Default for Settings {
                 local_window: crate::pipeline::LIVE_LOCAL_WINDOW,
                 ..Default::default()
             },
+            joins: Default::default(),
             surface: Some(SurfaceParams {
                 soft: crate::pipeline::SCAN_SOFTNESS,
                 reuse_tolerance: crate::pipeline::LIVE_REUSE_TOLERANCE,

@@ -164,6 +164,7 @@ fn curves_that_end_during_a_reconstruction_coalesce() {
     let mut live = sfs::live::Live::spawn(sfs::live::LiveSettings {
         out_dir: dir.clone(),
         network: Default::default(),
+        joins: Default::default(),
         surface: sfs::settings::Settings::default().surface,
         snapshots: false,
         source: "test".into(),

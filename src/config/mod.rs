@@ -61,6 +61,11 @@
 //! xi = 1e4                           # weight of the node normal consistency
 //! local_window = 10                  # live: samples either side of the new curve's nodes
 //!                                    # regressed again (0: the whole network every update)
+//! join_distance = 0.015              # a node tagged on one curve joins another curve passing
+//!                                    #   within this, m (0: no joins, no proposals)
+//! join_normal_deg = 15.0             #   with normals agreeing within this, degrees
+//! join_untagged = false              # true: crossings nobody tagged are joined too (else proposed)
+//! refuse = [[3, 7]]                  # pairs of curves never joined nor proposed
 //!
 //! [surface]                          # surfacing with normal control
 //! enabled = true                     # false: write the network only
@@ -269,6 +274,7 @@ impl ConfigFile {
         let mut acquisition = self.acquisition_config(file)?;
         acquisition.kinds = self.curve_kinds(file)?;
         let network = self.network_params(file)?;
+        let joins = self.join_settings(file)?;
         let surface = self.surface_params(file)?;
         let monitor = self.monitor_config(file, surface, &network)?;
         let settings = Settings {
@@ -279,6 +285,7 @@ impl ConfigFile {
             },
             acquisition,
             network,
+            joins,
             surface,
             live: self.output.live.unwrap_or(true) && self.monitor.is_none(),
             snapshots: self.output.snapshots.unwrap_or(false),
@@ -664,6 +671,29 @@ mod tests {
             .unwrap()
             .network;
         assert!(n.no_regression && (n.prefilter.h - 0.005).abs() < 1e-15);
+        // Issue 34: the joins' keys, and a bad one named.
+        let j = parse(&format!(
+            "{base}[network]\njoin_distance = 0.02\njoin_normal_deg = 10.0\njoin_untagged = true\nrefuse = [[3, 7]]\n"
+        ))
+        .unwrap()
+        .joins;
+        assert_eq!((j.params.distance_m, j.params.normal_deg), (0.02, 10.0));
+        assert_eq!(
+            j.params.noise_factor, 0.0,
+            "a set distance is the operator's"
+        );
+        assert!(j.untagged && j.refuses(7, 3) && !j.refuses(3, 4));
+        let d = parse(base).unwrap().joins;
+        assert_eq!(d, sfs_geometry::network::join::JoinSettings::default());
+        for (text, key) in [
+            ("join_distance = 2.0", "network.join_distance"),
+            ("join_normal_deg = -1.0", "network.join_normal_deg"),
+            ("refuse = [[3, 3]]", "network.refuse"),
+            ("refuse = [[3]]", "network.refuse"),
+        ] {
+            let e = parse(&format!("{base}[network]\n{text}\n")).unwrap_err();
+            assert_eq!(e.key, key, "{text}: {e}");
+        }
         assert_eq!(a.segment_lengths[&0], vec![0.3, 0.2]);
         assert!((a.calibration.mounting.angle() - 2f64.to_radians()).abs() < 1e-12);
         // Issue 18: curve kinds by index.

@@ -17,6 +17,10 @@ pub struct NetworkToml {
     pub stretch_length: Option<f64>,
     pub xi: Option<f64>,
     pub local_window: Option<usize>,
+    pub join_distance: Option<f64>,
+    pub join_normal_deg: Option<f64>,
+    pub join_untagged: Option<bool>,
+    pub refuse: Option<Vec<Vec<usize>>>,
 }
 
 impl ConfigFile {
@@ -72,5 +76,49 @@ impl ConfigFile {
             p.local_window = w;
         }
         Ok(p)
+    }
+
+    /// The joins of nodes tagged on one curve (issue 34): `join_distance`,
+    /// `join_normal_deg`, `join_untagged`, `refuse`.
+    pub(super) fn join_settings(
+        &self,
+        file: &Path,
+    ) -> Result<sfs_geometry::network::join::JoinSettings, ConfigError> {
+        let n = &self.network;
+        let mut j = sfs_geometry::network::join::JoinSettings::default();
+        let range = |key: &str, x: f64, lo: f64, hi: f64| {
+            if x.is_finite() && x >= lo && x <= hi {
+                Ok(x)
+            } else {
+                Err(ConfigError::new(
+                    file,
+                    format!("network.{key}"),
+                    format!("{x} is out of range [{lo}, {hi}]"),
+                ))
+            }
+        };
+        if let Some(x) = n.join_distance {
+            j.params.distance_m = range("join_distance", x, 0.0, 1.0)?;
+            j.params.noise_factor = 0.0;
+        }
+        if let Some(x) = n.join_normal_deg {
+            j.params.normal_deg = range("join_normal_deg", x, 0.0, 90.0)?;
+        }
+        j.untagged = n.join_untagged.unwrap_or(false);
+        for pair in n.refuse.iter().flatten() {
+            match pair[..] {
+                [a, b] if a != b => j.refuse.push((a, b)),
+                _ => {
+                    return Err(ConfigError::new(
+                        file,
+                        "network.refuse",
+                        format!(
+                            "{pair:?} is not a pair of two different curve indices (write refuse = [[3, 7]])"
+                        ),
+                    ))
+                }
+            }
+        }
+        Ok(j)
     }
 }
