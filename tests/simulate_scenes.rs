@@ -36,6 +36,8 @@ fn shipped_scenes_build_the_expected_networks() {
         ("relief", 32, 9, 1, 1),
         ("bumpy", 6, 3, 3, 0),
         ("torus-loops", 1, 2, 2, 0),
+        ("ellipsoid-dense", 20, 5, 5, 0),
+        ("parallel", 14, 5, 2, 1),
     ]);
 }
 

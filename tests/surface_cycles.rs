@@ -42,6 +42,8 @@ fn every_scene_traces_a_consistent_cell_complex() {
         ("bowl", 8, 1, 2),
         ("relief", 25, 1, 2),
         ("bumpy", 8, 0, 2),
+        ("ellipsoid-dense", 22, 0, 2),
+        ("parallel", 12, 1, 2),
     ]);
 }
 

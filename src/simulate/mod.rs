@@ -365,7 +365,8 @@ pub fn run_without(
 /// that two or more curves pass through; it can be left out on a curve where it is neither
 /// the first nor the last tag and which passes it once (so every curve keeps its ends, and
 /// the node stays tagged on another curve). Of the crossings that can, `fraction` (rounded to
-/// the nearest count) are chosen with `seed`, each left out on one such curve. Returns
+/// the nearest count) are chosen with `seed`, each left out on one such curve; never at a
+/// corner ([`operator::at_corner`]: the operator stands there to turn). Returns
 /// `(curve, tag)` pairs for [`Mistakes::untagged`], in scene order.
 pub fn untagged_crossings(scene: &Scene, fraction: f64, seed: u64) -> Vec<(usize, usize)> {
     let specs = scene.specs();
@@ -388,7 +389,9 @@ pub fn untagged_crossings(scene: &Scene, fraction: f64, seed: u64) -> Vec<(usize
                 .copied()
                 .filter(|&(ci, k)| {
                     let once = on.iter().filter(|x| x.0 == ci).count() == 1;
-                    once && k > 0 && k + 1 < specs[ci].tags.len()
+                    once && k > 0
+                        && k + 1 < specs[ci].tags.len()
+                        && !operator::at_corner(&specs[ci], k)
                 })
                 .collect::<Vec<_>>()
         })

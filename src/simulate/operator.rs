@@ -149,6 +149,14 @@ struct Param<'a> {
 /// A turn about the normal sharper than this at a node is a corner, degrees.
 pub const CORNER_DEG: f64 = 30.0;
 
+/// Whether tag `k` of `spec` is at a corner ([`CORNER_DEG`]), where the operator stands to
+/// turn (and so always types the node).
+pub fn at_corner(spec: &CurveSpec, k: usize) -> bool {
+    spec.tags
+        .get(k)
+        .is_some_and(|&(i, _)| Param::new(spec).corner.get(i).is_some_and(|c| c.is_some()))
+}
+
 impl<'a> Param<'a> {
     fn new(spec: &'a CurveSpec) -> Self {
         let p = &spec.points;

@@ -17,13 +17,14 @@ use nalgebra::Vector3;
 use std::collections::HashMap;
 
 /// The generators by the name a scene gives them (`[surface] generate = "…"`).
-pub const NAMES: [&str; 2] = ["relief", "bumpy"];
+pub const NAMES: [&str; 3] = ["relief", "bumpy", "ellipsoid"];
 
 /// The generated mesh called `name`, if there is one.
 pub fn generate(name: &str) -> Option<TriMesh> {
     match name {
         "relief" => Some(relief()),
         "bumpy" => Some(bumpy()),
+        "ellipsoid" => Some(ellipsoid()),
         _ => None,
     }
 }
@@ -104,6 +105,25 @@ pub fn bumpy_radius(d: &Vector3<f64>) -> f64 {
 /// A star-shaped closed surface ([`bumpy_radius`]) on an icosahedron subdivided 5 times
 /// (10 242 vertices, 20 480 triangles), normals out.
 pub fn bumpy() -> TriMesh {
+    star(bumpy_radius)
+}
+
+/// Semi-axes of the generated ellipsoid, m (those of the independent simulator's
+/// `ellipsoid` scenes).
+pub const ELLIPSOID_AXES: [f64; 3] = [0.50, 0.35, 0.25];
+
+/// The ellipsoid of semi-axes [`ELLIPSOID_AXES`] on the same subdivided icosahedron as
+/// [`bumpy`], normals out.
+pub fn ellipsoid() -> TriMesh {
+    star(|d| {
+        let [a, b, c] = ELLIPSOID_AXES;
+        1.0 / ((d.x / a).powi(2) + (d.y / b).powi(2) + (d.z / c).powi(2)).sqrt()
+    })
+}
+
+/// A star-shaped closed surface of radius `radius(direction)` on an icosahedron subdivided
+/// [`BUMPY_LEVELS`] times, normals out.
+fn star(radius: impl Fn(&Vector3<f64>) -> f64) -> TriMesh {
     let t = (1.0 + 5f64.sqrt()) / 2.0;
     let mut dirs: Vec<Vector3<f64>> = [
         [-1.0, t, 0.0],
@@ -161,7 +181,7 @@ pub fn bumpy() -> TriMesh {
         }
         f = next;
     }
-    let v = dirs.iter().map(|d| d * bumpy_radius(d)).collect();
+    let v = dirs.iter().map(|d| d * radius(d)).collect();
     let mut m = TriMesh { v, f, n: vec![] };
     m.compute_normals();
     m

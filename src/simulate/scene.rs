@@ -65,7 +65,15 @@ pub const BUILTIN: &[(&str, &str)] = &[
         include_str!("../../config/scenes/bumpy-cube.toml"),
     ),
     ("cone", include_str!("../../config/scenes/cone.toml")),
+    (
+        "ellipsoid-dense",
+        include_str!("../../config/scenes/ellipsoid-dense.toml"),
+    ),
     ("lilium", include_str!("../../config/scenes/lilium.toml")),
+    (
+        "parallel",
+        include_str!("../../config/scenes/parallel.toml"),
+    ),
     ("relief", include_str!("../../config/scenes/relief.toml")),
     ("roof", include_str!("../../config/scenes/roof.toml")),
     (

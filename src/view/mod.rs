@@ -111,10 +111,86 @@ pub struct Status {
     /// How each curve of the latest network closes its loops, with the tags to rescan
     /// (`report.json` `network.closure` in brief); empty until the network has a loop.
     pub closure: Vec<ClosureStatus>,
+    /// Nodes of the latest network joined to a curve that passes them untagged, crossings
+    /// nobody tagged proposed, and joins refused (`report.json` `network.joined`,
+    /// `proposed`, `joins_refused` in brief; issue 34).
+    pub joins: JoinsStatus,
     /// The phone page's address with its token (`sfs run --phone`); its QR code is at
     /// `/phone-qr.svg`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub phone_url: Option<String>,
+}
+
+/// The joins of the latest network as the view shows them.
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct JoinsStatus {
+    pub joined: Vec<JoinedNode>,
+    pub proposed: Vec<ProposedCrossing>,
+    pub refused: Vec<RefusedJoinStatus>,
+}
+
+/// A node joined to a curve that passes it.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct JoinedNode {
+    pub node: u32,
+    pub curve: usize,
+    /// Where the curve passed the node before it was joined, mm.
+    pub distance_mm: f64,
+    /// A crossing nobody tagged, joined under a fresh node (`join_untagged`).
+    pub untagged: bool,
+}
+
+/// Two curves that cross with no node there.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct ProposedCrossing {
+    pub curves: [usize; 2],
+    /// Where, in the glb's frame.
+    pub point: [f32; 3],
+    pub distance_mm: f64,
+}
+
+/// A join undone, and why.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct RefusedJoinStatus {
+    pub node: u32,
+    pub curve: usize,
+    pub reason: String,
+}
+
+impl From<&sfs_geometry::network::NetworkReport> for JoinsStatus {
+    fn from(r: &sfs_geometry::network::NetworkReport) -> Self {
+        let mm = |m: f64| (m * 1e4).round() / 10.0;
+        JoinsStatus {
+            joined: r
+                .joined
+                .iter()
+                .map(|j| JoinedNode {
+                    node: j.node,
+                    curve: j.curve,
+                    distance_mm: mm(j.distance_m),
+                    untagged: j.untagged,
+                })
+                .collect(),
+            proposed: r
+                .proposed
+                .iter()
+                .map(|p| ProposedCrossing {
+                    curves: p.curves,
+                    point: crate::gltf_out::to_gltf(&nalgebra::Vector3::from(p.point)),
+                    distance_mm: mm(p.distance_m),
+                })
+                .collect(),
+            refused: r
+                .joins_refused
+                .iter()
+                .map(|x| RefusedJoinStatus {
+                    node: x.node,
+                    curve: x.curve,
+                    reason: x.reason.clone(),
+                })
+                .collect(),
+        }
+    }
 }
 
 /// One curve's closure misfit as the view shows it.
@@ -417,12 +493,18 @@ impl View {
             .flat_map(|n| &n.report.closure)
             .map(Into::into)
             .collect();
+        let joins: JoinsStatus = products
+            .network
+            .as_ref()
+            .map(|n| (&n.report).into())
+            .unwrap_or_default();
         let m = &self.shared.metrics;
         crate::metrics::count_to(&m.updates, live.updates as u64);
         m.latency_p50.set(live.latency_ms.p50 * 1e-3);
         m.latency_p95.set(live.latency_ms.p95 * 1e-3);
         self.update(|s| {
             s.closure = closure;
+            s.joins = joins;
             s.live = Some(LiveStatus {
                 updates: live.updates,
                 latency_ms: live.latency_ms.clone(),

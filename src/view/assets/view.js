@@ -6,12 +6,14 @@ import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 
 const CURVE_KINDS = ['boundary', 'interior', 'crease', 'guide'];
-const COLOURS = { boundary: 0xff9800, interior: 0x4fc3f7, crease: 0x66bb6a, guide: 0x90a4ae, latest: 0xffee58, preview: 0xe040fb, node: 0xffffff, mark: '#ff1744' };
+const COLOURS = { boundary: 0xff9800, interior: 0x4fc3f7, crease: 0x66bb6a, guide: 0x90a4ae, latest: 0xffee58, preview: 0xe040fb, node: 0xffffff, mark: '#ff1744', joined: '#00e676', proposed: '#ffd740' };
 
 const state = {
   ready: false, errors: [], updates: 0, curves: [], nodes: [], surfaceTriangles: 0,
   lastCurve: null, warnings: 0, events: { status: 0, curve: 0, network: 0, warning: 0, preview: 0 },
   status: null, previewPoints: 0, closure: [], marked: [],
+  // The latest network's joins (issue 34): joined nodes and proposed crossings, as drawn.
+  joins: { joined: [], proposed: [], refused: [] }, joinMarks: 0,
   // Per curve brought in by a `network` event: from its E packet to the new network drawn
   // here, ms (the server's wall clock and this page's are the same machine's), and the part
   // of it from the event's arrival (`page_ms`: fetch, parse, draw).
@@ -99,6 +101,44 @@ const ringTexture = (() => {
   return new THREE.CanvasTexture(c);
 })();
 
+// A joined node's square and a proposed crossing's dashed ring.
+function markTexture(colour, dashed) {
+  const c = document.createElement('canvas');
+  c.width = c.height = 64;
+  const g = c.getContext('2d');
+  g.strokeStyle = colour;
+  g.lineWidth = 7;
+  if (dashed) {
+    g.setLineDash([10, 8]);
+    g.beginPath(); g.arc(32, 32, 26, 0, 2 * Math.PI); g.stroke();
+  } else {
+    g.strokeRect(8, 8, 48, 48);
+  }
+  return new THREE.CanvasTexture(c);
+}
+const joinedTexture = markTexture(COLOURS.joined, false);
+const proposedTexture = markTexture(COLOURS.proposed, true);
+
+// The joins of the latest network: listed, and marked where they are.
+function showJoins(joins) {
+  const key = JSON.stringify(joins);
+  if (key === state.joinsKey) return;
+  state.joinsKey = key;
+  state.joins = joins;
+  const items = [
+    ...joins.joined.map((j) => ['joined', `node ${j.node} joined to curve ${j.curve} (${j.distance_mm.toFixed(1)} mm)${j.untagged ? ', untagged crossing' : ''}`]),
+    ...joins.proposed.map((p) => ['proposed', `curves ${p.curves[0]} and ${p.curves[1]} cross untagged (${p.distance_mm.toFixed(1)} mm): tag it, set join_untagged, or refuse = [[${p.curves[0]}, ${p.curves[1]}]]`]),
+    ...joins.refused.map((r) => ['bad', `node ${r.node} not joined to curve ${r.curve}: ${r.reason}`]),
+  ];
+  document.getElementById('joins').replaceChildren(...(items.length ? items : [['', 'none']]).map(([cls, t]) => {
+    const li = document.createElement('li');
+    li.textContent = t;
+    if (cls) li.classList.add(cls);
+    return li;
+  }));
+  drawMarks();
+}
+
 // The closure misfit per curve (worst first) and the marked tags, ringed at their nodes.
 function showClosure(closure) {
   const key = JSON.stringify(closure);
@@ -134,6 +174,18 @@ function drawMarks() {
       marks.add(ring);
     }
   }
+  const sprite = (texture, p) => {
+    const m = new THREE.Sprite(new THREE.SpriteMaterial({ map: texture, depthTest: false }));
+    m.renderOrder = 11;
+    m.position.set(p[0], p[1], p[2]);
+    m.scale.setScalar(sceneSize * 0.04);
+    marks.add(m);
+  };
+  state.joinMarks = 0;
+  for (const j of state.joins.joined) {
+    if (at[j.node]) { sprite(joinedTexture, at[j.node]); state.joinMarks++; }
+  }
+  for (const p of state.joins.proposed) { sprite(proposedTexture, p.point); state.joinMarks++; }
   redraw();
 }
 
@@ -319,6 +371,7 @@ function showStatus(s) {
     text('device', `${d.kind} #${d.id} · ${d.rate_hz} Hz${batt}${flags}`, (d.battery_mv != null && d.battery_mv < 3400) || d.status_flags.length > 0);
   }
   showClosure(s.closure || []);
+  showJoins(s.joins || { joined: [], proposed: [], refused: [] });
   const rec = document.getElementById('reconstruction');
   rec.replaceChildren(...(s.reconstruction.length ? s.reconstruction : [{ text: 'nothing to say' }]).map((w) => {
     const li = document.createElement('li');
