@@ -216,3 +216,56 @@ async fn issue_16_a_running_session_is_drawn_as_it_is_scanned() {
     assert!(shot, "no moment with a preview and a network to photograph");
     browser.close().await;
 }
+
+/// Issue 34: the view marks the joins. A cone scanned with a third of its crossings untagged
+/// (Morphorider, seed 1), replayed with the view: the page lists every join of report.json's
+/// `network.joined` and marks each joined node and each proposed crossing.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(sfs_chromium),
+    ignore = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
+)]
+async fn issue_34_the_page_marks_the_joined_nodes() {
+    use sfs::simulate::{self, scene};
+    available();
+    let dir = tmpdir("view-browser-joins");
+    let s = scene::builtin("cone").unwrap();
+    let m = simulate::Mistakes {
+        untagged: simulate::untagged_crossings(&s, 1.0 / 3.0, 1),
+        ..Default::default()
+    };
+    let sim = simulate::run_with(
+        &s,
+        device_protocol::DeviceKind::Morphorider,
+        simulate::Profile::Default,
+        1,
+        &m,
+    );
+    let capture = dir.join("cone-untagged.bin");
+    std::fs::write(&capture, &sim.bytes).unwrap();
+    let out = dir.join("out");
+    let (port, _served) = serve_replay_on_a_free_port(&capture, &out, None, &[]);
+    let report = ended_report(&out, Duration::from_secs(60));
+    let joined = report["network"]["joined"].as_array().unwrap().len();
+    let proposed = report["network"]["proposed"].as_array().unwrap().len();
+    assert!(joined > 0, "{}", report["network"]["joined"]);
+    let browser = Browser::start(&dir.join("profile")).await;
+    browser.goto(&format!("http://127.0.0.1:{port}/")).await;
+    let seen = browser
+        .watch(Duration::from_secs(30), |s| {
+            s["joins"]["joined"].as_array().map(|a| a.len()) == Some(joined)
+                && s["joinMarks"].as_u64() == Some((joined + proposed) as u64)
+        })
+        .await;
+    let state = seen.last().unwrap();
+    assert_eq!(state["errors"], serde_json::json!([]), "console errors");
+    for (a, b) in state["joins"]["joined"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(report["network"]["joined"].as_array().unwrap())
+    {
+        assert_eq!((&a["node"], &a["curve"]), (&b["node"], &b["curve"]));
+    }
+    browser.close().await;
+}
