@@ -37,6 +37,9 @@ struct Cell {
     joined: f64,
     oracle: f64,
     left_out: usize,
+    /// Left out on a curve that then hangs free (none of its nodes on another curve): only
+    /// its normals could place it.
+    free: usize,
     right: usize,
     wrong: usize,
     refused: usize,
@@ -145,6 +148,21 @@ fn cell(
         }
     }
     let (joined, net) = run(&m, &on, false)?;
+    let cs = &un_net.positions.curves;
+    let hangs_free = |node: u32| {
+        cs.iter().any(|c| {
+            c.nodes.iter().any(|x| x.1 == node)
+                && c.nodes.iter().all(|x| {
+                    !cs.iter()
+                        .any(|o| o.index != c.index && o.nodes.iter().any(|y| y.1 == x.1))
+                })
+        })
+    };
+    let free = m
+        .untagged
+        .iter()
+        .filter(|&&(c, k)| hangs_free(specs[c].tags[k].1))
+        .count();
     let (oracle, _) = run(&m, &off, true)?;
     let truth = |node: u32, curve: usize| {
         m.untagged
@@ -200,6 +218,7 @@ fn cell(
         joined,
         oracle,
         left_out: m.untagged.len(),
+        free,
         right,
         wrong: r
             .joined
@@ -253,12 +272,12 @@ fn main() {
     let results = parallel(&jobs, |(sc, d, p, seed)| {
         cell(sc, *d, *p, *seed, fraction, untagged)
     });
-    println!("| scene | device | profile | seed | full % | untagged % | joined % | at the true place % | joined / left out | false | refused | proposed | passes | join ms |");
+    println!("| scene | device | profile | seed | full % | untagged % | joined % | at the true place % | joined / left out (free) | false | refused | proposed | passes | join ms |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for ((sc, d, p, seed), r) in jobs.iter().zip(&results) {
         match r {
             Ok(c) => println!(
-                "| {sc} | {} | {} | {seed} | {:.3} | {:.3} | {:.3} | {:.3} | {} / {} | {} | {} | {} | {} | {:.0} |",
+                "| {sc} | {} | {} | {seed} | {:.3} | {:.3} | {:.3} | {:.3} | {} / {} ({}) | {} | {} | {} | {} | {:.0} |",
                 d.name(),
                 p.name(),
                 c.full,
@@ -267,6 +286,7 @@ fn main() {
                 c.oracle,
                 c.right,
                 c.left_out,
+                c.free,
                 c.wrong,
                 c.refused,
                 c.proposed,
@@ -278,7 +298,7 @@ fn main() {
     }
     // Per scene, device and profile: the means over the seeds and the ratio to fully tagged.
     println!();
-    println!("| scene | device | profile | full % | untagged % | joined % | at the true place % | joined / full | joined / left out | false |");
+    println!("| scene | device | profile | full % | untagged % | joined % | at the true place % | joined / full | joined / left out (free) | false | join ms (max) |");
     println!("|---|---|---|---|---|---|---|---|---|---|");
     for sc in &scenes {
         for &d in &devices {
@@ -301,13 +321,15 @@ fn main() {
                 );
                 let or = mean(&|c| c.oracle);
                 println!(
-                    "| {sc} | {} | {} | {full:.3} | {un:.3} | {jo:.3} | {or:.3} | {:.2} | {} / {} | {} |",
+                    "| {sc} | {} | {} | {full:.3} | {un:.3} | {jo:.3} | {or:.3} | {:.2} | {} / {} ({}) | {} | {:.0} |",
                     d.name(),
                     p.name(),
                     jo / full,
                     cells.iter().map(|c| c.right).sum::<usize>(),
                     cells.iter().map(|c| c.left_out).sum::<usize>(),
-                    cells.iter().map(|c| c.wrong).sum::<usize>()
+                    cells.iter().map(|c| c.free).sum::<usize>(),
+                    cells.iter().map(|c| c.wrong).sum::<usize>(),
+                    cells.iter().map(|c| c.join_ms).fold(0.0, f64::max)
                 );
             }
         }

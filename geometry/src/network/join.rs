@@ -7,14 +7,25 @@
 //! one curve of a crossing, left the network untied there (and the surface with an open face).
 //!
 //! ## The test
-//! In the reconstructed network ([`Positions`]), a *lonely* node is one that a single curve
-//! tags (anonymous nodes, [`ANONYMOUS_NODE_BASE`] and above, are not). For each other curve,
-//! the closest approach of its polyline to the node: the distance, the curve's own distance
-//! `d` there (interpolated between its samples: the wheel's for a Morphorider, the phone's
-//! from its speed) and its normal there. The node joins the curve of least distance among
-//! those within [`JoinParams::distance_m`] whose normal agrees with the node's within
-//! [`JoinParams::normal_deg`], unless the split would leave a segment shorter than one and a half
-//! of the curve's steps (a node is already there). [`apply_joins`] then puts the tag into the scan.
+//! In the reconstructed network ([`Positions`]), every node (anonymous nodes,
+//! [`ANONYMOUS_NODE_BASE`] and above, aside) against every curve that does not tag it: the
+//! closest approach of the curve's polyline to the node, the curve's own distance `d` there
+//! (interpolated between its samples: the wheel's for a Morphorider, the phone's from its
+//! speed), its faces and its tangent there. The node joins the curve of least distance among
+//! those that
+//! - come within the reach: [`JoinParams::distance_m`], or for a node a single curve tags
+//!   (*lonely*: a crossing certainly missing its other curve) more where the network is noisy
+//!   ([`find_joins_within`]);
+//! - agree in normal within [`JoinParams::normal_deg`] (a crease's two faces span the normals
+//!   between them; where two creases meet, at a corner, each face of the node is matched by
+//!   one of the curve's within the reach);
+//! - cross the node's curves (tangents more than [`ALONGSIDE_DEG`] apart as lines): a curve
+//!   running alongside one of them, 20 mm away, is not a crossing;
+//! - and leave no segment shorter than one and a half of the curve's steps (a node is
+//!   already there).
+//!
+//! [`apply_joins`] then puts the tag into the scan. The passes that make the joins settle,
+//! the parts put together and the refusals are [`super::Reconstructor::run_joined`]'s.
 //!
 //! ```
 //! use sfs_geometry::network::join::{find_joins, JoinParams};
@@ -294,8 +305,17 @@ fn samples_near<'a>(
         .map(|(j, _)| j)
 }
 
-/// The closest approach of `c`'s polyline to `p`: `(distance, d there, faces there)`.
-fn closest_approach(c: &CurvePositions, p: &Vector3<f64>) -> Option<(f64, f64, Vec<Vector3<f64>>)> {
+/// Where a curve comes closest to a point.
+struct Approach {
+    distance: f64,
+    /// The curve's own distance there, m.
+    d: f64,
+    faces: Vec<Vector3<f64>>,
+    tangent: Vector3<f64>,
+}
+
+/// The closest approach of `c`'s polyline to `p`.
+fn closest_approach(c: &CurvePositions, p: &Vector3<f64>) -> Option<Approach> {
     let n = c.points.len().min(c.normals.len()).min(c.d.len());
     let mut best: Option<(f64, usize, f64)> = None;
     for j in 0..n.saturating_sub(1) {
@@ -314,11 +334,38 @@ fn closest_approach(c: &CurvePositions, p: &Vector3<f64>) -> Option<(f64, f64, V
     }
     let (dist, j, u) = best?;
     let d = c.d[j] + (c.d[j + 1] - c.d[j]) * u;
-    (dist.is_finite() && d.is_finite()).then(|| (dist, d, faces(c, j, u)))
+    let tangent = c
+        .tangents
+        .get(j)
+        .zip(c.tangents.get(j + 1))
+        .map_or(c.points[j + 1] - c.points[j], |(a, b)| {
+            a * (1.0 - u) + b * u
+        });
+    (dist.is_finite() && d.is_finite()).then(|| Approach {
+        distance: dist,
+        d,
+        faces: faces(c, j, u),
+        tangent,
+    })
+}
+
+/// The angle between two tangents as lines (0 to 90°), degrees.
+fn line_angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    let x = a.angle(b).to_degrees();
+    x.min(180.0 - x)
 }
 
 /// The joins of the lonely nodes of `net` (see the module docs), in node order.
 pub fn find_joins(net: &Positions, p: &JoinParams) -> Vec<Join> {
+    find_joins_within(net, p, p.distance_m)
+}
+
+/// As [`find_joins`], a node tagged on one curve only reaching `lonely_reach` (at least
+/// [`JoinParams::distance_m`]; [`Reconstructor::run_joined`](super::Reconstructor::run_joined)
+/// scales it with the network's noise). A node two curves or more already share (a third
+/// curve passes it untagged) reaches [`JoinParams::distance_m`] only: a complete crossing
+/// with a third curve near is the rarer event, and it wants the stronger evidence.
+pub fn find_joins_within(net: &Positions, p: &JoinParams, lonely_reach: f64) -> Vec<Join> {
     let mut on: std::collections::BTreeMap<u32, Vec<usize>> = Default::default();
     for (ci, c) in net.curves.iter().enumerate() {
         for &(_, node) in &c.nodes {
@@ -334,8 +381,15 @@ pub fn find_joins(net: &Positions, p: &JoinParams) -> Vec<Join> {
             continue;
         }
         let home_index = net.curves[curves[0]].index;
-        // The node's faces: those of every curve through it; a crease's kind if one is.
+        let reach = if curves.len() == 1 {
+            lonely_reach.max(p.distance_m)
+        } else {
+            p.distance_m
+        };
+        // The node's faces and tangents: those of every curve through it; a crease's kind if
+        // one is.
         let mut own = Vec::new();
+        let mut along = Vec::new();
         let mut kind = net.curves[curves[0]].kind;
         for &ci in curves {
             let c = &net.curves[ci];
@@ -345,6 +399,7 @@ pub fn find_joins(net: &Positions, p: &JoinParams) -> Vec<Join> {
                 .find(|x| x.1 == node && x.0 < c.normals.len())
             {
                 own.extend(faces(c, x.0, 0.0));
+                along.extend(c.tangents.get(x.0));
             }
             if c.kind == CurveKind::Crease {
                 kind = CurveKind::Crease;
@@ -359,10 +414,22 @@ pub fn find_joins(net: &Positions, p: &JoinParams) -> Vec<Join> {
             .enumerate()
             .filter(|&(ci, _)| !curves.contains(&ci))
             .filter_map(|(_, c)| {
-                let (dist, d, theirs) = closest_approach(c, pos)?;
+                let Approach {
+                    distance: dist,
+                    d,
+                    faces: theirs,
+                    tangent,
+                } = closest_approach(c, pos)?;
+                // Crossing, not running alongside one of the node's curves.
+                if along
+                    .iter()
+                    .any(|t| line_angle(t, &tangent) < ALONGSIDE_DEG)
+                {
+                    return None;
+                }
                 let angle = if kind == CurveKind::Crease && c.kind == CurveKind::Crease {
                     // Two creases meet at a corner: both faces of the node matched near it.
-                    let reach = p.distance_m.max(dist * 1.01);
+                    let reach = reach.max(dist * 1.01);
                     normals_fit(&own, kind, c, samples_near(c, pos, reach), f64::INFINITY)?
                 } else {
                     face_angle(&own, &theirs)
@@ -373,7 +440,7 @@ pub fn find_joins(net: &Positions, p: &JoinParams) -> Vec<Join> {
                     .iter()
                     .filter_map(|x| c.d.get(x.0))
                     .all(|&dn| (dn - d).abs() >= 1.5 * step);
-                (dist <= p.distance_m && angle <= p.normal_deg && clear).then(|| Join {
+                (dist <= reach && angle <= p.normal_deg && clear).then(|| Join {
                     node,
                     curve: c.index,
                     home: home_index,
@@ -438,8 +505,14 @@ pub fn apply_joins(curves: &mut [Curve], joins: &[Join]) -> usize {
     put
 }
 
-/// Tangents of two curves crossing make at least this angle (as lines), degrees: curves that
-/// run side by side (parallel, or a curve retraced) pass close without crossing.
+/// A curve whose tangent is within this of one of a node's curves' there (as lines) runs
+/// alongside it and does not join the node, degrees: two curves side by side are a few degrees
+/// apart in a noisy network, sections of a surface cross at 15° and more.
+pub const ALONGSIDE_DEG: f64 = 10.0;
+
+/// Tangents of two curves proposed as crossing make at least this angle (as lines), degrees:
+/// curves that run side by side (parallel, or a curve retraced) pass close without crossing,
+/// and a proposal, which no tag asked for, wants a clear crossing.
 pub const CROSSING_DEG: f64 = 30.0;
 
 /// Closest points of segments `p0 p1` and `q0 q1`: `(distance, u on p, v on q)`, u and v in
@@ -587,8 +660,7 @@ pub fn find_crossings(net: &Positions, p: &JoinParams) -> Vec<Proposal> {
             ) else {
                 continue;
             };
-            let line_angle = ta.angle(&tb).to_degrees();
-            let line_angle = line_angle.min(180.0 - line_angle);
+            let line_angle = line_angle(&ta, &tb);
             let normal_deg = face_angle(&faces(a, si, u), &faces(b, sj, v));
             let point = (xa + xb) * 0.5;
             let near_node = a

@@ -380,12 +380,10 @@ impl Reconstructor {
         }
         let t0 = Instant::now();
         // The reach of the joins: at least the set distance, and beyond the network's noise.
-        let mut js = js.clone();
-        js.params.distance_m = js
+        let lonely_reach = js
             .params
             .distance_m
             .max(js.params.noise_factor * net.report.closure_misfit_m.unwrap_or(0.0));
-        let js = &js;
         let mut fresh_node = curves
             .iter()
             .flat_map(|c| c.tags.iter().map(|t| t.node))
@@ -405,13 +403,18 @@ impl Reconstructor {
             let placed;
             let seen = if net.positions.components > 1 {
                 let mut moved = net.positions.clone();
-                join::place_parts(&mut moved, &js.params);
+                // Lonely nodes place the parts: as far as they reach.
+                let reach = join::JoinParams {
+                    distance_m: lonely_reach,
+                    ..js.params
+                };
+                join::place_parts(&mut moved, &reach);
                 placed = moved;
                 &placed
             } else {
                 &net.positions
             };
-            for j in join::find_joins(seen, &js.params) {
+            for j in join::find_joins_within(seen, &js.params, lonely_reach) {
                 if joins
                     .iter()
                     .any(|x| x.join.node == j.node && x.join.curve == j.curve)
