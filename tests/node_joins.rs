@@ -393,3 +393,84 @@ fn issue_34_live_and_resumed_sessions_keep_the_replays_joins() {
     assert_same_files(&resumed, &dir.join("replay"), &["network.glb"], "resumed");
     assert_eq!(&report_of(&resumed)["network"]["joined"], joined, "resumed");
 }
+
+/// Issue 34, point 2: crossings nobody tagged. On exact frames of `relief` and `ellipsoid-dense`,
+/// two crossings removed from both their curves: each is proposed (its two curves, within
+/// 1 mm of where it is); with `join_untagged` each is joined on both curves under a fresh
+/// node above every tagged one, within 1 mm of the true arc lengths, and nothing is proposed
+/// any more.
+#[test]
+fn issue_34_crossings_nobody_tagged_are_proposed_or_joined() {
+    for name in ["relief", "ellipsoid-dense"] {
+        let s = scene::builtin(name).expect("shipped scene");
+        let mut curves = s.exact_scan().curves;
+        let top = curves.iter().flat_map(|c| c.tags.iter().map(|t| t.node)).max().unwrap();
+        // Two nodes inside two curves each (neither curve's first or last tag).
+        let inside = |node: u32, curves: &[sfs_geometry::curve::Curve]| {
+            let on: Vec<(usize, usize)> = curves
+                .iter()
+                .enumerate()
+                .filter_map(|(ci, c)| {
+                    let k = c.tags.iter().position(|t| t.node == node)?;
+                    (k > 0 && k + 1 < c.tags.len()).then_some((ci, k))
+                })
+                .collect();
+            let count = curves
+                .iter()
+                .filter(|c| c.tags.iter().any(|t| t.node == node))
+                .count();
+            (on.len() == 2 && count == 2).then_some(on)
+        };
+        let picked: Vec<(u32, Vec<(usize, usize)>)> = (0..=top)
+            .filter_map(|n| inside(n, &curves).map(|on| (n, on)))
+            .step_by(3)
+            .take(2)
+            .collect();
+        assert_eq!(picked.len(), 2, "{name}");
+        // (curve index, true d) of each removed tag, per node.
+        let mut truth = Vec::new();
+        for (node, on) in &picked {
+            let mut where_ = Vec::new();
+            for &(ci, _) in on {
+                let c = &mut curves[ci];
+                let k = c.tags.iter().position(|t| t.node == *node).unwrap();
+                let tag = c.tags.remove(k);
+                let l = &mut c.segment_lengths;
+                l.remove(k.min(l.len() - 1));
+                where_.push((c.index, tag.d - c.tags[0].d));
+            }
+            truth.push((*node, where_));
+        }
+        let p = NetworkParams::default();
+        let proposed = Reconstructor::new()
+            .run_joined(&curves, &p, &JoinSettings::default())
+            .unwrap();
+        let r = &proposed.report;
+        assert!(r.joined.is_empty(), "{name}: {:?}", r.joined);
+        assert_eq!(r.proposed.len(), 2, "{name}: {:?}", r.proposed);
+        for (_, where_) in &truth {
+            let pair = [where_[0].0.min(where_[1].0), where_[0].0.max(where_[1].0)];
+            assert!(
+                r.proposed.iter().any(|x| x.curves == pair && x.distance_m < 1e-3),
+                "{name}: {pair:?} not proposed: {:?}",
+                r.proposed
+            );
+        }
+        let js = JoinSettings {
+            untagged: true,
+            ..JoinSettings::default()
+        };
+        let joined = Reconstructor::new().run_joined(&curves, &p, &js).unwrap();
+        let r = &joined.report;
+        assert!(r.proposed.is_empty(), "{name}: {:?}", r.proposed);
+        assert_eq!(r.joined.len(), 4, "{name}: {:?}", r.joined);
+        for j in &r.joined {
+            assert!(j.untagged && j.node > top, "{name}: {j:?}");
+            let ok = truth.iter().any(|(_, w)| {
+                w.iter()
+                    .any(|&(c, a)| c == j.curve && (a - j.arc_length_m).abs() < 1e-3)
+            });
+            assert!(ok, "{name}: {j:?} is not where a crossing was: {truth:?}");
+        }
+    }
+}
