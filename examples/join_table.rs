@@ -238,22 +238,8 @@ fn main() {
         .iter()
         .map(|s| s.parse().expect("--seeds: numbers separated by commas"))
         .collect();
-    let devices: Vec<DeviceKind> = list(&args, "--devices", "morphorider,phone")
-        .iter()
-        .map(|d| match d.as_str() {
-            "phone" => DeviceKind::Phone,
-            "morphorider" => DeviceKind::Morphorider,
-            other => panic!("--devices: {other} is not morphorider or phone"),
-        })
-        .collect();
-    let profiles: Vec<Profile> = list(&args, "--profiles", "default,field")
-        .iter()
-        .map(|p| match p.as_str() {
-            "default" => Profile::Default,
-            "field" => Profile::Field,
-            other => panic!("--profiles: {other} is not default or field"),
-        })
-        .collect();
+    let devices = shared::devices(&args);
+    let profiles = shared::profiles(&args);
     let scenes = list(&args, "--scenes", &SCENES.join(","));
     let fraction: f64 = list(&args, "--fraction", "0.3333333333333333")[0]
         .parse()

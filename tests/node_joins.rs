@@ -17,19 +17,11 @@ fn issue_34_joins_on_exact_frames_find_the_true_arc_length() {
     for name in ["sphere-octa", "torus", "bowl", "cone", "relief"] {
         let s = scene::builtin(name).expect("shipped scene");
         for fraction in [1.0 / 3.0] {
-            let left_out = simulate::untagged_crossings(&s, fraction, 1);
-            assert!(!left_out.is_empty(), "{name}: no crossing to leave out");
-            let mut scan = s.exact_scan();
             // The tags removed, with their true distance along their curve.
-            let mut removed = Vec::new();
-            for &(ci, k) in left_out.iter().rev() {
-                let tag = scan.curves[ci].tags.remove(k);
-                let lengths = &mut scan.curves[ci].segment_lengths;
-                lengths.remove(k.min(lengths.len() - 1));
-                removed.push((tag.node, scan.curves[ci].index, tag.d));
-            }
+            let (curves, removed) = untagged_exact(name, fraction);
+            assert!(!removed.is_empty(), "{name}: no crossing to leave out");
             let net = Reconstructor::new()
-                .run(&scan.curves, &NetworkParams::default())
+                .run(&curves, &NetworkParams::default())
                 .unwrap_or_else(|e| panic!("{name}: {e}"));
             let joins = find_joins(&net.positions, &JoinParams::default());
             assert_eq!(
@@ -50,7 +42,7 @@ fn issue_34_joins_on_exact_frames_find_the_true_arc_length() {
                 );
             }
             // Put back, the scan has its tags where they were.
-            let mut joined = scan.curves.clone();
+            let mut joined = curves.clone();
             assert_eq!(apply_joins(&mut joined, &joins), removed.len());
             let original = s.exact_scan();
             for (a, b) in joined.iter().zip(&original.curves) {
@@ -404,7 +396,11 @@ fn issue_34_crossings_nobody_tagged_are_proposed_or_joined() {
     for name in ["relief", "ellipsoid-dense"] {
         let s = scene::builtin(name).expect("shipped scene");
         let mut curves = s.exact_scan().curves;
-        let top = curves.iter().flat_map(|c| c.tags.iter().map(|t| t.node)).max().unwrap();
+        let top = curves
+            .iter()
+            .flat_map(|c| c.tags.iter().map(|t| t.node))
+            .max()
+            .unwrap();
         // Two nodes inside two curves each (neither curve's first or last tag).
         let inside = |node: u32, curves: &[sfs_geometry::curve::Curve]| {
             let on: Vec<(usize, usize)> = curves
@@ -451,7 +447,9 @@ fn issue_34_crossings_nobody_tagged_are_proposed_or_joined() {
         for (_, where_) in &truth {
             let pair = [where_[0].0.min(where_[1].0), where_[0].0.max(where_[1].0)];
             assert!(
-                r.proposed.iter().any(|x| x.curves == pair && x.distance_m < 1e-3),
+                r.proposed
+                    .iter()
+                    .any(|x| x.curves == pair && x.distance_m < 1e-3),
                 "{name}: {pair:?} not proposed: {:?}",
                 r.proposed
             );

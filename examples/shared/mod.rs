@@ -58,3 +58,29 @@ pub fn parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec
         .map(|r| r.expect("every job ran"))
         .collect()
 }
+
+#[allow(dead_code)]
+/// `--devices` (default both).
+pub fn devices(args: &[String]) -> Vec<device_protocol::DeviceKind> {
+    list(args, "--devices", "morphorider,phone")
+        .iter()
+        .map(|d| match d.as_str() {
+            "phone" => device_protocol::DeviceKind::Phone,
+            "morphorider" => device_protocol::DeviceKind::Morphorider,
+            other => panic!("--devices: {other} is not morphorider or phone"),
+        })
+        .collect()
+}
+
+#[allow(dead_code)]
+/// `--profiles` (default both).
+pub fn profiles(args: &[String]) -> Vec<sfs::simulate::Profile> {
+    list(args, "--profiles", "default,field")
+        .iter()
+        .map(|p| match p.as_str() {
+            "default" => sfs::simulate::Profile::Default,
+            "field" => sfs::simulate::Profile::Field,
+            other => panic!("--profiles: {other} is not default or field"),
+        })
+        .collect()
+}
