@@ -90,7 +90,7 @@ fn variant(
         }
     }
     let net = Reconstructor::new()
-        .run(&scan.curves, &settings.1)
+        .run_joined(&scan.curves, &settings.1, &Default::default())
         .map_err(|e| format!("{:?}", e.warnings))?;
     let e = sfs::eval::evaluate(&sim.truth, &sfs::gltf_out::as_read_network(&net.positions))
         .map_err(|e| e.to_string())?;

@@ -235,10 +235,11 @@ fn load_truth(path: &Path) -> Result<Truth, String> {
     Truth::load(path).map_err(|e| e.to_string())
 }
 
-/// The curve mean error of `curves` reconstructed, % of the diagonal, or why there is none.
+/// The curve mean error of `curves` reconstructed (with the daemon's default joins, issue 34),
+/// % of the diagonal, or why there is none.
 fn score_curves(curves: &[Curve], truth: &Truth, network: &NetworkParams) -> Result<f64, String> {
     let net = Reconstructor::new()
-        .run(curves, network)
+        .run_joined(curves, network, &Default::default())
         .map_err(|e| format!("{:?}", e.warnings))?;
     let e = sfs::eval::evaluate(truth, &sfs::gltf_out::as_read_network(&net.positions))
         .map_err(|e| e.to_string())?;
