@@ -19,7 +19,7 @@ pub mod prefilter;
 pub mod regression;
 
 use crate::curve::Curve;
-use join::{Join, JoinReport, JoinSettings, RefusedJoin};
+use join::JoinSettings;
 use nalgebra::UnitQuaternion;
 use poisson::{PoissonSolver, Positions};
 use prefilter::{prefilter_with_kinks, PrefilterParams, UniformCurve};
@@ -211,60 +211,11 @@ impl std::fmt::Display for Unreconstructed {
 
 /// What the Poisson solve and the loop test say of one sliding tag (a join's).
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Slide {
+pub(crate) struct Slide {
     /// Where the loops put the node along its curve from the tag, m (one Gauss–Newton step).
-    sigma: f64,
+    pub(crate) sigma: f64,
     /// How the loops the tag closes fit beside the others.
-    fit: Option<closure::LoopFit>,
-}
-
-/// A join in the passes of [`Reconstructor::run_joined`].
-#[derive(Debug, Clone)]
-struct Pending {
-    join: Join,
-    /// A crossing nobody tagged, under a fresh node.
-    untagged: bool,
-    /// How its loops fit in the last reconstruction.
-    fit: Option<closure::LoopFit>,
-    /// The distance its tag had in the last reconstruction, m.
-    used_d: f64,
-}
-
-impl Pending {
-    fn new(join: Join, untagged: bool) -> Self {
-        Pending {
-            used_d: join.d,
-            join,
-            untagged,
-            fit: None,
-        }
-    }
-}
-
-/// The join whose loops misfit most beyond [`join::REFUSE_RATIO`] × the network's other
-/// loops, if any.
-fn worst_join(joins: &[Pending]) -> Option<usize> {
-    joins
-        .iter()
-        .enumerate()
-        .filter_map(|(k, x)| {
-            let f = x.fit?;
-            let limit = join::REFUSE_RATIO * f.others_m?.max(join::MISFIT_FLOOR_M);
-            (f.own_m > limit).then_some((k, f.own_m / limit))
-        })
-        .max_by(|a, b| a.1.total_cmp(&b.1))
-        .map(|x| x.0)
-}
-
-/// The distances of the tags either side of `j`'s tag on its curve in `work`.
-fn segment_around(work: &[Curve], j: &Join) -> (f64, f64) {
-    work.iter()
-        .find(|c| c.index == j.curve)
-        .and_then(|c| {
-            let t = c.tags.iter().position(|t| t.node == j.node)?;
-            Some((c.tags.get(t.checked_sub(1)?)?.d, c.tags.get(t + 1)?.d))
-        })
-        .unwrap_or((j.d, j.d))
+    pub(crate) fit: Option<closure::LoopFit>,
 }
 
 /// The reconstruction of a scan.
@@ -384,178 +335,48 @@ impl Reconstructor {
             .params
             .distance_m
             .max(js.params.noise_factor * net.report.closure_misfit_m.unwrap_or(0.0));
-        let mut fresh_node = curves
-            .iter()
-            .flat_map(|c| c.tags.iter().map(|t| t.node))
-            .filter(|&n| n < crate::curve::ANONYMOUS_NODE_BASE)
-            .max()
-            .map_or(0, |n| n + 1);
-        let mut joins: Vec<Pending> = Vec::new();
-        let mut refused: Vec<RefusedJoin> = Vec::new();
-        // (node, curve) refused, and pairs of curves whose untagged crossing was refused.
-        let mut refused_at: Vec<(u32, usize)> = Vec::new();
-        let mut refused_pairs: Vec<(usize, usize)> = Vec::new();
-        let mut passes = 0;
+        let mut state = join::passes::Passes::new(curves, js, lonely_reach);
         let mut moved = 0.0_f64;
         loop {
-            let mut fresh = Vec::new();
-            // A network in parts: each part moved to where its lonely nodes fit first.
-            let placed;
-            let seen = if net.positions.components > 1 {
-                let mut moved = net.positions.clone();
-                // Lonely nodes place the parts: as far as they reach.
-                let reach = join::JoinParams {
-                    distance_m: lonely_reach,
-                    ..js.params
-                };
-                join::place_parts(&mut moved, &reach);
-                placed = moved;
-                &placed
-            } else {
-                &net.positions
-            };
-            for j in join::find_joins_within(seen, &js.params, lonely_reach) {
-                if joins
-                    .iter()
-                    .any(|x| x.join.node == j.node && x.join.curve == j.curve)
-                    || refused_at.contains(&(j.node, j.curve))
-                {
-                    continue;
-                }
-                if js.refuses(j.home, j.curve) {
-                    refused_at.push((j.node, j.curve));
-                    refused.push(RefusedJoin::configured(&j));
-                    continue;
-                }
-                fresh.push(Pending::new(j, false));
-            }
-            if js.untagged {
-                for pr in join::find_crossings(seen, &js.params) {
-                    let [a, b] = pr.curves;
-                    if js.refuses(a, b) || refused_pairs.contains(&(a, b)) {
-                        continue;
-                    }
-                    for (k, (curve, home)) in [(a, b), (b, a)].into_iter().enumerate() {
-                        let j = Join {
-                            node: fresh_node,
-                            curve,
-                            home,
-                            d: pr.d[k],
-                            arc_length_m: 0.0,
-                            distance_m: pr.distance_m,
-                            normal_deg: pr.normal_deg,
-                        };
-                        fresh.push(Pending::new(j, true));
-                    }
-                    fresh_node += 1;
-                }
-            }
+            let fresh = state.fresh(&net.positions);
             let mut refusing = false;
             if fresh.is_empty() && moved <= join::SETTLED_M {
                 // Settled: the join whose loops misfit worst, if beyond the others' noise.
-                let Some(k) = worst_join(&joins) else { break };
-                let out = joins[k].clone();
-                let f = out.fit.expect("judged by its fit");
-                refused.push(RefusedJoin {
-                    node: out.join.node,
-                    curve: out.join.curve,
-                    distance_m: out.join.distance_m,
-                    misfit_before_m: f.others_m,
-                    misfit_after_m: Some(f.own_m),
-                    reason: format!(
-                        "the loops it closes miss by {:.1} mm, more than {} times the network's other loops ({:.1} mm): the curves pass there without crossing",
-                        f.own_m * 1e3,
-                        join::REFUSE_RATIO,
-                        f.others_m.unwrap_or(0.0) * 1e3
-                    ),
-                });
-                refused_at.push((out.join.node, out.join.curve));
-                if out.untagged {
-                    let (a, b) = (
-                        out.join.curve.min(out.join.home),
-                        out.join.curve.max(out.join.home),
-                    );
-                    refused_pairs.push((a, b));
+                if !state.refuse_worst() {
+                    break;
                 }
-                // An untagged crossing's fresh node goes with both its tags.
-                joins.retain(|x| {
-                    x.join.node != out.join.node
-                        || (!out.untagged && x.join.curve != out.join.curve)
-                });
                 refusing = true;
-            } else if passes >= join::MAX_PASSES {
+            } else if state.passes >= join::MAX_PASSES {
                 net.warnings
                     .push(NetworkWarning::JoinsUnsettled { moved_m: moved });
                 break;
             }
-            joins.extend(fresh);
-            passes += 1;
-            if joins.is_empty() {
+            state.joins.extend(fresh);
+            state.passes += 1;
+            if state.joins.is_empty() {
                 net = self.run_inner(curves, p, false, &[])?.0;
                 break;
             }
-            let mut work = curves.to_vec();
-            let now: Vec<Join> = joins.iter().map(|x| x.join.clone()).collect();
-            join::apply_joins(&mut work, &now);
-            let slides: Vec<(usize, u32)> = now.iter().map(|j| (j.curve, j.node)).collect();
-            let (n, slid) = match self.run_inner(&work, p, false, &slides) {
-                Ok(x) => x,
-                Err(e) => {
-                    // The joined network cannot be reconstructed: keep the last that could.
-                    for x in joins.drain(..) {
-                        refused.push(RefusedJoin {
-                            reason: format!("the joined network could not be reconstructed: {e}"),
-                            ..RefusedJoin::configured(&x.join)
-                        });
+            let (work, slides) = state.joined_scan(curves);
+            match self.run_inner(&work, p, false, &slides) {
+                Ok((n, slid)) => {
+                    net = n;
+                    moved = state.slide(&work, &slid);
+                    if refusing {
+                        moved = moved.max(1.0);
                     }
+                }
+                // The joined network cannot be reconstructed: keep the last that could.
+                Err(e) => {
+                    state.drop_all(&format!(
+                        "the joined network could not be reconstructed: {e}"
+                    ));
                     break;
                 }
-            };
-            net = n;
-            moved = if refusing { 1.0 } else { 0.0 };
-            let mut lost = Vec::new();
-            for (k, s) in slid.iter().enumerate() {
-                let x = &mut joins[k];
-                x.used_d = x.join.d;
-                let Some(s) = s else {
-                    lost.push(k);
-                    continue;
-                };
-                x.fit = s.fit;
-                let (lo, hi) = segment_around(&work, &x.join);
-                let margin = join::SLIDE_MARGIN_M.min(0.25 * (hi - lo));
-                let step = s.sigma.clamp(-js.params.distance_m, js.params.distance_m);
-                let d = (x.join.d + step).clamp(lo + margin, (hi - margin).max(lo + margin));
-                moved = moved.max((d - x.join.d).abs());
-                x.join.d = d;
-            }
-            for &k in lost.iter().rev() {
-                let x = joins.remove(k);
-                refused_at.push((x.join.node, x.join.curve));
-                refused.push(RefusedJoin {
-                    reason: "the loop-closure test detached the joined tag".into(),
-                    ..RefusedJoin::configured(&x.join)
-                });
-                moved = moved.max(1.0);
             }
         }
-        let at_d0: HashMap<usize, f64> = curves
-            .iter()
-            .filter_map(|c| Some((c.index, c.tags.first()?.d)))
-            .collect();
-        net.report.joined = joins
-            .iter()
-            .map(|x| JoinReport {
-                node: x.join.node,
-                curve: x.join.curve,
-                arc_length_m: x.used_d - at_d0.get(&x.join.curve).copied().unwrap_or(0.0),
-                distance_m: x.join.distance_m,
-                normal_deg: x.join.normal_deg,
-                misfit_before_m: x.fit.and_then(|f| f.others_m),
-                misfit_after_m: x.fit.map(|f| f.own_m),
-                untagged: x.untagged,
-            })
-            .collect();
+        let (joined, refused) = state.finish(curves);
+        net.report.joined = joined;
         net.report.proposed = join::find_crossings(&net.positions, &js.params)
             .into_iter()
             .filter(|pr| !js.refuses(pr.curves[0], pr.curves[1]))
@@ -563,7 +384,7 @@ impl Reconstructor {
         net.warnings
             .extend(refused.iter().cloned().map(NetworkWarning::JoinRefused));
         net.report.joins_refused = refused;
-        net.report.join_passes = passes;
+        net.report.join_passes = state.passes;
         net.report.timings_ms.join = t0.elapsed().as_secs_f64() * 1e3;
         Ok(net)
     }

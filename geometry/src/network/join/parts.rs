@@ -1,0 +1,253 @@
+//! A network in parts put together (issue 34): where the parts' lonely nodes lie on each
+//! other's curves ([`place_parts`]).
+
+use super::{face_angle, faces, normals_fit, JoinParams};
+use crate::curve::{CurveKind, ANONYMOUS_NODE_BASE};
+use crate::network::poisson::Positions;
+use nalgebra::Vector3;
+
+/// A node tagged by one curve only: its position and faces.
+struct Lonely {
+    curve: usize,
+    kind: CurveKind,
+    x: Vector3<f64>,
+    faces: Vec<Vector3<f64>>,
+}
+
+/// The lonely nodes of `net` (see the module docs), with the curve (position) that tags each.
+fn lonely_nodes(net: &Positions) -> Vec<Lonely> {
+    let mut on: std::collections::BTreeMap<u32, Vec<usize>> = Default::default();
+    for (ci, c) in net.curves.iter().enumerate() {
+        for &(_, node) in &c.nodes {
+            let list = on.entry(node).or_default();
+            if !list.contains(&ci) {
+                list.push(ci);
+            }
+        }
+    }
+    on.into_iter()
+        .filter(|(node, curves)| *node < ANONYMOUS_NODE_BASE && curves.len() == 1)
+        .filter_map(|(node, curves)| {
+            let c = &net.curves[curves[0]];
+            let i = c.nodes.iter().find(|x| x.1 == node)?.0;
+            let x = *net.nodes.get(&node)?;
+            (i < c.normals.len()).then(|| Lonely {
+                curve: curves[0],
+                kind: c.kind,
+                x,
+                faces: faces(c, i, 0.0),
+            })
+        })
+        .collect()
+}
+
+/// The connected part of every curve of `net` (curves sharing a node are in one part).
+fn parts(net: &Positions) -> Vec<usize> {
+    let mut sets = crate::union_find::UnionFind::new(net.curves.len());
+    let mut first: std::collections::HashMap<u32, usize> = Default::default();
+    for (ci, c) in net.curves.iter().enumerate() {
+        for &(_, node) in &c.nodes {
+            let f = *first.entry(node).or_insert(ci);
+            sets.union(f, ci);
+        }
+    }
+    (0..net.curves.len()).map(|ci| sets.find(ci)).collect()
+}
+
+/// A grid of curve samples with cells the size of the join distance.
+struct Grid {
+    reach: f64,
+    cells: std::collections::HashMap<[i64; 3], Vec<(usize, usize)>>,
+}
+
+impl Grid {
+    fn key(&self, x: &Vector3<f64>) -> Option<[i64; 3]> {
+        let k = x / self.reach;
+        k.iter()
+            .all(|v| v.is_finite() && v.abs() < 1e12)
+            .then(|| [k.x.floor() as i64, k.y.floor() as i64, k.z.floor() as i64])
+    }
+
+    /// The samples of the curves `take` of `net`, shifted by `shift`.
+    fn of(net: &Positions, reach: f64, take: impl Fn(usize) -> bool) -> Grid {
+        let mut g = Grid {
+            reach,
+            cells: Default::default(),
+        };
+        for (ci, c) in net.curves.iter().enumerate().filter(|(ci, _)| take(*ci)) {
+            for (j, x) in c.points.iter().enumerate() {
+                if let Some(k) = g.key(x) {
+                    g.cells.entry(k).or_default().push((ci, j));
+                }
+            }
+        }
+        g
+    }
+
+    /// Whether a curve of the grid passes within the reach of `l` moved by `t`, its normals
+    /// fitting ([`normals_fit`]).
+    fn meets(&self, net: &Positions, l: &Lonely, t: &Vector3<f64>, normal_deg: f64) -> bool {
+        let x = l.x + t;
+        let Some(k) = self.key(&x) else { return false };
+        let mut near: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let Some(list) = self.cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) else {
+                        continue;
+                    };
+                    for &(ci, j) in list {
+                        if (net.curves[ci].points[j] - x).norm() <= self.reach {
+                            near.entry(ci).or_default().push(j);
+                        }
+                    }
+                }
+            }
+        }
+        near.into_iter().any(|(ci, js)| {
+            normals_fit(
+                &l.faces,
+                l.kind,
+                &net.curves[ci],
+                js.into_iter(),
+                normal_deg,
+            )
+            .is_some()
+        })
+    }
+}
+
+/// A network in parts (a crossing left untagged can cut it) has no relative placement of its
+/// parts: the Poisson solve gives each its own gauge. The orientations are absolute, so each
+/// part's shape is right and only its translation is unknown. This moves each part, greedily
+/// from the largest, by the translation that puts the most of its lonely nodes on the placed
+/// parts' curves and the placed parts' lonely nodes on its curves (at least two such
+/// incidences, and no other translation as good farther than twice the join distance: one
+/// incidence leaves the part free to slide along a curve). Candidates come from each
+/// incidence along every sample of the curve; each is checked in a grid, so the cost is the
+/// lonely nodes squared times the samples. Returns the parts moved; the joins
+/// ([`find_joins`]) are then found in the moved network.
+pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
+    let reach = p.distance_m;
+    if net.components < 2 || reach <= 0.0 || !reach.is_finite() {
+        return 0;
+    }
+    let part = parts(net);
+    let mut roots: Vec<usize> = part.clone();
+    roots.sort_unstable();
+    roots.dedup();
+    if roots.len() < 2 {
+        return 0;
+    }
+    let size = |r: usize| -> usize {
+        net.curves
+            .iter()
+            .enumerate()
+            .filter(|(ci, _)| part[*ci] == r)
+            .map(|(_, c)| c.points.len())
+            .sum()
+    };
+    roots.sort_by_key(|&r| std::cmp::Reverse(size(r)));
+    let mut placed = vec![roots[0]];
+    let mut moved = 0;
+    loop {
+        let lonely = lonely_nodes(net);
+        let mut best: Option<(usize, Vector3<f64>, usize)> = None;
+        for &r in roots.iter().filter(|r| !placed.contains(r)) {
+            let in_p = |ci: usize| part[ci] == r;
+            let in_placed = |ci: usize| placed.contains(&part[ci]);
+            let g_placed = Grid::of(net, reach, in_placed);
+            let g_part = Grid::of(net, reach, in_p);
+            // Incidences: a lonely node of the part on a placed curve (t = curve − node), and
+            // a lonely node of a placed part on the part's curves (t = node − curve).
+            let ours: Vec<&Lonely> = lonely.iter().filter(|l| in_p(l.curve)).collect();
+            let theirs: Vec<&Lonely> = lonely.iter().filter(|l| in_placed(l.curve)).collect();
+            if ours.len() + theirs.len() < 2 {
+                continue;
+            }
+            let score = |t: &Vector3<f64>| -> usize {
+                ours.iter()
+                    .filter(|l| g_placed.meets(net, l, t, p.normal_deg))
+                    .count()
+                    + theirs
+                        .iter()
+                        .filter(|l| g_part.meets(net, l, &-t, p.normal_deg))
+                        .count()
+            };
+            let mut top: Vec<(usize, Vector3<f64>)> = Vec::new();
+            let mut consider = |t: Vector3<f64>| {
+                let s = score(&t);
+                if s >= 2 {
+                    top.push((s, t));
+                }
+            };
+            for l in &ours {
+                for (ci, c) in net
+                    .curves
+                    .iter()
+                    .enumerate()
+                    .filter(|(ci, _)| in_placed(*ci))
+                {
+                    for (j, x) in c.points.iter().enumerate() {
+                        if face_angle(&l.faces, &faces(c, j, 0.0)) <= p.normal_deg {
+                            consider(x - l.x);
+                        }
+                    }
+                    let _ = ci;
+                }
+            }
+            for l in &theirs {
+                for c in net
+                    .curves
+                    .iter()
+                    .enumerate()
+                    .filter(|(ci, _)| in_p(*ci))
+                    .map(|x| x.1)
+                {
+                    for (j, x) in c.points.iter().enumerate() {
+                        if face_angle(&l.faces, &faces(c, j, 0.0)) <= p.normal_deg {
+                            consider(l.x - x);
+                        }
+                    }
+                }
+            }
+            let Some(&(s, t)) = top.iter().max_by_key(|x| x.0) else {
+                continue;
+            };
+            // Unique: every translation as good lies near this one.
+            if top
+                .iter()
+                .any(|x| x.0 == s && (x.1 - t).norm() > 2.0 * reach)
+            {
+                continue;
+            }
+            // The mean of the best translations near it (they spread along the curves within
+            // the reach).
+            let near: Vec<&Vector3<f64>> = top
+                .iter()
+                .filter(|x| x.0 == s && (x.1 - t).norm() <= 2.0 * reach)
+                .map(|x| &x.1)
+                .collect();
+            let t = near.iter().copied().sum::<Vector3<f64>>() / near.len() as f64;
+            if best.as_ref().is_none_or(|b| s > b.2) {
+                best = Some((r, t, s));
+            }
+        }
+        let Some((r, t, _)) = best else { break };
+        let mut nodes_moved = std::collections::BTreeSet::new();
+        for (ci, c) in net.curves.iter_mut().enumerate() {
+            if part[ci] == r {
+                c.points.iter_mut().for_each(|x| *x += t);
+                nodes_moved.extend(c.nodes.iter().map(|x| x.1));
+            }
+        }
+        for n in nodes_moved {
+            if let Some(x) = net.nodes.get_mut(&n) {
+                *x += t;
+            }
+        }
+        placed.push(r);
+        moved += 1;
+    }
+    moved
+}
