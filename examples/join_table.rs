@@ -234,10 +234,7 @@ fn cell(
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let seeds: Vec<u64> = list(&args, "--seeds", "1,2,3")
-        .iter()
-        .map(|s| s.parse().expect("--seeds: numbers separated by commas"))
-        .collect();
+    let seeds = shared::seeds(&args, "1,2,3");
     let devices = shared::devices(&args);
     let profiles = shared::profiles(&args);
     let scenes = list(&args, "--scenes", &SCENES.join(","));

@@ -84,3 +84,12 @@ pub fn profiles(args: &[String]) -> Vec<sfs::simulate::Profile> {
         })
         .collect()
 }
+
+#[allow(dead_code)]
+/// `--seeds`, numbers separated by commas (else `default`'s).
+pub fn seeds(args: &[String], default: &str) -> Vec<u64> {
+    list(args, "--seeds", default)
+        .iter()
+        .map(|s| s.parse().expect("--seeds: numbers separated by commas"))
+        .collect()
+}

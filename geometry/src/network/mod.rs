@@ -589,26 +589,17 @@ impl Reconstructor {
                 prefilter: (t1 - t0).as_secs_f64() * 1e3,
                 regression: (t2 - t1).as_secs_f64() * 1e3,
                 poisson: (t3 - t2).as_secs_f64() * 1e3,
-                join: 0.0,
+                ..Default::default()
             },
-            joined: Vec::new(),
-            proposed: Vec::new(),
-            joins_refused: Vec::new(),
-            join_passes: 0,
+            // The joins are run_joined's.
+            ..Default::default()
         };
-        let mut k = 0;
-        let slid = at
-            .iter()
-            .map(|a| {
-                a.map(|_| {
-                    k += 1;
-                    Slide {
-                        sigma: sigma[k - 1],
-                        fit: fits[k - 1],
-                    }
-                })
-            })
-            .collect();
+        // The slides found, in order, back to the slides asked for.
+        let mut solved = sigma
+            .into_iter()
+            .zip(fits)
+            .map(|(sigma, fit)| Slide { sigma, fit });
+        let slid = at.iter().map(|a| a.and_then(|_| solved.next())).collect();
         Ok((
             Network {
                 positions,

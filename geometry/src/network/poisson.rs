@@ -284,7 +284,7 @@ fn slide(
         }
         s[(k, k)] += SLIDE_RIDGE * dd[(k, k)].max(1.0);
     }
-    let Some(sigma) = s.clone().cholesky().map(|ch| ch.solve(&g)) else {
+    let Some(sigma) = s.cholesky().map(|ch| ch.solve(&g)) else {
         return vec![0.0; m];
     };
     if sigma.iter().any(|v| !v.is_finite()) {

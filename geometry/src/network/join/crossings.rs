@@ -1,6 +1,7 @@
 //! Crossings nobody tagged (issue 34, point 2): two curves whose reconstructed paths cross
 //! with no node there, proposed ([`Proposal`]) or, with `join_untagged`, joined.
 
+use super::grid::Grid;
 use super::{face_angle, faces, line_angle, JoinParams, Proposal};
 use crate::network::poisson::Positions;
 use nalgebra::Vector3;
@@ -64,42 +65,15 @@ pub fn find_crossings(net: &Positions, p: &JoinParams) -> Vec<Proposal> {
     if reach <= 0.0 || !reach.is_finite() {
         return Vec::new();
     }
-    let cell = |x: &Vector3<f64>| -> Option<[i64; 3]> {
-        let k = [x.x / reach, x.y / reach, x.z / reach];
-        k.iter().all(|v| v.is_finite() && v.abs() < 1e12).then(|| {
-            [
-                k[0].floor() as i64,
-                k[1].floor() as i64,
-                k[2].floor() as i64,
-            ]
-        })
-    };
-    let mut grid: std::collections::HashMap<[i64; 3], Vec<(usize, usize)>> = Default::default();
-    for (ci, c) in net.curves.iter().enumerate() {
-        for (j, x) in c.points.iter().enumerate() {
-            if let Some(k) = cell(x) {
-                grid.entry(k).or_default().push((ci, j));
-            }
-        }
-    }
+    let grid = Grid::of(net, reach, |_| true);
     // Close sample pairs per pair of curves: (a, b) → [(i on a, j on b)].
     let mut close: std::collections::BTreeMap<(usize, usize), Vec<(usize, usize)>> =
         Default::default();
     for (ca, c) in net.curves.iter().enumerate() {
         for (i, x) in c.points.iter().enumerate() {
-            let Some(k) = cell(x) else { continue };
-            for dx in -1..=1 {
-                for dy in -1..=1 {
-                    for dz in -1..=1 {
-                        let Some(list) = grid.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) else {
-                            continue;
-                        };
-                        for &(cb, j) in list {
-                            if cb > ca && (net.curves[cb].points[j] - x).norm() <= 2.0 * reach {
-                                close.entry((ca, cb)).or_default().push((i, j));
-                            }
-                        }
-                    }
+            for (cb, j) in grid.around(x) {
+                if cb > ca && (net.curves[cb].points[j] - x).norm() <= 2.0 * reach {
+                    close.entry((ca, cb)).or_default().push((i, j));
                 }
             }
         }

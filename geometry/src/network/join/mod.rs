@@ -60,6 +60,7 @@
 //! ```
 
 mod crossings;
+mod grid;
 mod parts;
 pub(crate) mod passes;
 
@@ -362,6 +363,20 @@ fn line_angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     x.min(180.0 - x)
 }
 
+/// The curves (positions in `net`) through every node, each once, in node order.
+fn curves_at_nodes(net: &Positions) -> std::collections::BTreeMap<u32, Vec<usize>> {
+    let mut on: std::collections::BTreeMap<u32, Vec<usize>> = Default::default();
+    for (ci, c) in net.curves.iter().enumerate() {
+        for &(_, node) in &c.nodes {
+            let list = on.entry(node).or_default();
+            if !list.contains(&ci) {
+                list.push(ci);
+            }
+        }
+    }
+    on
+}
+
 /// The joins of the lonely nodes of `net` (see the module docs), in node order.
 pub fn find_joins(net: &Positions, p: &JoinParams) -> Vec<Join> {
     find_joins_within(net, p, p.distance_m)
@@ -373,17 +388,9 @@ pub fn find_joins(net: &Positions, p: &JoinParams) -> Vec<Join> {
 /// curve passes it untagged) reaches [`JoinParams::distance_m`] only: a complete crossing
 /// with a third curve near is the rarer event, and it wants the stronger evidence.
 pub fn find_joins_within(net: &Positions, p: &JoinParams, lonely_reach: f64) -> Vec<Join> {
-    let mut on: std::collections::BTreeMap<u32, Vec<usize>> = Default::default();
-    for (ci, c) in net.curves.iter().enumerate() {
-        for &(_, node) in &c.nodes {
-            let list = on.entry(node).or_default();
-            if !list.contains(&ci) {
-                list.push(ci);
-            }
-        }
-    }
     let mut out = Vec::new();
-    for (&node, curves) in &on {
+    for (node, curves) in &curves_at_nodes(net) {
+        let node = *node;
         if node >= ANONYMOUS_NODE_BASE {
             continue;
         }

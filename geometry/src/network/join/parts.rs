@@ -1,7 +1,8 @@
 //! A network in parts put together (issue 34): where the parts' lonely nodes lie on each
 //! other's curves ([`place_parts`]).
 
-use super::{face_angle, faces, normals_fit, JoinParams};
+use super::grid::Grid;
+use super::{curves_at_nodes, face_angle, faces, normals_fit, JoinParams};
 use crate::curve::{CurveKind, ANONYMOUS_NODE_BASE};
 use crate::network::poisson::Positions;
 use nalgebra::Vector3;
@@ -16,16 +17,8 @@ struct Lonely {
 
 /// The lonely nodes of `net` (see the module docs), with the curve (position) that tags each.
 fn lonely_nodes(net: &Positions) -> Vec<Lonely> {
-    let mut on: std::collections::BTreeMap<u32, Vec<usize>> = Default::default();
-    for (ci, c) in net.curves.iter().enumerate() {
-        for &(_, node) in &c.nodes {
-            let list = on.entry(node).or_default();
-            if !list.contains(&ci) {
-                list.push(ci);
-            }
-        }
-    }
-    on.into_iter()
+    curves_at_nodes(net)
+        .into_iter()
         .filter(|(node, curves)| *node < ANONYMOUS_NODE_BASE && curves.len() == 1)
         .filter_map(|(node, curves)| {
             let c = &net.curves[curves[0]];
@@ -54,67 +47,26 @@ fn parts(net: &Positions) -> Vec<usize> {
     (0..net.curves.len()).map(|ci| sets.find(ci)).collect()
 }
 
-/// A grid of curve samples with cells the size of the join distance.
-struct Grid {
-    reach: f64,
-    cells: std::collections::HashMap<[i64; 3], Vec<(usize, usize)>>,
-}
-
-impl Grid {
-    fn key(&self, x: &Vector3<f64>) -> Option<[i64; 3]> {
-        let k = x / self.reach;
-        k.iter()
-            .all(|v| v.is_finite() && v.abs() < 1e12)
-            .then(|| [k.x.floor() as i64, k.y.floor() as i64, k.z.floor() as i64])
-    }
-
-    /// The samples of the curves `take` of `net`, shifted by `shift`.
-    fn of(net: &Positions, reach: f64, take: impl Fn(usize) -> bool) -> Grid {
-        let mut g = Grid {
-            reach,
-            cells: Default::default(),
-        };
-        for (ci, c) in net.curves.iter().enumerate().filter(|(ci, _)| take(*ci)) {
-            for (j, x) in c.points.iter().enumerate() {
-                if let Some(k) = g.key(x) {
-                    g.cells.entry(k).or_default().push((ci, j));
-                }
-            }
+/// Whether a curve of `grid` passes within its reach of `l` moved by `t`, its normals fitting
+/// ([`normals_fit`]).
+fn meets(grid: &Grid, net: &Positions, l: &Lonely, t: &Vector3<f64>, normal_deg: f64) -> bool {
+    let x = l.x + t;
+    let mut near: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for (ci, j) in grid.around(&x) {
+        if (net.curves[ci].points[j] - x).norm() <= grid.reach {
+            near.entry(ci).or_default().push(j);
         }
-        g
     }
-
-    /// Whether a curve of the grid passes within the reach of `l` moved by `t`, its normals
-    /// fitting ([`normals_fit`]).
-    fn meets(&self, net: &Positions, l: &Lonely, t: &Vector3<f64>, normal_deg: f64) -> bool {
-        let x = l.x + t;
-        let Some(k) = self.key(&x) else { return false };
-        let mut near: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for dz in -1..=1 {
-                    let Some(list) = self.cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) else {
-                        continue;
-                    };
-                    for &(ci, j) in list {
-                        if (net.curves[ci].points[j] - x).norm() <= self.reach {
-                            near.entry(ci).or_default().push(j);
-                        }
-                    }
-                }
-            }
-        }
-        near.into_iter().any(|(ci, js)| {
-            normals_fit(
-                &l.faces,
-                l.kind,
-                &net.curves[ci],
-                js.into_iter(),
-                normal_deg,
-            )
-            .is_some()
-        })
-    }
+    near.into_iter().any(|(ci, js)| {
+        normals_fit(
+            &l.faces,
+            l.kind,
+            &net.curves[ci],
+            js.into_iter(),
+            normal_deg,
+        )
+        .is_some()
+    })
 }
 
 /// A network in parts (a crossing left untagged can cut it) has no relative placement of its
@@ -167,11 +119,11 @@ pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
             }
             let score = |t: &Vector3<f64>| -> usize {
                 ours.iter()
-                    .filter(|l| g_placed.meets(net, l, t, p.normal_deg))
+                    .filter(|l| meets(&g_placed, net, l, t, p.normal_deg))
                     .count()
                     + theirs
                         .iter()
-                        .filter(|l| g_part.meets(net, l, &-t, p.normal_deg))
+                        .filter(|l| meets(&g_part, net, l, &-t, p.normal_deg))
                         .count()
             };
             let mut top: Vec<(usize, Vector3<f64>)> = Vec::new();
