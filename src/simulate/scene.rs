@@ -729,25 +729,7 @@ fn arclen(p: &[Vector3<f64>]) -> Vec<f64> {
 
 /// The closest point of a polyline to `x`: (segment index, parameter in it, distance).
 fn closest(p: &[Vector3<f64>], x: &Vector3<f64>) -> (usize, f64, f64) {
-    let mut best = (0, 0.0, f64::INFINITY);
-    for i in 0..p.len().saturating_sub(1) {
-        let (a, b) = (p[i], p[i + 1]);
-        let ab = b - a;
-        let l2 = ab.norm_squared();
-        let t = if l2 > 0.0 {
-            ((x - a).dot(&ab) / l2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let d = (a + ab * t - x).norm();
-        if d < best.2 {
-            best = (i, t, d);
-        }
-    }
-    if p.len() == 1 {
-        best = (0, 0.0, (p[0] - x).norm());
-    }
-    best
+    sfs_geometry::curve::closest_on_polyline(p, x)
 }
 
 /// Resamples a polyline at about `h` (both ends kept), interpolating normals, and snaps the

@@ -325,22 +325,10 @@ struct Approach {
 /// The closest approach of `c`'s polyline to `p`.
 fn closest_approach(c: &CurvePositions, p: &Vector3<f64>) -> Option<Approach> {
     let n = c.points.len().min(c.normals.len()).min(c.d.len());
-    let mut best: Option<(f64, usize, f64)> = None;
-    for j in 0..n.saturating_sub(1) {
-        let (a, b) = (c.points[j], c.points[j + 1]);
-        let ab = b - a;
-        let len2 = ab.norm_squared();
-        let u = if len2 > 0.0 {
-            ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let dist = (a + ab * u - p).norm();
-        if best.as_ref().is_none_or(|x| dist < x.0) {
-            best = Some((dist, j, u));
-        }
+    if n < 2 {
+        return None;
     }
-    let (dist, j, u) = best?;
+    let (j, u, dist) = crate::curve::closest_on_polyline(&c.points[..n], p);
     let d = c.d[j] + (c.d[j + 1] - c.d[j]) * u;
     let tangent = c
         .tangents
