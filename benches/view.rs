@@ -13,7 +13,9 @@
 //!   surfacing (`sfs replay … --pace x10 --view`), watched by Debian's chromium, headless,
 //!   through chromedriver; the page measures each curve from the wall-clock time of its `E`
 //!   (in the `network` event) to its network drawn. Beside it, the daemon's own figure (E to
-//!   `network.glb` in place, `report.json` `live.latency_ms`). Needs chromium and chromedriver.
+//!   `network.glb` in place, `report.json` `live.latency_ms`). And, issue 35, each curve's
+//!   time from its `E` to its curves drawn before their surface (the `curves` event), against
+//!   the surface drawn. Needs chromium and chromedriver.
 //! - **stalled**: the daemon's own latency on the same replay (seed 1) with nobody looking,
 //!   and with 200 clients that ask for the event stream and never read a byte (32 are
 //!   served, the rest refused), alternately, three runs each.
@@ -172,7 +174,9 @@ fn stalled() {
 struct Measured {
     /// Per curve: E to drawn in the page, and the `network` event's arrival to drawn, ms.
     page: Vec<(f64, f64)>,
-    /// `report.json` `live.latency_ms`.
+    /// Per curve: E to its curves drawn before their surface (the `curves` event, issue 35), ms.
+    curves: Vec<f64>,
+    /// `report.json` `live` (`latency_ms`, `curves_latency_ms`).
     daemon: serde_json::Value,
     /// `preview` events the page received per second of wall time a curve was open.
     preview_hz: f64,
@@ -193,6 +197,8 @@ async fn latency_of(seed: u64, dir: &Path) -> Measured {
             s["events"]["network"].as_u64() == s["events"]["curve"].as_u64()
                 && s["latencies"].as_array().map(Vec::len)
                     == s["events"]["curve"].as_u64().map(|n| n as usize)
+                && s["curveLatencies"].as_array().map(Vec::len)
+                    == s["events"]["curve"].as_u64().map(|n| n as usize)
         })
         .await
         .pop()
@@ -206,6 +212,12 @@ async fn latency_of(seed: u64, dir: &Path) -> Measured {
         .iter()
         .map(|l| (l["ms"].as_f64().unwrap(), l["page_ms"].as_f64().unwrap()))
         .collect();
+    let curves: Vec<f64> = state["curveLatencies"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["ms"].as_f64().unwrap())
+        .collect();
     // Curves were open for their samples at the device's rate, replayed 10 times faster.
     let rate = report["link"]["hello"]["rate_hz"].as_f64().unwrap_or(100.0);
     let open_s: f64 = report["curves"]
@@ -216,7 +228,8 @@ async fn latency_of(seed: u64, dir: &Path) -> Measured {
         .sum();
     Measured {
         page,
-        daemon: report["live"]["latency_ms"].clone(),
+        curves,
+        daemon: report["live"].clone(),
         preview_hz: state["events"]["preview"].as_f64().unwrap() / open_s,
     }
 }
@@ -245,18 +258,28 @@ fn latency() {
         let dir = root().join(format!("target/bench-view/seed-{seed}"));
         let Measured {
             page,
+            curves,
             daemon,
             preview_hz,
         } = rt.block_on(latency_of(seed, &dir));
         let total: Vec<f64> = page.iter().map(|l| l.0).collect();
         let own: Vec<f64> = page.iter().map(|l| l.1).collect();
-        let (p, o) = (Percentiles::of(&total), Percentiles::of(&own));
-        let ms = |k: &str| daemon[k].as_f64().unwrap_or(f64::NAN);
+        let (p, o, c) = (
+            Percentiles::of(&total),
+            Percentiles::of(&own),
+            Percentiles::of(&curves),
+        );
+        let ms = |what: &str, k: &str| daemon[what][k].as_f64().unwrap_or(f64::NAN);
         println!(
             "  seed {seed}: E to drawn, {} curves: p50 {:.0} / p95 {:.0} / max {:.0} ms; of which the page (event to drawn) p50 {:.0} / p95 {:.0} ms; daemon (E to network.glb) p50 {:.0} / p95 {:.0} ms",
-            p.n, p.p50, p.p95, p.max, o.p50, o.p95, ms("p50"), ms("p95")
+            p.n, p.p50, p.p95, p.max, o.p50, o.p95, ms("latency_ms", "p50"), ms("latency_ms", "p95")
+        );
+        println!(
+            "    E to the curves drawn (issue 35): p50 {:.0} / p95 {:.0} / max {:.0} ms, p95 {:.2} x that of the surface drawn (target <= 0.4); daemon (E to the curves published) p50 {:.1} / p95 {:.1} ms",
+            c.p50, c.p95, c.max, c.p95 / p.p95, ms("curves_latency_ms", "p50"), ms("curves_latency_ms", "p95")
         );
         println!("    E to drawn per curve, ms: {total:.0?}");
+        println!("    E to the curves drawn per curve, ms: {curves:.0?}");
         println!("    of which the page, ms: {own:.0?}");
         println!(
             "    preview events while a curve was open: {preview_hz:.1} per second (target >= 5)"

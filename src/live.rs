@@ -7,6 +7,7 @@
 //!                         (one pending update at most; later curves merge into it)
 //! worker: take ▶ Reconstructor (cached pre-filter, symbolic factorisations kept, the frames
 //!         regressed near the new curve only: a provisional network) ▶
+//!         the view's `curves` event (the network drawn at once, before its surface) ▶
 //!         Surfacer (faces kept: a provisional surface) ▶
 //!         network.glb and report.json replaced atomically ▶ one status line per curve ▶
 //!         while no curve waits: the update settled (exact) ▶ network.glb and report.json again
@@ -151,6 +152,11 @@ impl Live {
     }
 }
 
+/// A duration, ms.
+fn ms(d: std::time::Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
 fn lock(m: &Mutex<Mail>) -> std::sync::MutexGuard<'_, Mail> {
     // A panic on the other side leaves the mail usable: it holds plain data.
     m.lock().unwrap_or_else(|p| p.into_inner())
@@ -186,8 +192,19 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
             }
         }
         let t0 = Instant::now();
-        let mut products = pipeline.run(&scan.curves, &settings.network, settings.surface.as_ref());
-        let compute_ms = t0.elapsed().as_secs_f64() * 1e3;
+        // Phase one: the network, published at once (the operator sees the curve in place);
+        // phase two: its surface and network.glb (issue 35).
+        let mut products = pipeline.reconstruct(&scan.curves, &settings.network);
+        if let Some(v) = &settings.view {
+            v.curves(&products, report.updates + 1, &posted);
+        }
+        let published = Instant::now();
+        report
+            .curves_latencies
+            .extend(posted.iter().map(|(_, at)| ms(published - *at)));
+        report.curves_latency_ms = Percentiles::of(&report.curves_latencies);
+        pipeline.surface_into(&mut products, settings.surface.as_ref());
+        let compute_ms = ms(t0.elapsed());
         if let Err(e) = products.write_glb(&settings.out_dir) {
             tracing::error!("live update: {e}");
             last = Some(products);
@@ -196,10 +213,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
         let done = Instant::now();
         report.updates += 1;
         update_ms.push(compute_ms);
-        let lat: Vec<(usize, f64)> = posted
-            .iter()
-            .map(|(i, at)| (*i, (done - *at).as_secs_f64() * 1e3))
-            .collect();
+        let lat: Vec<(usize, f64)> = posted.iter().map(|(i, at)| (*i, ms(done - *at))).collect();
         report.latencies.extend(lat.iter().map(|l| l.1));
         report.latency_ms = Percentiles::of(&report.latencies);
         report.update_ms = Percentiles::of(&update_ms);
@@ -224,20 +238,21 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
                 waiting,
             )
         {
-            let ms = t0.elapsed().as_secs_f64() * 1e3;
+            let took = ms(t0.elapsed());
             if let Err(e) = products.write_glb(&settings.out_dir) {
                 tracing::error!("live update: {e}");
             } else {
                 report.settled += 1;
-                settle_ms.push(ms);
+                settle_ms.push(took);
                 report.settle_ms = Percentiles::of(&settle_ms);
                 update.publish(&products, &mut report, &[]);
-                tracing::debug!("update settled in {ms:.1} ms");
+                tracing::debug!("update settled in {took:.1} ms");
             }
         }
         last = Some(products);
     }
     report.latency_ms = Percentiles::of(&report.latencies);
+    report.curves_latency_ms = Percentiles::of(&report.curves_latencies);
     report.update_ms = Percentiles::of(&update_ms);
     LiveOutcome {
         report,

@@ -6,6 +6,10 @@
 //! curves ─▶ Reconstructor (pre-filter, closure test, regression, Poisson) ─▶ positions
 //!        ─▶ surface (segments ─▶ Surfacer) ─▶ glb (curves, nodes, surface) ─▶ Products
 //! ```
+//!
+//! Two phases (issue 35): [`Pipeline::reconstruct`] makes the network alone, which the live
+//! worker publishes at once (the view's `curves` event); [`Pipeline::surface_into`] then
+//! surfaces it and encodes `network.glb`. [`Pipeline::run`] is both.
 
 use crate::atomic::OutputError;
 use crate::scan::Curve;
@@ -134,8 +138,9 @@ impl Pipeline {
         out
     }
 
-    /// The network of `curves` alone (no surface, no glb yet).
-    fn reconstruct(&mut self, curves: &[Curve], network: &NetworkParams) -> Products {
+    /// The network of `curves` alone (no surface, no glb yet): the first phase of
+    /// [`run`](Self::run), what the live view draws before the surface comes.
+    pub fn reconstruct(&mut self, curves: &[Curve], network: &NetworkParams) -> Products {
         let t0 = Instant::now();
         let net = self.reconstructor.run_joined(curves, network, &self.joins);
         let mut out = Products {
@@ -204,8 +209,9 @@ impl Pipeline {
         true
     }
 
-    /// The surface of the network in `out` (when `surface` is given) and the glb of both.
-    fn surface_into(&mut self, out: &mut Products, surface: Option<&SurfaceParams>) {
+    /// The surface of the network in `out` (when `surface` is given) and the glb of both: the
+    /// second phase of [`run`](Self::run).
+    pub fn surface_into(&mut self, out: &mut Products, surface: Option<&SurfaceParams>) {
         let Some(net) = &out.network else {
             return;
         };

@@ -102,6 +102,9 @@ pub struct LiveReport {
     /// From the E key packet (the pipeline seeing the curve end) to the `network.glb` that
     /// contains the curve in place, ms.
     pub latency_ms: Percentiles,
+    /// From the E key packet to the network's curves published (the view's `curves` event,
+    /// before the surface is made: issue 35), ms; a curve's is always below its `latency_ms`.
+    pub curves_latency_ms: Percentiles,
     /// Reconstruction (network and surface) time per update, ms.
     pub update_ms: Percentiles,
     /// Provisional surfaces (faces kept, `[surface] reuse_tolerance`) made exact while the
@@ -114,6 +117,9 @@ pub struct LiveReport {
     /// Every latency, ms (summarised in `latency_ms`).
     #[serde(skip)]
     pub latencies: Vec<f64>,
+    /// Every curves latency, ms (summarised in `curves_latency_ms`).
+    #[serde(skip)]
+    pub curves_latencies: Vec<f64>,
 }
 
 /// A distribution summarised.

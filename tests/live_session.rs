@@ -103,6 +103,10 @@ fn issue7_pty_session_updates_after_every_curve_and_scores_within_target() {
     // Every update but the first kept faces and was settled.
     assert!(r["live"]["settled"].as_u64().unwrap() >= 1, "{}", r["live"]);
     assert_eq!(r["live"]["latency_ms"]["n"], expected_curves as u64);
+    // Issue 35: the curves were published before their surface, each sooner.
+    assert_eq!(r["live"]["curves_latency_ms"]["n"], expected_curves as u64);
+    let (c, a) = (&r["live"]["curves_latency_ms"], &r["live"]["latency_ms"]);
+    assert!(c["max"].as_f64() < a["max"].as_f64(), "{}", r["live"]);
     // Issue 5's target for the Morphorider, default profile: ≤ 0.10 % of the diagonal.
     let e = eval(&truth, &session.join("network.glb"));
     let mean = e["curves"]["mean_pct"].as_f64().unwrap();
@@ -186,6 +190,7 @@ fn curves_that_end_during_a_reconstruction_coalesce() {
     );
     assert_eq!(out.curves, n, "the last update has every curve");
     assert_eq!(out.report.latency_ms.n, n);
+    assert_eq!(out.report.curves_latency_ms.n, n);
     let net = out.products.unwrap().network.unwrap();
     assert_eq!(net.report.curves_used, n);
     assert!(dir.join("network.glb").exists());

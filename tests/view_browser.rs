@@ -209,6 +209,17 @@ async fn issue_16_a_running_session_is_drawn_as_it_is_scanned() {
         let ms = l["ms"].as_f64().unwrap();
         assert!(ms > 0.0 && ms < 30_000.0, "{l}");
     }
+    // Issue 35: each of them was drawn first without its surface (the `curves` event), sooner.
+    let curve_latencies = last["curveLatencies"].as_array().unwrap();
+    assert_eq!(curve_latencies.len(), latencies.len(), "{last}");
+    for (c, l) in curve_latencies.iter().zip(latencies) {
+        assert_eq!(c["curve"], l["curve"]);
+        let (c_ms, l_ms) = (c["ms"].as_f64().unwrap(), l["ms"].as_f64().unwrap());
+        assert!(
+            c_ms > 0.0 && c_ms < l_ms,
+            "curves drawn {c_ms} ms, surface {l_ms} ms"
+        );
+    }
     // The curve being scanned was drawn, growing, and replaced by the network at the end.
     assert!(longest_preview > 100, "{longest_preview} preview points");
     assert!(preview_grew, "the preview never grew");

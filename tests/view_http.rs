@@ -4,7 +4,7 @@
 //! to the file, 404 outside the routes, the limit on event streams, a stalled client.
 
 mod common;
-use common::view::{free_port, interrupt, Served};
+use common::view::{ended_report, free_port, interrupt, Served};
 use common::*;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -338,4 +338,89 @@ async fn issue_16_a_stalled_client_changes_nothing() {
         &["scan.json", "network.glb"],
         "viewed by a stalled client",
     );
+}
+
+/// Issue 35: each update publishes its network before its surface. A shipped replay served
+/// with every update's network exact (`[network] local_window = 0`, so that the last update's
+/// network is the outputs'): every update that brings curves in sends a `curves` event (the
+/// same update number and curves) before its `network` event; the last one draws the curves
+/// of the final `network.glb`; report.json's `live.curves_latency_ms` counts every curve, each
+/// percentile below `latency_ms`'s.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn issue_35_each_update_publishes_its_curves_before_its_surface() {
+    let dir = tmpdir("view-curves");
+    let out = dir.join("out");
+    let config = dir.join("exact.toml");
+    std::fs::write(&config, "[network]\nlocal_window = 0\n").unwrap();
+    let port = free_port();
+    let cfg = config.to_str().unwrap();
+    let _child = common::view::serve_replay(
+        &root().join("replay-logs/cone-morphorider.bin"),
+        &out,
+        Some("x20"),
+        port,
+        &["--config", cfg],
+    );
+    let events = connect(&format!("http://127.0.0.1:{port}/events")).await;
+    let seen = read_events(events, |name, v| name == "status" && v["state"] == "ended").await;
+    let report = ended_report(&out, Duration::from_secs(20));
+    let accepted = report["curves"].as_array().unwrap().len();
+    let ending = |v: &serde_json::Value| v["ended"].as_array().is_some_and(|a| !a.is_empty());
+    // The updates that bring curves in, in order: (event, update, curves ended).
+    let updates: Vec<(&str, u64, Vec<u64>)> = seen
+        .iter()
+        .filter(|(e, v)| (e == "curves" || e == "network") && ending(v))
+        .map(|(e, v)| {
+            let ended = v["ended"].as_array().unwrap().iter();
+            (
+                e.as_str(),
+                v["update"].as_u64().unwrap(),
+                ended.map(|x| x["curve"].as_u64().unwrap()).collect(),
+            )
+        })
+        .collect();
+    assert_eq!(updates.len(), 2 * accepted, "{updates:?}");
+    for pair in updates.chunks(2) {
+        assert_eq!(pair[0].0, "curves", "{updates:?}");
+        assert_eq!(pair[1].0, "network", "{updates:?}");
+        assert_eq!(
+            (pair[0].1, &pair[0].2),
+            (pair[1].1, &pair[1].2),
+            "{updates:?}"
+        );
+    }
+    // The last curves event draws the final network's curves (to 0.01 mm).
+    let last = &seen.iter().rev().find(|(e, _)| e == "curves").unwrap().1;
+    let glb = sfs::gltf_out::read_glb(&std::fs::read(out.join("network.glb")).unwrap()).unwrap();
+    let drawn = last["curves"].as_array().unwrap();
+    assert_eq!(drawn.len(), glb.curves.len());
+    for (d, c) in drawn.iter().zip(&glb.curves) {
+        assert_eq!(d["curve"].as_u64(), Some(c.index as u64));
+        assert_eq!(d["kind"], c.kind.name());
+        assert_eq!(d["nodes"], serde_json::json!(c.nodes));
+        let points = d["points"].as_array().unwrap();
+        assert_eq!(points.len(), c.points.len(), "curve {}", c.index);
+        for (p, q) in points.iter().zip(&c.points) {
+            let q = sfs::gltf_out::to_gltf(q);
+            for k in 0..3 {
+                let x = p[k].as_f64().unwrap();
+                assert!(
+                    (x - q[k] as f64).abs() < 1e-5 + 1e-6,
+                    "curve {}: {p} {q:?}",
+                    c.index
+                );
+            }
+        }
+    }
+    let nodes = last["nodes"].as_object().unwrap();
+    assert_eq!(nodes.len(), glb.nodes.len());
+    // Every curve's two latencies, the curves' first.
+    let live = &report["live"];
+    let (curves, all) = (&live["curves_latency_ms"], &live["latency_ms"]);
+    assert_eq!(curves["n"].as_u64(), Some(accepted as u64), "{live}");
+    assert_eq!(all["n"].as_u64(), Some(accepted as u64), "{live}");
+    for p in ["p50", "p95", "max"] {
+        let (c, a) = (curves[p].as_f64().unwrap(), all[p].as_f64().unwrap());
+        assert!(c > 0.0 && c < a, "{p}: curves {c} ms, update {a} ms");
+    }
 }

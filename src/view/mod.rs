@@ -7,7 +7,10 @@
 //! - `GET /status` one JSON object ([`Status`]);
 //! - `GET /metrics` Prometheus text ([`crate::metrics`]);
 //! - `GET /events` server-sent events: `status` (5 Hz while data flows, 1 Hz otherwise);
-//!   `curve` (a curve ended: `{"index"}`); `network` (a new `network.glb` is in place:
+//!   `curve` (a curve ended: `{"index"}`); `curves` (an update's network is made, before its
+//!   surface: `{"update", "ended", "curves": [{"curve", "kind", "boundary", "nodes",
+//!   "points"}], "nodes": {"ID": [x, y, z]}, "closure", "joins"}`, positions in the glb's
+//!   frame to 0.01 mm, `closure` and `joins` as in the status; issue 35); `network` (a new `network.glb` is in place:
 //!   `{"update", "curves", "ended": [{"curve", "e_unix_ms"}]}`, the curves it brings in and
 //!   when their `E` packet was read, wall clock); `warning` (each warning of `report.json` as
 //!   it is raised: `{"text", "code", "curve", "node"}`; acquisition's at once, the
@@ -293,6 +296,8 @@ impl Orientation {
 pub struct LiveStatus {
     pub updates: usize,
     pub latency_ms: Percentiles,
+    /// From `E` to the curves published (the `curves` event), ms.
+    pub curves_latency_ms: Percentiles,
     pub update_ms: Percentiles,
 }
 
@@ -314,6 +319,39 @@ impl From<&Warning> for WarningEvent {
             node: w.node(),
         }
     }
+}
+
+/// The closure marks and the joins of a reconstruction, as the status and the events give them.
+fn marks(products: &crate::pipeline::Products) -> (Vec<ClosureStatus>, JoinsStatus) {
+    let closure = products
+        .network
+        .iter()
+        .flat_map(|n| &n.report.closure)
+        .map(Into::into)
+        .collect();
+    let joins = products
+        .network
+        .as_ref()
+        .map(|n| (&n.report).into())
+        .unwrap_or_default();
+    (closure, joins)
+}
+
+/// The curves an update brings in, each with its `E` packet on the wall clock
+/// (`{"curve", "e_unix_ms"}`), for a page on this machine to measure the time to its own
+/// screen.
+fn ended_on_the_wall_clock(posted: &[(usize, std::time::Instant)]) -> Vec<serde_json::Value> {
+    let (now, wall) = (std::time::Instant::now(), std::time::SystemTime::now());
+    posted
+        .iter()
+        .map(|(curve, at)| {
+            let unix = wall
+                .checked_sub(now.saturating_duration_since(*at))
+                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                .map_or(0.0, |d| d.as_secs_f64() * 1e3);
+            serde_json::json!({ "curve": curve, "e_unix_ms": unix })
+        })
+        .collect()
 }
 
 /// One server-sent event: its name and JSON data.
@@ -471,6 +509,55 @@ impl View {
         self.update(|s| s.reconstruction = list);
     }
 
+    /// The network of live update `update` is made (its surface is not yet): its curves, nodes,
+    /// closure marks and joins, sent as the `curves` event for the page to draw at once, with
+    /// the curves it brings in (`posted`: index, when its `E` packet was read) (issue 35).
+    pub fn curves(
+        &self,
+        products: &crate::pipeline::Products,
+        update: usize,
+        posted: &[(usize, std::time::Instant)],
+    ) {
+        let Some(n) = &products.network else {
+            return; // nothing reconstructed: the network event says why (report.json)
+        };
+        *lock(&self.shared.nodes) = n.positions.nodes.clone();
+        let (closure, joins) = marks(products);
+        let curves: Vec<serde_json::Value> = n
+            .positions
+            .curves
+            .iter()
+            .map(|c| {
+                let points: Vec<[f32; 3]> = c
+                    .points
+                    .iter()
+                    .map(|p| crate::gltf_out::to_gltf(p).map(|x| (x * 1e5).round() / 1e5))
+                    .collect();
+                serde_json::json!({
+                    "curve": c.index,
+                    "kind": c.kind.name(),
+                    "boundary": c.kind == sfs_geometry::curve::CurveKind::Boundary,
+                    "nodes": c.nodes.iter().map(|n| n.1).collect::<Vec<_>>(),
+                    "points": points,
+                })
+            })
+            .collect();
+        let nodes: std::collections::BTreeMap<String, [f32; 3]> = products.nodes.clone();
+        let data = serde_json::json!({
+            "update": update,
+            "ended": ended_on_the_wall_clock(posted),
+            "curves": curves,
+            "nodes": nodes,
+            "closure": &closure,
+            "joins": &joins,
+        });
+        self.update(|s| {
+            s.closure = closure;
+            s.joins = joins;
+        });
+        self.send("curves", data.to_string());
+    }
+
     /// A new `network.glb` is in place (`products`: its bytes and node positions), after
     /// live update `live.updates` over `curves` curves, bringing in the curves `posted` (index,
     /// when its `E` packet was read).
@@ -487,17 +574,7 @@ impl View {
         if let Some(n) = &products.network {
             *lock(&self.shared.nodes) = n.positions.nodes.clone();
         }
-        let closure: Vec<ClosureStatus> = products
-            .network
-            .iter()
-            .flat_map(|n| &n.report.closure)
-            .map(Into::into)
-            .collect();
-        let joins: JoinsStatus = products
-            .network
-            .as_ref()
-            .map(|n| (&n.report).into())
-            .unwrap_or_default();
+        let (closure, joins) = marks(products);
         let m = &self.shared.metrics;
         crate::metrics::count_to(&m.updates, live.updates as u64);
         m.latency_p50.set(live.latency_ms.p50 * 1e-3);
@@ -508,22 +585,11 @@ impl View {
             s.live = Some(LiveStatus {
                 updates: live.updates,
                 latency_ms: live.latency_ms.clone(),
+                curves_latency_ms: live.curves_latency_ms.clone(),
                 update_ms: live.update_ms.clone(),
             })
         });
-        // The E packets on the wall clock, for a page on this machine to measure the time
-        // to its own screen.
-        let (now, wall) = (std::time::Instant::now(), std::time::SystemTime::now());
-        let ended: Vec<serde_json::Value> = posted
-            .iter()
-            .map(|(curve, at)| {
-                let unix = wall
-                    .checked_sub(now.saturating_duration_since(*at))
-                    .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-                    .map_or(0.0, |d| d.as_secs_f64() * 1e3);
-                serde_json::json!({ "curve": curve, "e_unix_ms": unix })
-            })
-            .collect();
+        let ended = ended_on_the_wall_clock(posted);
         self.send(
             "network",
             serde_json::json!({ "update": live.updates, "curves": curves, "ended": ended })

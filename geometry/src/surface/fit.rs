@@ -991,6 +991,7 @@ fn surface_with(
     soft_pattern: &mut CachedPattern,
     faces: &mut Faces,
 ) -> Result<Surfaced, SurfaceError> {
+    let t_tess = std::time::Instant::now();
     let Tessellation {
         mut asm,
         skipped,
@@ -1003,7 +1004,8 @@ fn surface_with(
         tracing::debug!("surface: {what} {:.1} ms", t.elapsed().as_secs_f64() * 1e3);
         *t = std::time::Instant::now();
     };
-    let mut tt = std::time::Instant::now();
+    let mut tt = t_tess;
+    lap("tessellation", &mut tt);
     if asm.triangles.is_empty() {
         return Err(SurfaceError::NoPatch(problems));
     }
@@ -1049,6 +1051,7 @@ fn surface_with(
         lap("factorisation", &mut tt);
         // 1. Biharmonic positions (the first pass, and the comparison methods) and normals.
         system.propagate(&q, pass, p.method, &mut asm, &mut nstar, &data, &zero);
+        lap("propagate", &mut tt);
         // 2. The fit.
         match p.method {
             Method::Biharmonic => {}
@@ -1093,6 +1096,7 @@ fn surface_with(
                 system.fit(&q, &b, &mut asm.positions, &data);
             }
         }
+        lap("fit", &mut tt);
         if matches!(system, System::Soft(_)) {
             weld(&mut asm.positions, &asm.primary, c);
         }
@@ -1115,6 +1119,7 @@ fn surface_with(
         })
         .collect();
     let (triangles, normals) = output(&asm, &nstar, edge, &mut problems)?;
+    lap("output", &mut tt);
     // The faces kept for the next surface, each with the 3D weights its last pass was
     // solved with (so that the same network again is the same system: back-substitutions
     // only), or those of this surface where it had none (a provisional surface's new faces).
@@ -1124,6 +1129,7 @@ fn surface_with(
         used[i] = fresh.next();
     }
     let faces_kept = asm.pieces.iter().filter(|pc| pc.kept).count();
+    lap("weights kept", &mut tt);
     tracing::debug!(
         "surface: {faces_kept} of {} faces kept{}",
         asm.pieces.len(),

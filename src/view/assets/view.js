@@ -10,7 +10,7 @@ const COLOURS = { boundary: 0xff9800, interior: 0x4fc3f7, crease: 0x66bb6a, guid
 
 const state = {
   ready: false, errors: [], updates: 0, curves: [], nodes: [], surfaceTriangles: 0,
-  lastCurve: null, warnings: 0, events: { status: 0, curve: 0, network: 0, warning: 0, preview: 0 },
+  lastCurve: null, warnings: 0, events: { status: 0, curve: 0, curves: 0, network: 0, warning: 0, preview: 0 },
   status: null, previewPoints: 0, closure: [], marked: [],
   // The latest network's joins (issue 34): joined nodes and proposed crossings, as drawn.
   joins: { joined: [], proposed: [], refused: [] }, joinMarks: 0,
@@ -18,6 +18,9 @@ const state = {
   // here, ms (the server's wall clock and this page's are the same machine's), and the part
   // of it from the event's arrival (`page_ms`: fetch, parse, draw).
   latencies: [], frames: 0,
+  // Per curve brought in by a `curves` event (the network before its surface, issue 35): from
+  // its E packet to those curves drawn here, ms, and the part from the event's arrival.
+  curveLatencies: [], curvesShown: 0,
 };
 window.sfsView = state;
 function pageError(text) {
@@ -230,37 +233,23 @@ function clear(group) {
   }
 }
 
-// Rebuilds the scene from a glb (the output contract: a `network` node whose mesh has a
-// LINE_STRIP per curve with extras {curve, kind, boundary, nodes} and node positions in its extras;
-// an optional `surface` node).
-function show(gltf) {
+// Replaces the drawn curves and nodes: `lines` [{geometry, curve, kind, nodes}], `positions`
+// {node: [x, y, z]} (the glb's frame); frames the first network in view.
+function drawNetwork(lines, positions) {
   clear(network); clear(labels);
-  if (surface) { scene.remove(surface); surface.geometry.dispose(); surface = null; }
   const curves = [], nodes = [];
   const box = new THREE.Box3();
-  gltf.scene.traverse((o) => {
-    if (o.isLine) {
-      const x = o.geometry.userData || {};
-      // `kind` since curve kinds; before them only `boundary`.
-      const kind = CURVE_KINDS.includes(x.kind) ? x.kind : (x.boundary ? 'boundary' : 'interior');
-      curves.push({ index: x.curve, kind, boundary: kind === 'boundary', nodes: x.nodes || [] });
-      const latest = x.curve === state.lastCurve;
-      const material = latest ? MATERIALS.latest : MATERIALS[kind];
-      // The loaded geometry itself: the parsed glb is dropped after this.
-      const line = new THREE.Line(o.geometry, material);
-      line.userData = { curve: x.curve, kind, boundary: kind === 'boundary' };
-      network.add(line);
-      o.geometry.computeBoundingBox();
-      box.union(o.geometry.boundingBox);
-    }
-    if (o.isMesh && (o.name === 'surface' || o.parent?.name === 'surface')) {
-      surface = new THREE.Mesh(o.geometry, MATERIALS.surface);
-      surface.visible = document.getElementById('show-surface').checked;
-      scene.add(surface);
-    }
-  });
-  let positions = null;
-  gltf.scene.traverse((o) => { if (o.userData && o.userData.nodes && !positions) positions = o.userData.nodes; });
+  for (const l of lines) {
+    // `kind` since curve kinds; before them only `boundary`.
+    const kind = CURVE_KINDS.includes(l.kind) ? l.kind : (l.boundary ? 'boundary' : 'interior');
+    curves.push({ index: l.curve, kind, boundary: kind === 'boundary', nodes: l.nodes || [] });
+    const material = l.curve === state.lastCurve ? MATERIALS.latest : MATERIALS[kind];
+    const line = new THREE.Line(l.geometry, material);
+    line.userData = { curve: l.curve, kind, boundary: kind === 'boundary' };
+    network.add(line);
+    l.geometry.computeBoundingBox();
+    box.union(l.geometry.boundingBox);
+  }
   const size = box.isEmpty() ? 1 : box.getSize(new THREE.Vector3()).length();
   sceneSize = size;
   if (positions) {
@@ -279,7 +268,6 @@ function show(gltf) {
   state.nodes = nodes;
   state.nodePositions = positions || {};
   drawMarks();
-  state.surfaceTriangles = surface ? (surface.geometry.index ? surface.geometry.index.count / 3 : 0) : 0;
   if (!framed && !box.isEmpty()) {
     const c = box.getCenter(new THREE.Vector3());
     controls.target.copy(c);
@@ -288,6 +276,49 @@ function show(gltf) {
     camera.updateProjectionMatrix();
     controls.update();
     framed = true;
+  }
+}
+
+// Rebuilds the scene from a glb (the output contract: a `network` node whose mesh has a
+// LINE_STRIP per curve with extras {curve, kind, boundary, nodes} and node positions in its extras;
+// an optional `surface` node).
+function show(gltf) {
+  if (surface) { scene.remove(surface); surface.geometry.dispose(); surface = null; }
+  const lines = [];
+  gltf.scene.traverse((o) => {
+    if (o.isLine) {
+      // The loaded geometry itself: the parsed glb is dropped after this.
+      lines.push({ geometry: o.geometry, ...(o.geometry.userData || {}) });
+    }
+    if (o.isMesh && (o.name === 'surface' || o.parent?.name === 'surface')) {
+      surface = new THREE.Mesh(o.geometry, MATERIALS.surface);
+      surface.visible = document.getElementById('show-surface').checked;
+      scene.add(surface);
+    }
+  });
+  let positions = null;
+  gltf.scene.traverse((o) => { if (o.userData && o.userData.nodes && !positions) positions = o.userData.nodes; });
+  drawNetwork(lines, positions);
+  state.surfaceTriangles = surface ? (surface.geometry.index ? surface.geometry.index.count / 3 : 0) : 0;
+}
+
+// An update's network before its surface (the `curves` event, issue 35): drawn at once over
+// the last surface, which the update's network.glb then replaces.
+function showCurves(c) {
+  const received = performance.now();
+  const lines = c.curves.map((k) => ({
+    ...k,
+    geometry: new THREE.BufferGeometry().setAttribute('position', new THREE.Float32BufferAttribute(k.points.flat(), 3)),
+  }));
+  drawNetwork(lines, c.nodes);
+  showJoins(c.joins);
+  showClosure(c.closure);
+  state.curvesShown += 1;
+  dropPreview();
+  draw();
+  const now = performance.now();
+  for (const e of c.ended || []) {
+    state.curveLatencies.push({ curve: e.curve, ms: performance.timeOrigin + now - e.e_unix_ms, page_ms: now - received });
   }
 }
 
@@ -393,7 +424,8 @@ function showStatus(s) {
     state.orientation = s.orientation;
   }
   if (s.live && s.live.latency_ms.n > 0) {
-    text('latency', `update ${s.live.latency_ms.p50.toFixed(0)} / ${s.live.latency_ms.p95.toFixed(0)} ms`);
+    const c = s.live.curves_latency_ms;
+    text('latency', `curves ${c.p50.toFixed(0)} / ${c.p95.toFixed(0)} ms · update ${s.live.latency_ms.p50.toFixed(0)} / ${s.live.latency_ms.p95.toFixed(0)} ms`);
   }
 }
 
@@ -450,6 +482,7 @@ const on = (name, f) => events.addEventListener(name, (e) => {
 });
 on('status', showStatus);
 on('curve', (c) => { state.lastCurve = c.index; });
+on('curves', showCurves);
 on('network', (n) => {
   const received = performance.now();
   pendingEnded.push(...(n.ended || []).map((e) => ({ ...e, received })));
