@@ -2,7 +2,9 @@
 """The scaling plot of BENCHMARKS.md (issue 19, point 4): the CSV written by
 `cargo run --release -p sfs-geometry --example scaling -- target/scaling.csv` drawn as two
 log-log panels (update time against surface vertices, against network curves), one line per
-timing column (cold, warm, and any added later), as an SVG with no dependency.
+timing column (cold, warm, and any added later), and a third (issue 35, point 3): the two
+phases of a live update against the network's curves (E to the curves: the network; its
+surface; E to the surface: the whole update), as an SVG with no dependency.
 
     python3 benches/scaling_plot.py target/scaling.csv docs/scaling.svg
 """
@@ -18,7 +20,7 @@ def panel(rows, series, x0, y0, w, h, title, xlabel):
     pts = [r for r in rows if r["series"] == series]
     if not pts:
         return []
-    cols = [k for k in pts[0] if k.endswith("_ms")]
+    cols = [k for k in pts[0] if k.endswith("_ms") and any(r[k] for r in pts)]
     xs = [float(r["x"]) for r in pts]
     ys = [float(r[c]) for r in pts for c in cols if r[c]]
     lx0, lx1 = math.log10(min(xs)), math.log10(max(xs))
@@ -56,8 +58,9 @@ def main():
         rows = list(csv.DictReader(f))
     body = panel(rows, "vertices", 70, 40, 380, 300, "surface size", "vertices")
     body += panel(rows, "curves", 560, 40, 380, 300, "network size (about 20 k vertices)", "curves")
+    body += panel(rows, "session", 1050, 40, 380, 300, "a live update's two phases", "curves")
     svg = (
-        '<svg xmlns="http://www.w3.org/2000/svg" width="980" height="400" font-family="sans-serif">'
+        '<svg xmlns="http://www.w3.org/2000/svg" width="1470" height="400" font-family="sans-serif">'
         '<rect width="100%" height="100%" fill="white"/>' + "".join(body) + "</svg>\n"
     )
     with open(dst, "w") as f:

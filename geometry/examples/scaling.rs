@@ -17,14 +17,34 @@
 //! - `again`: the same network once more with the tolerance (the system unchanged: the
 //!   factorisation kept, back-substitutions only: a monitored structure's epochs).
 //!
+//!
+//! And the two phases of a live update against the network's size (issue 35, point 3): the
+//! same grids' curves sampled as a device would give them (distance along, frames whose x is
+//! the tangent and z the surface normal, exact), then, after the network without meridian 1,
+//! the update that adds it as the live worker runs it:
+//! - `curves`: the network reconstructed (pre-filter, the regression local to 10 samples
+//!   either side of the new curve's nodes as the daemon's `LIVE_LOCAL_WINDOW`, Poisson: what
+//!   the view's `curves` event publishes);
+//! - `surface`: its surface, provisional (τ = 0.5, after the surface of the network without
+//!   the meridian);
+//! - `update`: both (what `network.glb` waits for);
+//! - `settle`: what the worker does next while idle: the whole network's regression and the
+//!   exact surface (τ = 0), replacing the provisional update.
+//!
 //! `cargo run --release -p sfs-geometry --example scaling [-- target/scaling.csv]`
 
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use sfs_geometry::curve::{Curve, Samples, Tag};
+use sfs_geometry::network::{NetworkParams, Reconstructor};
 use sfs_geometry::surface::analytic::sphere_grid;
-use sfs_geometry::surface::cycles::NetworkSegments;
+use sfs_geometry::surface::cycles::{NetworkSegments, Segment};
 use sfs_geometry::surface::fit::{SurfaceParams, Surfacer};
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 const COLUMNS: [&str; 5] = ["cold", "warm", "exact", "provisional", "again"];
+/// The columns of the live update's phases.
+const PHASES: [&str; 4] = ["curves", "surface", "update", "settle"];
 
 /// Wall time of `f`, ms.
 fn ms<T>(f: impl FnOnce() -> T) -> (f64, T) {
@@ -64,6 +84,112 @@ fn row(net: &NetworkSegments, p: &SurfaceParams, runs: usize) -> (usize, String,
         }
     }
     (nv, touched, best)
+}
+
+/// The curves of `net` as a device samples them: per curve its segments in order, a sample
+/// per point with its distance along the curve and the frame whose x is the tangent and z
+/// the normal, a tag at every node (session time: 0.1 m/s).
+fn curves_of(net: &NetworkSegments) -> Vec<Curve> {
+    let mut by_curve: BTreeMap<usize, Vec<&Segment>> = BTreeMap::new();
+    for s in &net.segments {
+        by_curve.entry(s.curve).or_default().push(s);
+    }
+    by_curve
+        .into_iter()
+        .map(|(index, mut segs)| {
+            segs.sort_by_key(|s| s.k);
+            let (mut points, mut normals) = (Vec::new(), Vec::new());
+            let mut ends = vec![(0, segs[0].a)];
+            for s in &segs {
+                let skip = usize::from(!points.is_empty());
+                points.extend_from_slice(&s.points[skip..]);
+                normals.extend_from_slice(&s.normals[skip..]);
+                ends.push((points.len() - 1, s.b));
+            }
+            let mut d = vec![0.0];
+            for w in points.windows(2) {
+                d.push(d.last().unwrap() + (w[1] - w[0]).norm());
+            }
+            let mut samples = Samples::default();
+            for i in 0..points.len() {
+                let (a, b) = (i.saturating_sub(1), (i + 1).min(points.len() - 1));
+                let x: Vector3<f64> = (points[b] - points[a]).normalize();
+                let z = (normals[i] - x * x.dot(&normals[i])).normalize();
+                let m = Matrix3::from_columns(&[x, z.cross(&x), z]);
+                let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m));
+                samples.t.push(d[i] / 0.1);
+                samples.d.push(d[i]);
+                samples.q.push([q.w, q.i, q.j, q.k]);
+                samples.flags.push(0);
+                samples.w.push(1.0);
+            }
+            let tags: Vec<Tag> = ends
+                .iter()
+                .map(|&(i, node)| Tag {
+                    node,
+                    d: d[i],
+                    t: d[i] / 0.1,
+                    uncertain: false,
+                })
+                .collect();
+            Curve {
+                index,
+                kind: segs[0].kind,
+                closed: tags[0].node == tags[tags.len() - 1].node,
+                segment_lengths: vec![None; tags.len() - 1],
+                tags,
+                samples,
+            }
+        })
+        .collect()
+}
+
+/// The live update that adds meridian 1 to the curves of `net`, after the update without
+/// it: the network's time, the provisional surface's, best of `runs`, ms, and the vertices.
+fn phases(net: &NetworkSegments, runs: usize) -> (usize, [f64; 4]) {
+    let curves = curves_of(net);
+    let without: Vec<Curve> = curves.iter().filter(|c| c.index != 1).cloned().collect();
+    let (np, sp) = (
+        NetworkParams {
+            local_window: 10,
+            ..NetworkParams::default()
+        },
+        SurfaceParams {
+            reuse_tolerance: 0.5,
+            ..SurfaceParams::default()
+        },
+    );
+    let mut best = [f64::MAX; 4];
+    let mut nv = 0;
+    for _ in 0..runs {
+        let (mut r, mut s) = (Reconstructor::new(), Surfacer::new());
+        let before = r.run(&without, &np).expect("a network");
+        s.run(&NetworkSegments::from_positions(&before.positions), &sp)
+            .expect("a surface");
+        let (curves_ms, after) = ms(|| r.run(&curves, &np).expect("a network"));
+        let (surface_ms, out) = ms(|| {
+            s.run(&NetworkSegments::from_positions(&after.positions), &sp)
+                .expect("a surface")
+        });
+        nv = out.positions.len();
+        let (settle_ms, _) = ms(|| {
+            let whole = r
+                .run(&curves, &NetworkParams::default())
+                .expect("a network");
+            s.run(
+                &NetworkSegments::from_positions(&whole.positions),
+                &SurfaceParams::default(),
+            )
+            .expect("a surface")
+        });
+        for (b, t) in
+            best.iter_mut()
+                .zip([curves_ms, surface_ms, curves_ms + surface_ms, settle_ms])
+        {
+            *b = b.min(t);
+        }
+    }
+    (nv, best)
 }
 
 /// The process's peak resident size so far (`VmHWM`), bytes (0 where /proc is not there).
@@ -185,12 +311,42 @@ fn main() {
         .map(|b| format!("{b:.2}"))
         .collect();
     println!("| exponent | | | {} |", e.join(" | "));
-    let names: Vec<String> = COLUMNS.iter().map(|c| format!("{c}_ms")).collect();
+    // The two phases of a live update (issue 35), the same grids.
+    println!();
+    println!("| curves (a live update) | vertices | E to the curves: network | surface | E to the surface: update | settle |");
+    println!("|---|---|---|---|---|---|");
+    let mut session = String::new();
+    let mut by_phase: Vec<(f64, [f64; 4])> = Vec::new();
+    for curves in [5usize, 10, 20, 50, 100] {
+        let meridians = curves.div_ceil(2);
+        let (nv, t) = phases(&sphere_grid(meridians, curves - meridians, 0.01), 3);
+        println!("| {curves} | {nv} | {} |", cells(&t));
+        session += &format!(
+            "session,{curves},{nv},{}{}\n",
+            ",".repeat(COLUMNS.len()),
+            t.map(|v| format!("{v:.3}")).join(",")
+        );
+        by_phase.push((curves as f64, t));
+    }
+    let e: Vec<String> = (0..PHASES.len())
+        .map(|c| {
+            let xy: Vec<(f64, f64)> = by_phase.iter().map(|(x, t)| (*x, t[c])).collect();
+            format!("{:.2}", exponent(&xy))
+        })
+        .collect();
+    println!("| exponent | | {} |", e.join(" | "));
+    let names: Vec<String> = COLUMNS
+        .iter()
+        .chain(&PHASES)
+        .map(|c| format!("{c}_ms"))
+        .collect();
+    let pad = ",".repeat(PHASES.len());
+    let padded = |rows: String| rows.replace('\n', &format!("{pad}\n"));
     let csv = format!(
-        "series,x,vertices,{}\n{}{}",
+        "series,x,vertices,{}\n{}{}{session}",
         names.join(","),
-        by_size.csv(),
-        by_curves.csv()
+        padded(by_size.csv()),
+        padded(by_curves.csv())
     );
     if let Some(path) = csv_path {
         std::fs::write(&path, csv).expect("the CSV written");
