@@ -9,7 +9,7 @@
 //! | `sfs_promtool` | `promtool` is on `PATH` (Debian's `prometheus`), or `SFS_REQUIRE_PROMTOOL` is set |
 //! | `sfs_paper_data` | `SFS_PAPER_DATA` names a directory with the paper's meshes (`lilium.obj`, `bumpy-cube.obj`) |
 //! | `sfs_dev_full` | `/dev/full` exists |
-//! | `sfs_golden_simd` | this machine's SIMD level is the one `tests/golden/outputs.txt` was made on |
+//! | `sfs_golden_simd` | this machine's SIMD level is one `tests/golden/outputs.txt` was made on |
 //!
 //! A `SFS_REQUIRE_*` variable (`.ci/run` sets them) makes the tests run, and fail, where the
 //! tool is missing. The directories on `PATH` are watched, so installing a package builds the
@@ -77,13 +77,10 @@ fn main() {
         }),
     );
     set("sfs_dev_full", Path::new("/dev/full").exists());
-    let golden = std::fs::read_to_string("tests/golden/outputs.txt").unwrap_or_default();
-    let made_on = golden
-        .lines()
-        .next()
-        .and_then(|l| l.rsplit(' ').next())
-        .unwrap_or("");
-    set("sfs_golden_simd", made_on == simd_level());
+    set(
+        "sfs_golden_simd",
+        made_on_this_level(Path::new("tests/golden/outputs.txt")),
+    );
 }
 
 include!("tests/golden/simd_level.rs");

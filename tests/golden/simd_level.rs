@@ -17,3 +17,14 @@ fn simd_level() -> &'static str {
         std::env::consts::ARCH
     }
 }
+
+/// Whether the digests file at `path` was made (or checked, the same digests) on this
+/// machine's SIMD level: its first line ends `made on LEVEL[, LEVEL…]`.
+fn made_on_this_level(path: &std::path::Path) -> bool {
+    std::fs::read_to_string(path)
+        .unwrap_or_default()
+        .lines()
+        .next()
+        .and_then(|l| l.split_once("made on "))
+        .is_some_and(|(_, levels)| levels.split(", ").any(|l| l.trim() == simd_level()))
+}
