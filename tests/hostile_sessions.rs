@@ -1,5 +1,7 @@
-//! Issue 15: the defects found by probing the daemon as a hostile world would, each pinned by
-//! a test named after what it pins.
+//! Sessions a hostile world makes: a failing standard input, bytes after the last frame, a
+//! stuck key, undo after a repeated Enter, loops through one node, a curve past its largest
+//! size, a taken port, a configuration whose capture is missing. The defects issue 15 found by
+//! probing the daemon this way, each pinned by a test named after what it pins.
 
 mod common;
 use common::*;
