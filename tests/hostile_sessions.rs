@@ -28,10 +28,6 @@ fn replay(
     o
 }
 
-fn read_report(dir: &std::path::Path) -> serde_json::Value {
-    serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap()
-}
-
 /// Point 6: a read error on standard input exits 3 (the input cannot be read), naming
 /// standard input; the report of what was read is still written.
 #[test]
@@ -151,12 +147,7 @@ fn issue_15_the_report_says_why_nothing_was_reconstructed() {
     replay("off", &cap, None, &dir.join("out"));
     let report = read_report(&dir.join("out"));
     assert!(report["network"].is_null());
-    let codes: Vec<&str> = report["warning_codes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| c.as_str().unwrap())
-        .collect();
+    let codes = strings(&report["warning_codes"]);
     assert!(
         codes.contains(&"curve_left_out") && codes.contains(&"nothing_reconstructed"),
         "{codes:?}: {}",

@@ -9,11 +9,6 @@ fn sfs() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sfs"))
 }
 
-fn read_report(dir: &std::path::Path) -> serde_json::Value {
-    let text = std::fs::read_to_string(dir.join("report.json")).unwrap();
-    serde_json::from_str(&text).unwrap()
-}
-
 #[test]
 fn replay_counts_every_fault() {
     let dir = tmpdir("replay-faults");
@@ -187,18 +182,8 @@ fn issue_14_warnings_carry_stable_codes() {
         .unwrap();
     assert!(out.status.success());
     let report = read_report(&dir.join("out"));
-    let texts: Vec<&str> = report["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|w| w.as_str().unwrap())
-        .collect();
-    let codes: Vec<&str> = report["warning_codes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| c.as_str().unwrap())
-        .collect();
+    let texts = strings(&report["warnings"]);
+    let codes = strings(&report["warning_codes"]);
     assert_eq!(
         codes,
         ["keypad_repeat", "keypad_unknown_key", "curve_never_ended"],

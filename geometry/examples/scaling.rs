@@ -17,7 +17,6 @@
 //! - `again`: the same network once more with the tolerance (the system unchanged: the
 //!   factorisation kept, back-substitutions only: a monitored structure's epochs).
 //!
-//!
 //! And the two phases of a live update against the network's size (issue 35, point 3): the
 //! same grids' curves sampled as a device would give them (distance along, frames whose x is
 //! the tangent and z the surface normal, exact), then, after the network without meridian 1,
@@ -145,7 +144,7 @@ fn curves_of(net: &NetworkSegments) -> Vec<Curve> {
 }
 
 /// The live update that adds meridian 1 to the curves of `net`, after the update without
-/// it: the network's time, the provisional surface's, best of `runs`, ms, and the vertices.
+/// it: the vertices, and the [`PHASES`]' times (ms, best of `runs`).
 fn phases(net: &NetworkSegments, runs: usize) -> (usize, [f64; 4]) {
     let curves = curves_of(net);
     let without: Vec<Curve> = curves.iter().filter(|c| c.index != 1).cloned().collect();
@@ -215,29 +214,37 @@ fn exponent(xy: &[(f64, f64)]) -> f64 {
     sxy / sxx
 }
 
-/// One sweep of the table: per row its x (vertices or curves), vertex count and the
-/// columns' times (ms).
+/// One sweep of a table: per row its x (vertices or curves), vertex count and its columns'
+/// times (ms), the CSV's columns from `first` on ([`COLUMNS`] then [`PHASES`]).
 struct Series {
     name: &'static str,
-    rows: Vec<(f64, usize, [f64; 5])>,
+    first: usize,
+    rows: Vec<(f64, usize, Vec<f64>)>,
 }
 
 impl Series {
-    /// Its rows as CSV lines.
+    /// Its rows as CSV lines (the other sweeps' columns empty).
     fn csv(&self) -> String {
+        let total = COLUMNS.len() + PHASES.len();
         self.rows
             .iter()
             .map(|(x, nv, t)| {
-                let cols: Vec<String> = t.iter().map(|v| format!("{v:.3}")).collect();
+                let mut cols = vec![String::new(); total];
+                for (c, v) in cols[self.first..].iter_mut().zip(t) {
+                    *c = format!("{v:.3}");
+                }
                 format!("{},{x},{nv},{}\n", self.name, cols.join(","))
             })
             .collect()
     }
 
-    /// The fitted exponent of each column against x.
-    fn exponents(&self) -> Vec<f64> {
-        (0..COLUMNS.len())
-            .map(|c| exponent(&self.rows.iter().map(|r| (r.0, r.2[c])).collect::<Vec<_>>()))
+    /// The fitted exponent of each column against x, formatted.
+    fn exponents(&self) -> Vec<String> {
+        (0..self.rows.first().map_or(0, |r| r.2.len()))
+            .map(|c| {
+                let xy: Vec<(f64, f64)> = self.rows.iter().map(|r| (r.0, r.2[c])).collect();
+                format!("{:.2}", exponent(&xy))
+            })
             .collect()
     }
 }
@@ -260,6 +267,7 @@ fn main() {
     println!("|---|---|---|---|---|---|---|---|");
     let mut by_size = Series {
         name: "vertices",
+        first: 0,
         rows: Vec::new(),
     };
     for target in [
@@ -282,20 +290,16 @@ fn main() {
         let (nv, touched, t) = row(&sphere_grid(6, 5, 0.5 * edge), &p, runs);
         let per_vertex = peak_rss() / nv as f64 / 1e3;
         println!("| {nv} | {touched} | {} | {per_vertex:.1} kB |", cells(&t));
-        by_size.rows.push((nv as f64, nv, t));
+        by_size.rows.push((nv as f64, nv, t.to_vec()));
     }
-    let e: Vec<String> = by_size
-        .exponents()
-        .iter()
-        .map(|b| format!("{b:.2}"))
-        .collect();
-    println!("| exponent | | {} | |", e.join(" | "));
+    println!("| exponent | | {} | |", by_size.exponents().join(" | "));
     // Network size: the grid at the default edge and budget.
     println!();
     println!("| curves | vertices | faces touched | {header} |");
     println!("|---|---|---|---|---|---|---|---|");
     let mut by_curves = Series {
         name: "curves",
+        first: 0,
         rows: Vec::new(),
     };
     for curves in [5usize, 10, 20, 50, 100] {
@@ -303,50 +307,36 @@ fn main() {
         let net = sphere_grid(meridians, curves - meridians, 0.01);
         let (nv, touched, t) = row(&net, &SurfaceParams::default(), 3);
         println!("| {curves} | {nv} | {touched} | {} |", cells(&t));
-        by_curves.rows.push((curves as f64, nv, t));
+        by_curves.rows.push((curves as f64, nv, t.to_vec()));
     }
-    let e: Vec<String> = by_curves
-        .exponents()
-        .iter()
-        .map(|b| format!("{b:.2}"))
-        .collect();
-    println!("| exponent | | | {} |", e.join(" | "));
+    println!("| exponent | | | {} |", by_curves.exponents().join(" | "));
     // The two phases of a live update (issue 35), the same grids.
     println!();
     println!("| curves (a live update) | vertices | E to the curves: network | surface | E to the surface: update | settle |");
     println!("|---|---|---|---|---|---|");
-    let mut session = String::new();
-    let mut by_phase: Vec<(f64, [f64; 4])> = Vec::new();
+    let mut by_phase = Series {
+        name: "session",
+        first: COLUMNS.len(),
+        rows: Vec::new(),
+    };
     for curves in [5usize, 10, 20, 50, 100] {
         let meridians = curves.div_ceil(2);
         let (nv, t) = phases(&sphere_grid(meridians, curves - meridians, 0.01), 3);
         println!("| {curves} | {nv} | {} |", cells(&t));
-        session += &format!(
-            "session,{curves},{nv},{}{}\n",
-            ",".repeat(COLUMNS.len()),
-            t.map(|v| format!("{v:.3}")).join(",")
-        );
-        by_phase.push((curves as f64, t));
+        by_phase.rows.push((curves as f64, nv, t.to_vec()));
     }
-    let e: Vec<String> = (0..PHASES.len())
-        .map(|c| {
-            let xy: Vec<(f64, f64)> = by_phase.iter().map(|(x, t)| (*x, t[c])).collect();
-            format!("{:.2}", exponent(&xy))
-        })
-        .collect();
-    println!("| exponent | | {} |", e.join(" | "));
+    println!("| exponent | | {} |", by_phase.exponents().join(" | "));
     let names: Vec<String> = COLUMNS
         .iter()
         .chain(&PHASES)
         .map(|c| format!("{c}_ms"))
         .collect();
-    let pad = ",".repeat(PHASES.len());
-    let padded = |rows: String| rows.replace('\n', &format!("{pad}\n"));
     let csv = format!(
-        "series,x,vertices,{}\n{}{}{session}",
+        "series,x,vertices,{}\n{}{}{}",
         names.join(","),
-        padded(by_size.csv()),
-        padded(by_curves.csv())
+        by_size.csv(),
+        by_curves.csv(),
+        by_phase.csv()
     );
     if let Some(path) = csv_path {
         std::fs::write(&path, csv).expect("the CSV written");

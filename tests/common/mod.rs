@@ -203,6 +203,20 @@ pub fn tmpdir(name: &str) -> PathBuf {
     d
 }
 
+/// `DIR/report.json`, parsed.
+pub fn read_report(dir: &std::path::Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap()
+}
+
+/// A JSON array of strings (a report's `warnings`, `warning_codes`) as `&str`s.
+pub fn strings(v: &serde_json::Value) -> Vec<&str> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_str().unwrap())
+        .collect()
+}
+
 /// Asserts the `"link"` object of a report against the construction.
 pub fn assert_link(link: &serde_json::Value, bytes: usize, exp: &Expected) {
     assert_eq!(link["bytes"], bytes as u64, "bytes");

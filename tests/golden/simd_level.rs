@@ -18,11 +18,10 @@ fn simd_level() -> &'static str {
     }
 }
 
-/// Whether the digests file at `path` was made (or checked, the same digests) on this
-/// machine's SIMD level: its first line ends `made on LEVEL[, LEVEL…]`.
-fn made_on_this_level(path: &std::path::Path) -> bool {
-    std::fs::read_to_string(path)
-        .unwrap_or_default()
+/// Whether a digests file (its text, `digests`) was made (or checked, the same digests) on
+/// this machine's SIMD level: its first line ends `made on LEVEL[, LEVEL…]`.
+fn made_on_this_level(digests: &str) -> bool {
+    digests
         .lines()
         .next()
         .and_then(|l| l.split_once("made on "))
