@@ -17,8 +17,9 @@
 //!   causal filter and its smoother of finished curves, rests from window statistics, the
 //!   q-method mean, disturbance tests).
 //! - [`keypad`], [`acquisition`], [`scan`]: orientations and key presses → tagged curves
-//!   (a phone's distances from its speed fitted to the accelerometer, [`acquisition::speed`];
-//!   a Morphorider's wheel skids filled, [`acquisition::skid`]).
+//!   (the state machine; the open curve kept until `E` and finalised; a phone's stands and
+//!   its distances from its speed fitted to the accelerometer, [`acquisition::speed`]; a
+//!   Morphorider's wheel skids filled, [`acquisition::skid`]; sensor arrays' windows).
 //! - `sfs-geometry` (its own crate, `geometry/`, no I/O): tagged curves → filtered frames
 //!   (pre-filter, loop-closure test of the tags, regression on SO(3)) → positions of the
 //!   network (Poisson) → surface (cycles, tessellation, cotangent Laplacian, biharmonic
