@@ -185,10 +185,6 @@ fn other_face(
 ) -> Result<Vec<Vector3<f64>>, CreaseUnknown> {
     let c = &curves[ci];
     let curve = c.index;
-    let n = c.points.len();
-    let s = &arcs[ci];
-    let in_face = IN_FACE_DEG.to_radians().sin();
-    let off_line = OFF_LINE_DEG.to_radians().sin();
     // Per segment, per end: the votes.
     let mut ends: Vec<[EndVotes; 2]> = Vec::new();
     let mut side_total = 0.0;
@@ -199,66 +195,112 @@ fn other_face(
             .into_iter()
             .enumerate()
         {
-            // The crease's frame near this end, T along the curve's travel.
-            let Some(t) = window_mean(c, s, i, dir, stop, |j| c.tangents[j]) else {
-                continue;
+            let end = CreaseEnd {
+                ci,
+                i,
+                node,
+                dir,
+                stop,
             };
-            let nn = window_mean(c, s, i, dir, stop, |j| c.normals[j]).unwrap_or(c.normals[i]);
-            let Some(t) = t.try_normalize(1e-12) else {
-                continue;
-            };
-            let Some(nn) = (nn - t * nn.dot(&t)).try_normalize(1e-12) else {
-                continue;
-            };
-            let bb = nn.cross(&t);
-            let mut into = (0.0, 0.0);
-            // Every direction leaving the node along a curve, but this end's own.
-            for &(dj, k) in at.get(&node).map_or(&[][..], |v| v.as_slice()) {
-                let d = &curves[dj];
-                let di = d.nodes[k].0;
-                for ddir in [1isize, -1] {
-                    // Along its segment to the next (or previous) tag of d.
-                    let stop_k = if ddir > 0 {
-                        d.nodes.get(k + 1)
-                    } else {
-                        k.checked_sub(1).and_then(|k| d.nodes.get(k))
-                    };
-                    let Some(&(dstop, _)) = stop_k else { continue };
-                    if dj == ci && di == i && dstop == stop {
-                        continue; // this very end
-                    }
-                    let Some(wv) = window_mean(d, &arcs[dj], di, ddir, dstop, |j| {
-                        d.tangents[j] * ddir as f64
-                    }) else {
-                        continue;
-                    };
-                    let Some(wv) = wv.try_normalize(1e-12) else {
-                        continue;
-                    };
-                    let (wb, wn) = (wv.dot(&bb), wv.dot(&nn));
-                    let rho = wb.hypot(wn);
-                    if rho < off_line {
-                        continue;
-                    }
-                    if wn.abs() < in_face * rho {
-                        votes[e].side += wb.signum() * rho;
-                    } else {
-                        into.0 += wb;
-                        into.1 += wn;
-                    }
-                }
+            if let Some(v) = end_votes(curves, arcs, at, &end) {
+                side_total += v.side;
+                votes[e] = v;
             }
-            if into.0.hypot(into.1) > 0.0 {
-                votes[e].into_b = Some(into);
-            }
-            side_total += votes[e].side;
         }
         ends.push(votes);
     }
     if side_total == 0.0 {
         return Err(CreaseUnknown::Side { curve });
     }
-    let sgn = side_total.signum();
+    let open = c.nodes.first().map(|x| x.1) != c.nodes.last().map(|x| x.1);
+    let theta =
+        end_angles(&ends, side_total.signum(), open).ok_or(CreaseUnknown::OtherFace { curve })?;
+    Ok(turn_between_ends(c, &arcs[ci], &theta))
+}
+
+/// One end of a segment of a crease: curve `ci`, its sample `i` at `node`, the segment
+/// running in direction `dir` (±1) to sample `stop`.
+struct CreaseEnd {
+    ci: usize,
+    i: usize,
+    node: u32,
+    dir: isize,
+    stop: usize,
+}
+
+/// The votes of the other curves at one end of a crease segment: every direction leaving
+/// the node along a curve (but this end's own), in the crease's frame there (T along its
+/// travel); `None` when the crease has no frame there.
+fn end_votes(
+    curves: &[CurvePositions],
+    arcs: &[Vec<f64>],
+    at: &NodeTags,
+    end: &CreaseEnd,
+) -> Option<EndVotes> {
+    let &CreaseEnd {
+        ci,
+        i,
+        node,
+        dir,
+        stop,
+    } = end;
+    let c = &curves[ci];
+    let s = &arcs[ci];
+    let in_face = IN_FACE_DEG.to_radians().sin();
+    let off_line = OFF_LINE_DEG.to_radians().sin();
+    let t = window_mean(c, s, i, dir, stop, |j| c.tangents[j])?;
+    let nn = window_mean(c, s, i, dir, stop, |j| c.normals[j]).unwrap_or(c.normals[i]);
+    let t = t.try_normalize(1e-12)?;
+    let nn = (nn - t * nn.dot(&t)).try_normalize(1e-12)?;
+    let bb = nn.cross(&t);
+    let mut votes = EndVotes::default();
+    let mut into = (0.0, 0.0);
+    for &(dj, k) in at.get(&node).map_or(&[][..], |v| v.as_slice()) {
+        let d = &curves[dj];
+        let di = d.nodes[k].0;
+        for ddir in [1isize, -1] {
+            // Along its segment to the next (or previous) tag of d.
+            let stop_k = if ddir > 0 {
+                d.nodes.get(k + 1)
+            } else {
+                k.checked_sub(1).and_then(|k| d.nodes.get(k))
+            };
+            let Some(&(dstop, _)) = stop_k else { continue };
+            if dj == ci && di == i && dstop == stop {
+                continue; // this very end
+            }
+            let Some(wv) = window_mean(d, &arcs[dj], di, ddir, dstop, |j| {
+                d.tangents[j] * ddir as f64
+            }) else {
+                continue;
+            };
+            let Some(wv) = wv.try_normalize(1e-12) else {
+                continue;
+            };
+            let (wb, wn) = (wv.dot(&bb), wv.dot(&nn));
+            let rho = wb.hypot(wn);
+            if rho < off_line {
+                continue;
+            }
+            if wn.abs() < in_face * rho {
+                votes.side += wb.signum() * rho;
+            } else {
+                into.0 += wb;
+                into.1 += wn;
+            }
+        }
+    }
+    if into.0.hypot(into.1) > 0.0 {
+        votes.into_b = Some(into);
+    }
+    Some(votes)
+}
+
+/// The angle of the other face at each end of each segment (from the measured normal,
+/// towards the side `sgn` says), from the votes into it; the free ends of an open crease
+/// with none are a dart (0); missing ends from the segment's other end, then from the
+/// nearest segment. `None` when no end has any.
+fn end_angles(ends: &[[EndVotes; 2]], sgn: f64, open: bool) -> Option<Vec<[Option<f64>; 2]>> {
     let theta_of = |(cb, sn): (f64, f64)| -> f64 {
         let phi = sn.atan2(cb);
         if sgn > 0.0 {
@@ -267,14 +309,12 @@ fn other_face(
             -phi
         }
     };
-    let open = c.nodes.first().map(|x| x.1) != c.nodes.last().map(|x| x.1);
     let last = ends.len().saturating_sub(1);
     let mut theta: Vec<[Option<f64>; 2]> = ends
         .iter()
         .enumerate()
         .map(|(g, v)| {
             let mut t = [v[0].into_b.map(theta_of), v[1].into_b.map(theta_of)];
-            // The free ends of an open crease with nothing into another face: a dart.
             if open && g == 0 && t[0].is_none() {
                 t[0] = Some(0.0);
             }
@@ -284,7 +324,6 @@ fn other_face(
             t
         })
         .collect();
-    // Missing ends from the segment's other end, then from the nearest segment.
     for t in &mut theta {
         let (a, b) = (t[0], t[1]);
         t[0] = a.or(b);
@@ -294,7 +333,7 @@ fn other_face(
         .filter(|&g| theta[g][0].is_some())
         .collect();
     if known.is_empty() {
-        return Err(CreaseUnknown::OtherFace { curve });
+        return None;
     }
     for g in 0..theta.len() {
         if theta[g][0].is_none() {
@@ -306,11 +345,22 @@ fn other_face(
             theta[g] = [v, v];
         }
     }
+    Some(theta)
+}
+
+/// The other face's normal at every sample of crease `c` (`s` its arc lengths): the measured
+/// normal turned about the tangent by the angle interpolated along each segment between its
+/// ends' (`theta`), the shorter way round.
+fn turn_between_ends(
+    c: &CurvePositions,
+    s: &[f64],
+    theta: &[[Option<f64>; 2]],
+) -> Vec<Vector3<f64>> {
+    let n = c.points.len();
     let mut across = vec![Vector3::zeros(); n];
     for (g, w) in c.nodes.windows(2).enumerate() {
         let ((i0, _), (i1, _)) = (w[0], w[1]);
         let (t0, t1) = (theta[g][0].unwrap_or(0.0), theta[g][1].unwrap_or(0.0));
-        // The shorter way round from t0 to t1.
         let dt = (t1 - t0 + PI).rem_euclid(2.0 * PI) - PI;
         let span = (s[i1] - s[i0]).max(f64::MIN_POSITIVE);
         for j in i0..=i1.min(n - 1) {
@@ -326,7 +376,7 @@ fn other_face(
             across[j] = (bb * th.sin() + nn * th.cos()).normalize();
         }
     }
-    Ok(across)
+    across
 }
 
 #[cfg(test)]

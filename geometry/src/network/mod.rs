@@ -415,39 +415,7 @@ impl Reconstructor {
     ) -> Result<(Network, Vec<Option<Slide>>), Unreconstructed> {
         let mut warnings = Vec::new();
         let t0 = Instant::now();
-        let mut uniform: Vec<UniformCurve> = Vec::new();
-        let live: std::collections::HashSet<usize> = curves.iter().map(|c| c.index).collect();
-        self.prefiltered.retain(|k, _| live.contains(k));
-        self.regressed.retain(|k, _| live.contains(k));
-        self.prefiltered_last = 0;
-        // Curves may kink at the nodes a crease passes through.
-        let crease_nodes: std::collections::BTreeSet<u32> = curves
-            .iter()
-            .filter(|c| c.kind == crate::curve::CurveKind::Crease)
-            .flat_map(|c| c.tags.iter().map(|t| t.node))
-            .collect();
-        for c in curves {
-            let mut kink_nodes: Vec<u32> = c
-                .tags
-                .iter()
-                .map(|t| t.node)
-                .filter(|n| crease_nodes.contains(n))
-                .collect();
-            kink_nodes.sort_unstable();
-            kink_nodes.dedup();
-            let key = CurveKey::of(c, &p.prefilter, kink_nodes);
-            let fresh = !matches!(self.prefiltered.get(&c.index), Some((k, _)) if *k == key);
-            if fresh {
-                self.prefiltered_last += 1;
-                self.regressed.remove(&c.index);
-                let u = prefilter_with_kinks(c, &p.prefilter, &key.kink_nodes);
-                self.prefiltered.insert(c.index, (key, u));
-            }
-            match &self.prefiltered[&c.index].1 {
-                Ok(u) => uniform.push(u.clone()),
-                Err(e) => warnings.push(NetworkWarning::LeftOut(e.clone())),
-            }
-        }
+        let mut uniform = self.prefilter_all(curves, p, &mut warnings);
         let t1 = Instant::now();
         if uniform.is_empty() {
             if !curves.is_empty() {
@@ -455,85 +423,8 @@ impl Reconstructor {
             }
             return Err(Unreconstructed { warnings });
         }
-        let closure = if p.no_closure_check {
-            closure::ClosureReport::default()
-        } else {
-            let uncertain: std::collections::BTreeSet<(usize, usize)> = curves
-                .iter()
-                .flat_map(|c| {
-                    c.tags
-                        .iter()
-                        .enumerate()
-                        .filter(|(_, t)| t.uncertain)
-                        .map(|(k, _)| (c.index, k))
-                })
-                .collect();
-            closure::detach_outlier_tags(&mut uniform, |c, k| uncertain.contains(&(c, k)))
-        };
-        warnings.extend(
-            closure
-                .detached
-                .iter()
-                .cloned()
-                .map(NetworkWarning::TagDetached),
-        );
-        warnings.extend(
-            closure
-                .refused
-                .iter()
-                .cloned()
-                .map(NetworkWarning::TagRefused),
-        );
-        // The nodes of curves that left the regressed network (a curve undone, or now left
-        // out): their ties went with them.
-        let in_use: std::collections::HashSet<usize> = uniform.iter().map(|u| u.index).collect();
-        let mut changed_nodes: Vec<u32> = self
-            .regressed_nodes
-            .iter()
-            .filter(|(k, _)| !in_use.contains(k))
-            .flat_map(|(_, nodes)| nodes.iter().map(|x| x.1))
-            .collect();
-        changed_nodes.sort_unstable();
-        changed_nodes.dedup();
-        let local = p.local_window > 0 && !self.regressed_nodes.is_empty();
-        let regression = if p.no_regression {
-            RegressionReport::default()
-        } else if local {
-            let previous: Vec<Option<&[UnitQuaternion<f64>]>> = uniform
-                .iter()
-                .map(|u| {
-                    let same_ties = self.regressed_nodes.get(&u.index) == Some(&u.nodes);
-                    self.regressed
-                        .get(&u.index)
-                        .filter(|_| same_ties)
-                        .map(|q| q.as_slice())
-                })
-                .collect();
-            self.regression.run_local(
-                &mut uniform,
-                &p.regression,
-                &previous,
-                p.local_window,
-                &changed_nodes,
-            )
-        } else if warm {
-            let init: Vec<Vec<UnitQuaternion<f64>>> = uniform
-                .iter()
-                .map(|u| self.regressed.get(&u.index).cloned().unwrap_or_default())
-                .collect();
-            let init: Vec<Option<&[UnitQuaternion<f64>]>> =
-                init.iter().map(|v| Some(v.as_slice())).collect();
-            self.regression.run_from(&mut uniform, &p.regression, &init)
-        } else {
-            self.regression.run(&mut uniform, &p.regression)
-        };
-        self.regressed_nodes.clear();
-        if !p.no_regression {
-            for u in &uniform {
-                self.regressed.insert(u.index, u.q.clone());
-                self.regressed_nodes.insert(u.index, u.nodes.clone());
-            }
-        }
+        let closure = closure_check(curves, &mut uniform, p, &mut warnings);
+        let regression = self.regress(&mut uniform, p, warm);
         let t2 = Instant::now();
         // Each slide's curve (position) and the tag's position in its nodes.
         let at: Vec<Option<(usize, usize)>> = slides
@@ -609,6 +500,153 @@ impl Reconstructor {
             slid,
         ))
     }
+
+    /// Every curve resampled ([`prefilter_with_kinks`]: curves may kink at the nodes a crease
+    /// passes through), from the cache where the curve and its kinks are unchanged; a curve
+    /// that cannot be is left out (a warning). Forgets the curves no longer in `curves`.
+    fn prefilter_all(
+        &mut self,
+        curves: &[Curve],
+        p: &NetworkParams,
+        warnings: &mut Vec<NetworkWarning>,
+    ) -> Vec<UniformCurve> {
+        let mut uniform: Vec<UniformCurve> = Vec::new();
+        let live: std::collections::HashSet<usize> = curves.iter().map(|c| c.index).collect();
+        self.prefiltered.retain(|k, _| live.contains(k));
+        self.regressed.retain(|k, _| live.contains(k));
+        self.prefiltered_last = 0;
+        let crease_nodes: std::collections::BTreeSet<u32> = curves
+            .iter()
+            .filter(|c| c.kind == crate::curve::CurveKind::Crease)
+            .flat_map(|c| c.tags.iter().map(|t| t.node))
+            .collect();
+        for c in curves {
+            let mut kink_nodes: Vec<u32> = c
+                .tags
+                .iter()
+                .map(|t| t.node)
+                .filter(|n| crease_nodes.contains(n))
+                .collect();
+            kink_nodes.sort_unstable();
+            kink_nodes.dedup();
+            let key = CurveKey::of(c, &p.prefilter, kink_nodes);
+            let fresh = !matches!(self.prefiltered.get(&c.index), Some((k, _)) if *k == key);
+            if fresh {
+                self.prefiltered_last += 1;
+                self.regressed.remove(&c.index);
+                let u = prefilter_with_kinks(c, &p.prefilter, &key.kink_nodes);
+                self.prefiltered.insert(c.index, (key, u));
+            }
+            match &self.prefiltered[&c.index].1 {
+                Ok(u) => uniform.push(u.clone()),
+                Err(e) => warnings.push(NetworkWarning::LeftOut(e.clone())),
+            }
+        }
+        uniform
+    }
+
+    /// The regression on SO(3) of the resampled curves: local around the changed ties when a
+    /// regressed network is kept ([`NetworkParams::local_window`]), warm-started from the
+    /// kept frames (`warm`), or from scratch; the frames kept for the next run.
+    fn regress(
+        &mut self,
+        uniform: &mut [UniformCurve],
+        p: &NetworkParams,
+        warm: bool,
+    ) -> RegressionReport {
+        // The nodes of curves that left the regressed network (a curve undone, or now left
+        // out): their ties went with them.
+        let in_use: std::collections::HashSet<usize> = uniform.iter().map(|u| u.index).collect();
+        let mut changed_nodes: Vec<u32> = self
+            .regressed_nodes
+            .iter()
+            .filter(|(k, _)| !in_use.contains(k))
+            .flat_map(|(_, nodes)| nodes.iter().map(|x| x.1))
+            .collect();
+        changed_nodes.sort_unstable();
+        changed_nodes.dedup();
+        let local = p.local_window > 0 && !self.regressed_nodes.is_empty();
+        let regression = if p.no_regression {
+            RegressionReport::default()
+        } else if local {
+            let previous: Vec<Option<&[UnitQuaternion<f64>]>> = uniform
+                .iter()
+                .map(|u| {
+                    let same_ties = self.regressed_nodes.get(&u.index) == Some(&u.nodes);
+                    self.regressed
+                        .get(&u.index)
+                        .filter(|_| same_ties)
+                        .map(|q| q.as_slice())
+                })
+                .collect();
+            self.regression.run_local(
+                uniform,
+                &p.regression,
+                &previous,
+                p.local_window,
+                &changed_nodes,
+            )
+        } else if warm {
+            let init: Vec<Vec<UnitQuaternion<f64>>> = uniform
+                .iter()
+                .map(|u| self.regressed.get(&u.index).cloned().unwrap_or_default())
+                .collect();
+            let init: Vec<Option<&[UnitQuaternion<f64>]>> =
+                init.iter().map(|v| Some(v.as_slice())).collect();
+            self.regression.run_from(uniform, &p.regression, &init)
+        } else {
+            self.regression.run(uniform, &p.regression)
+        };
+        self.regressed_nodes.clear();
+        if !p.no_regression {
+            for u in uniform.iter() {
+                self.regressed.insert(u.index, u.q.clone());
+                self.regressed_nodes.insert(u.index, u.nodes.clone());
+            }
+        }
+        regression
+    }
+}
+
+/// The loop-closure test of the tags ([`closure::detach_outlier_tags`]; tags the operator
+/// marked uncertain go first), unless [`NetworkParams::no_closure_check`]; its detached and
+/// refused tags are warnings.
+fn closure_check(
+    curves: &[Curve],
+    uniform: &mut Vec<UniformCurve>,
+    p: &NetworkParams,
+    warnings: &mut Vec<NetworkWarning>,
+) -> closure::ClosureReport {
+    let closure = if p.no_closure_check {
+        closure::ClosureReport::default()
+    } else {
+        let uncertain: std::collections::BTreeSet<(usize, usize)> = curves
+            .iter()
+            .flat_map(|c| {
+                c.tags
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, t)| t.uncertain)
+                    .map(|(k, _)| (c.index, k))
+            })
+            .collect();
+        closure::detach_outlier_tags(uniform, |c, k| uncertain.contains(&(c, k)))
+    };
+    warnings.extend(
+        closure
+            .detached
+            .iter()
+            .cloned()
+            .map(NetworkWarning::TagDetached),
+    );
+    warnings.extend(
+        closure
+            .refused
+            .iter()
+            .cloned()
+            .map(NetworkWarning::TagRefused),
+    );
+    closure
 }
 
 /// Largest angle between normals of different curves at a shared node, degrees. At a node a

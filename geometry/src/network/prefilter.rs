@@ -159,6 +159,86 @@ pub fn prefilter_with_kinks(
     p: &PrefilterParams,
     kink_nodes: &[u32],
 ) -> Result<UniformCurve, PrefilterError> {
+    let length = check(c, p)?;
+    let (raw, outliers) = usable_samples(c, p);
+    if raw.is_empty() {
+        return Err(PrefilterError::NoSamples { curve: c.index });
+    }
+    let uniq = merge_duplicates(raw);
+    let ds: Vec<f64> = uniq.iter().map(|u| u.0).collect();
+    let spacing = quadrature_weights(&ds);
+    let grid = UniformGrid::of(c, p);
+    let closed = c.tags.first().map(|t| t.node) == c.tags.last().map(|t| t.node);
+    let kink_at = grid.kinks(kink_nodes, closed, &uniq, &ds);
+    let UniformGrid { d, nodes, hs } = grid;
+    // The distances each sample's kernel may use: between the kinks around it (the standing
+    // samples at a kink, turning from one way to the other, on neither side).
+    let eps = |j: usize| 0.1 * hs[segment_of(&nodes, hs.len(), j)];
+    let range_of = |j: usize, arriving: bool| -> (f64, f64) {
+        let mut lo = f64::NEG_INFINITY;
+        let mut hi = f64::INFINITY;
+        for &kk in &kink_at {
+            let dk = d[kk];
+            // (A loop closing at a kink, at sample 0, bounds only its first sample.)
+            if (kk < j || (kk == j && !arriving)) && (kk > 0 || j == 0) {
+                lo = lo.max(dk + eps(kk));
+            }
+            if kk > j || (kk == j && arriving) {
+                hi = hi.min(dk - eps(kk.saturating_sub(1)));
+            }
+        }
+        (lo, hi)
+    };
+    // Gaussian-weighted q-method means.
+    let mut q = Vec::with_capacity(d.len());
+    let mut rel = Vec::with_capacity(d.len());
+    let mut kinks = Vec::new();
+    let mut last = uniq[0].1;
+    for (k, &t) in d.iter().enumerate() {
+        let width = p.sigma * hs[segment_of(&nodes, hs.len(), k)];
+        // At an interior kink: the frame arriving first (from the samples before), then the
+        // one leaving.
+        if kink_at.contains(&k) && k > 0 {
+            let (lo_d, hi_d) = range_of(k, true);
+            let (m, _) = kernel_mean(&uniq, &ds, &spacing, t, width, length, (lo_d, hi_d), &last);
+            kinks.push((k, m));
+        }
+        let (lo_d, hi_d) = range_of(k, false);
+        let (mean, reliability) =
+            kernel_mean(&uniq, &ds, &spacing, t, width, length, (lo_d, hi_d), &last);
+        last = mean;
+        q.push(mean);
+        rel.push(reliability.clamp(0.0, 1.0));
+    }
+    if kink_at.contains(&0) && closed {
+        kinks.insert(0, (0, *q.last().expect("samples")));
+    }
+    Ok(UniformCurve {
+        index: c.index,
+        kind: c.kind,
+        d,
+        q,
+        nodes,
+        h: hs,
+        w: rel,
+        outliers,
+        kinks,
+    })
+}
+
+/// The segment (between two node tags) that uniform sample `j` lies in: the last whose start
+/// node is at or before it, of `segments`.
+fn segment_of(nodes: &[(usize, u32)], segments: usize, j: usize) -> usize {
+    nodes
+        .iter()
+        .rposition(|&(i, _)| i <= j)
+        .unwrap_or(0)
+        .min(segments - 1)
+}
+
+/// Whether a curve can be resampled: two tags at least, long enough, its tags in order and
+/// apart, not too long for the step. Returns its length.
+fn check(c: &Curve, p: &PrefilterParams) -> Result<f64, PrefilterError> {
     if c.tags.len() < 2 {
         return Err(PrefilterError::TooFewNodes {
             curve: c.index,
@@ -203,13 +283,20 @@ pub fn prefilter_with_kinks(
             max: MAX_SAMPLES_PER_CURVE,
         });
     }
+    Ok(length)
+}
+
+/// A raw sample: distance, orientation, weight.
+type RawSample = (f64, UnitQuaternion<f64>, f64);
+
+/// The usable raw samples in time order (weighted, at a finite distance), without the
+/// outliers (far from both neighbours in time order, by `p.alpha`); and how many outliers.
+fn usable_samples(c: &Curve, p: &PrefilterParams) -> (Vec<RawSample>, usize) {
     let s = &c.samples;
-    // Usable raw samples in time order.
-    let mut raw: Vec<(f64, UnitQuaternion<f64>, f64)> = (0..s.len())
+    let mut raw: Vec<RawSample> = (0..s.len())
         .filter(|&i| s.w.get(i).copied().unwrap_or(1.0) > 0.0 && s.d[i].is_finite())
         .map(|i| (s.d[i], quat(&s.q[i]), s.w.get(i).copied().unwrap_or(1.0)))
         .collect();
-    // Outliers: far from both neighbours (in time order).
     let mut outliers = 0;
     if raw.len() >= 3 {
         let keep: Vec<bool> = (0..raw.len())
@@ -228,13 +315,14 @@ pub fn prefilter_with_kinks(
         let mut it = keep.iter();
         raw.retain(|_| *it.next().expect("same length"));
     }
-    if raw.is_empty() {
-        return Err(PrefilterError::NoSamples { curve: c.index });
-    }
-    // Duplicates (same distance: the device stood still) become one sample: their mean
-    // orientation with their mean weight.
+    (raw, outliers)
+}
+
+/// The samples sorted by distance, duplicates (same distance: the device stood still) made
+/// one sample: their mean orientation with their mean weight.
+fn merge_duplicates(mut raw: Vec<RawSample>) -> Vec<RawSample> {
     raw.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut uniq: Vec<(f64, UnitQuaternion<f64>, f64)> = Vec::with_capacity(raw.len());
+    let mut uniq: Vec<RawSample> = Vec::with_capacity(raw.len());
     let mut i = 0;
     while i < raw.len() {
         let mut j = i + 1;
@@ -255,12 +343,15 @@ pub fn prefilter_with_kinks(
         }
         i = j;
     }
-    let ds: Vec<f64> = uniq.iter().map(|u| u.0).collect();
-    // Quadrature weights: the kernel integrates over distance, so each sample stands for the
-    // stretch of curve around it (where the operator slowed down, samples are denser; without
-    // this the mean is pulled towards them).
+    uniq
+}
+
+/// Quadrature weights of samples at distances `ds` (sorted): the kernel integrates over
+/// distance, so each sample stands for the stretch of curve around it (where the operator
+/// slowed down, samples are denser; without this the mean is pulled towards them).
+fn quadrature_weights(ds: &[f64]) -> Vec<f64> {
     let m = ds.len();
-    let spacing: Vec<f64> = (0..m)
+    (0..m)
         .map(|i| {
             let a = if i > 0 { ds[i] - ds[i - 1] } else { 0.0 };
             let b = if i + 1 < m { ds[i + 1] - ds[i] } else { 0.0 };
@@ -271,130 +362,94 @@ pub fn prefilter_with_kinks(
                 (false, false) => 1.0,
             }
         })
-        .collect();
-    // Uniform parameters per segment.
-    let mut d = Vec::new();
-    let mut nodes = Vec::new();
-    let mut hs = Vec::new();
-    for (k, w) in c.tags.windows(2).enumerate() {
-        let l = w[1].d - w[0].d;
-        let n = ((l / p.h).round() as usize).max(1);
-        let h = l / n as f64;
-        if k == 0 {
-            nodes.push((0, w[0].node));
-            d.push(w[0].d);
+        .collect()
+}
+
+/// The uniform parameters of a curve: each segment between node tags cut into steps of
+/// about `h`.
+struct UniformGrid {
+    /// The samples' distances.
+    d: Vec<f64>,
+    /// `(sample, node)` of each tag.
+    nodes: Vec<(usize, u32)>,
+    /// Each segment's step.
+    hs: Vec<f64>,
+}
+
+impl UniformGrid {
+    fn of(c: &Curve, p: &PrefilterParams) -> Self {
+        let mut d = Vec::new();
+        let mut nodes = Vec::new();
+        let mut hs = Vec::new();
+        for (k, w) in c.tags.windows(2).enumerate() {
+            let l = w[1].d - w[0].d;
+            let n = ((l / p.h).round() as usize).max(1);
+            let h = l / n as f64;
+            if k == 0 {
+                nodes.push((0, w[0].node));
+                d.push(w[0].d);
+            }
+            for j in 1..=n {
+                d.push(w[0].d + h * j as f64);
+            }
+            nodes.push((d.len() - 1, w[1].node));
+            hs.push(h);
         }
-        for j in 1..=n {
-            d.push(w[0].d + h * j as f64);
-        }
-        nodes.push((d.len() - 1, w[1].node));
-        hs.push(h);
+        UniformGrid { d, nodes, hs }
     }
-    // Kinks: at the allowed nodes, the mean tangents half a step to two steps before and after.
-    let tangent_between = |a: f64, b: f64| -> Option<nalgebra::Vector3<f64>> {
-        let (lo, hi) = (
-            ds.partition_point(|&x| x < a),
-            ds.partition_point(|&x| x <= b),
-        );
-        let sum: nalgebra::Vector3<f64> = uniq[lo..hi]
-            .iter()
-            .map(|u| u.1 * nalgebra::Vector3::x())
-            .sum();
-        sum.try_normalize(1e-12)
-    };
-    let kink_cos = KINK_DEG.to_radians().cos();
-    let mut kink_at: Vec<usize> = Vec::new(); // sample indices
-    let closed = c.tags.first().map(|t| t.node) == c.tags.last().map(|t| t.node);
-    for (k, &(i, node)) in nodes.iter().enumerate() {
-        if !kink_nodes.contains(&node) {
-            continue;
-        }
-        let last_tag = k + 1 == nodes.len();
-        if last_tag {
-            continue;
-        }
-        let dn = d[i];
-        let hb = if k > 0 { hs[k - 1] } else { hs[hs.len() - 1] };
-        let ha = hs[k];
-        let before = if k > 0 {
-            tangent_between(dn - 2.0 * hb, dn - 0.5 * hb)
-        } else if closed {
-            let end = d[d.len() - 1];
-            tangent_between(end - 2.0 * hb, end - 0.5 * hb)
-        } else {
-            None
+
+    /// The samples (indices) at a kink: at the allowed nodes (`kink_nodes`), the mean
+    /// tangents of the raw samples `uniq` (at distances `ds`) half a step to two steps before
+    /// and after turn by more than [`KINK_DEG`].
+    fn kinks(
+        &self,
+        kink_nodes: &[u32],
+        closed: bool,
+        uniq: &[RawSample],
+        ds: &[f64],
+    ) -> Vec<usize> {
+        let (d, hs) = (&self.d, &self.hs);
+        let tangent_between = |a: f64, b: f64| -> Option<nalgebra::Vector3<f64>> {
+            let (lo, hi) = (
+                ds.partition_point(|&x| x < a),
+                ds.partition_point(|&x| x <= b),
+            );
+            let sum: nalgebra::Vector3<f64> = uniq[lo..hi]
+                .iter()
+                .map(|u| u.1 * nalgebra::Vector3::x())
+                .sum();
+            sum.try_normalize(1e-12)
         };
-        let after = tangent_between(dn + 0.5 * ha, dn + 2.0 * ha);
-        if let (Some(b), Some(a)) = (before, after) {
-            if b.dot(&a) < kink_cos {
-                kink_at.push(i);
+        let kink_cos = KINK_DEG.to_radians().cos();
+        let mut kink_at: Vec<usize> = Vec::new();
+        for (k, &(i, node)) in self.nodes.iter().enumerate() {
+            if !kink_nodes.contains(&node) {
+                continue;
+            }
+            let last_tag = k + 1 == self.nodes.len();
+            if last_tag {
+                continue;
+            }
+            let dn = d[i];
+            let hb = if k > 0 { hs[k - 1] } else { hs[hs.len() - 1] };
+            let ha = hs[k];
+            let before = if k > 0 {
+                tangent_between(dn - 2.0 * hb, dn - 0.5 * hb)
+            } else if closed {
+                let end = d[d.len() - 1];
+                tangent_between(end - 2.0 * hb, end - 0.5 * hb)
+            } else {
+                None
+            };
+            let after = tangent_between(dn + 0.5 * ha, dn + 2.0 * ha);
+            if let (Some(b), Some(a)) = (before, after) {
+                if b.dot(&a) < kink_cos {
+                    kink_at.push(i);
+                }
             }
         }
+        kink_at
     }
-    // The distances each sample's kernel may use: between the kinks around it (the standing
-    // samples at a kink, turning from one way to the other, on neither side).
-    let eps = |j: usize| {
-        0.1 * hs[nodes
-            .iter()
-            .rposition(|&(i, _)| i <= j)
-            .unwrap_or(0)
-            .min(hs.len() - 1)]
-    };
-    let range_of = |j: usize, arriving: bool| -> (f64, f64) {
-        let mut lo = f64::NEG_INFINITY;
-        let mut hi = f64::INFINITY;
-        for &kk in &kink_at {
-            let dk = d[kk];
-            // (A loop closing at a kink, at sample 0, bounds only its first sample.)
-            if (kk < j || (kk == j && !arriving)) && (kk > 0 || j == 0) {
-                lo = lo.max(dk + eps(kk));
-            }
-            if kk > j || (kk == j && arriving) {
-                hi = hi.min(dk - eps(kk.saturating_sub(1)));
-            }
-        }
-        (lo, hi)
-    };
-    // Gaussian-weighted q-method means.
-    let mut q = Vec::with_capacity(d.len());
-    let mut rel = Vec::with_capacity(d.len());
-    let mut kinks = Vec::new();
-    let mut last = uniq[0].1;
-    for (k, &t) in d.iter().enumerate() {
-        let seg = nodes
-            .iter()
-            .rposition(|&(i, _)| i <= k)
-            .unwrap_or(0)
-            .min(hs.len() - 1);
-        let width = p.sigma * hs[seg];
-        // At an interior kink: the frame arriving first (from the samples before), then the
-        // one leaving.
-        if kink_at.contains(&k) && k > 0 {
-            let (lo_d, hi_d) = range_of(k, true);
-            let (m, _) = kernel_mean(&uniq, &ds, &spacing, t, width, length, (lo_d, hi_d), &last);
-            kinks.push((k, m));
-        }
-        let (lo_d, hi_d) = range_of(k, false);
-        let (mean, reliability) =
-            kernel_mean(&uniq, &ds, &spacing, t, width, length, (lo_d, hi_d), &last);
-        last = mean;
-        q.push(mean);
-        rel.push(reliability.clamp(0.0, 1.0));
-    }
-    if kink_at.contains(&0) && closed {
-        kinks.insert(0, (0, *q.last().expect("samples")));
-    }
-    Ok(UniformCurve {
-        index: c.index,
-        kind: c.kind,
-        d,
-        q,
-        nodes,
-        h: hs,
-        w: rel,
-        outliers,
-        kinks,
-    })
 }
 
 /// The Gaussian-weighted q-method mean of the raw samples around `t` (kernel width `width`)
@@ -402,7 +457,7 @@ pub fn prefilter_with_kinks(
 /// window widens over gaps in the data.
 #[allow(clippy::too_many_arguments)]
 fn kernel_mean(
-    uniq: &[(f64, UnitQuaternion<f64>, f64)],
+    uniq: &[RawSample],
     ds: &[f64],
     spacing: &[f64],
     t: f64,

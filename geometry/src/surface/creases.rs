@@ -21,7 +21,7 @@
 //! with G⁰ continuity; the surface is cut along the crease (a viewer shows a sharp edge) and
 //! whole again once the copies are identified ([`super::fit::Surfaced::primary`]).
 
-use super::cycles::{Cycles, NetworkSegments, Segment};
+use super::cycles::{Cycle, Cycles, NetworkSegments, Segment};
 use crate::union_find::UnionFind;
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
@@ -62,6 +62,21 @@ fn start(s: &Segment, forward: bool) -> u32 {
 /// Splits the patches of `cyc` along the creases of `net` (see the module docs).
 pub fn split(net: &NetworkSegments, cyc: &Cycles) -> Split {
     let patches = &cyc.patches;
+    let takes_across = sides(net, patches);
+    let (corners, darts) = corners_and_darts(net);
+    let (corner_sector, sectors) = sectors(net, patches, &takes_across);
+    Split {
+        corner_sector,
+        takes_across,
+        sectors,
+        corners,
+        darts,
+    }
+}
+
+/// Per patch, per half-edge: whether the patch takes the other face of the crease it runs
+/// along (the patch on the side the measured face turns towards takes the measured one).
+fn sides(net: &NetworkSegments, patches: &[Cycle]) -> Vec<Vec<bool>> {
     // Where each half-edge is used: (patch, position).
     let mut used: BTreeMap<(usize, bool), (usize, usize)> = BTreeMap::new();
     for (pi, p) in patches.iter().enumerate() {
@@ -69,7 +84,6 @@ pub fn split(net: &NetworkSegments, cyc: &Cycles) -> Split {
             used.insert((h.segment, h.forward), (pi, e));
         }
     }
-    // Sides: which patch takes the other face.
     let mut takes_across: Vec<Vec<bool>> =
         patches.iter().map(|p| vec![false; p.edges.len()]).collect();
     let centroids: Vec<Vector3<f64>> = patches
@@ -108,7 +122,48 @@ pub fn split(net: &NetworkSegments, cyc: &Cycles) -> Split {
             }
         }
     }
-    // Sectors: corners (patch, position) joined across the segments that are not creases.
+    takes_across
+}
+
+/// The crease corners (nodes where three or more crease segments meet) and darts (one crease
+/// segment ending inside a face, not on the boundary).
+fn corners_and_darts(net: &NetworkSegments) -> (Vec<u32>, Vec<u32>) {
+    let mut crease_ends: BTreeMap<u32, usize> = BTreeMap::new();
+    for s in net.segments.iter().filter(|s| s.crease()) {
+        *crease_ends.entry(s.a).or_default() += 1;
+        *crease_ends.entry(s.b).or_default() += 1;
+    }
+    let on_boundary: std::collections::BTreeSet<u32> = net
+        .segments
+        .iter()
+        .filter(|s| s.boundary())
+        .flat_map(|s| [s.a, s.b])
+        .collect();
+    let corners: Vec<u32> = crease_ends
+        .iter()
+        .filter(|(_, &n)| n >= 3)
+        .map(|(&v, _)| v)
+        .collect();
+    let darts: Vec<u32> = crease_ends
+        .iter()
+        .filter(|(v, &n)| n == 1 && !on_boundary.contains(v))
+        .map(|(&v, _)| v)
+        .collect();
+    (corners, darts)
+}
+
+/// Per patch, per half-edge: the sector of the patch's corner at the half-edge's start node.
+type CornerSectors = Vec<Vec<usize>>;
+
+/// The sectors of each node: the corners of the patches around it joined across the
+/// segments that are not creases, numbered in the order their first corner comes. Returns
+/// each corner's sector and, for nodes with more than one, each sector's normal (the sum of
+/// its corners' normals, `takes_across` saying which face of a crease a corner sees).
+fn sectors(
+    net: &NetworkSegments,
+    patches: &[Cycle],
+    takes_across: &[Vec<bool>],
+) -> (CornerSectors, BTreeMap<u32, Vec<Vector3<f64>>>) {
     let corners_list: Vec<(usize, usize)> = patches
         .iter()
         .enumerate()
@@ -146,33 +201,9 @@ pub fn split(net: &NetworkSegments, cyc: &Cycles) -> Split {
             sets.union(w[0], w[1]);
         }
     }
-    // Crease segment ends at each node; nodes on the boundary.
-    let mut crease_ends: BTreeMap<u32, usize> = BTreeMap::new();
-    for s in net.segments.iter().filter(|s| s.crease()) {
-        *crease_ends.entry(s.a).or_default() += 1;
-        *crease_ends.entry(s.b).or_default() += 1;
-    }
-    let on_boundary: std::collections::BTreeSet<u32> = net
-        .segments
-        .iter()
-        .filter(|s| s.boundary())
-        .flat_map(|s| [s.a, s.b])
-        .collect();
-    let corners: Vec<u32> = crease_ends
-        .iter()
-        .filter(|(_, &n)| n >= 3)
-        .map(|(&v, _)| v)
-        .collect();
-    let darts: Vec<u32> = crease_ends
-        .iter()
-        .filter(|(v, &n)| n == 1 && !on_boundary.contains(v))
-        .map(|(&v, _)| v)
-        .collect();
-    // Number the sectors of each node in the order their first corner comes; sum normals.
     let mut sector_of_root: BTreeMap<usize, usize> = BTreeMap::new();
     let mut sums: BTreeMap<u32, Vec<Vector3<f64>>> = BTreeMap::new();
-    let mut corner_sector: Vec<Vec<usize>> =
-        patches.iter().map(|p| vec![0; p.edges.len()]).collect();
+    let mut corner_sector: CornerSectors = patches.iter().map(|p| vec![0; p.edges.len()]).collect();
     for (k, &(pi, e)) in corners_list.iter().enumerate() {
         let p = &patches[pi];
         let h = p.edges[e];
@@ -213,13 +244,7 @@ pub fn split(net: &NetworkSegments, cyc: &Cycles) -> Split {
             )
         })
         .collect();
-    Split {
-        corner_sector,
-        takes_across,
-        sectors,
-        corners,
-        darts,
-    }
+    (corner_sector, sectors)
 }
 
 #[cfg(test)]

@@ -370,122 +370,200 @@ fn describe(net: &NetworkSegments, h: HalfEdge) -> Span {
 /// Traces the faces of `net` (see the module docs).
 pub fn cycles(net: &NetworkSegments) -> Cycles {
     let mut out = Cycles::default();
-    // Rotation system: at each node, the half-edges leaving it, sorted counter-clockwise
-    // around the node normal.
-    let mut at: BTreeMap<u32, Vec<(f64, HalfEdge)>> = BTreeMap::new();
-    // A node without a normal takes the mean of its segments' end normals.
-    let mut fallback: BTreeMap<u32, Vector3<f64>> = BTreeMap::new();
-    for s in &net.segments {
-        for (node, n) in [(s.a, s.normals.first()), (s.b, s.normals.last())] {
-            if let (false, Some(n)) = (net.normals.contains_key(&node), n) {
-                *fallback.entry(node).or_insert_with(Vector3::zeros) += n;
-            }
-        }
-    }
-    let fallback: BTreeMap<u32, Vector3<f64>> = fallback
-        .into_iter()
-        .filter_map(|(k, v)| v.try_normalize(1e-12).map(|u| (k, u)))
-        .collect();
-    for (si, s) in net.segments.iter().enumerate() {
-        for (forward, node) in [(true, s.a), (false, s.b)] {
-            let Some(n) = net.normals.get(&node).or_else(|| fallback.get(&node)) else {
-                out.problems.push(SurfaceProblem::NoNormal {
-                    node,
-                    curve: s.curve,
-                });
-                continue;
-            };
-            let d = s.leaving(!forward);
-            // Angle in a basis of the tangent plane at the node.
-            let e1 = if n.x.abs() < 0.9 {
-                Vector3::x()
-            } else {
-                Vector3::y()
-            };
-            let e1 = (e1 - n * n.dot(&e1)).normalize();
-            let e2 = n.cross(&e1);
-            let dp = d - n * n.dot(&d);
-            if dp.norm() < 1e-12 * d.norm().max(1e-300) || !dp.iter().all(|x| x.is_finite()) {
-                out.problems.push(SurfaceProblem::AlongNormal {
-                    span: describe(
-                        net,
-                        HalfEdge {
-                            segment: si,
-                            forward,
-                        },
-                    ),
-                    node,
-                });
-            }
-            let angle = dp.dot(&e2).atan2(dp.dot(&e1));
-            at.entry(node).or_default().push((
-                angle,
-                HalfEdge {
-                    segment: si,
-                    forward,
-                },
-            ));
-        }
-    }
-    // Position of every leaving half-edge in its node's rotation.
-    let mut place: BTreeMap<HalfEdge, (u32, usize)> = BTreeMap::new();
-    for (&node, list) in at.iter_mut() {
-        list.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        for (i, (_, h)) in list.iter().enumerate() {
-            place.insert(*h, (node, i));
-        }
-    }
-    let end_node = |h: HalfEdge| {
-        let s = &net.segments[h.segment];
-        if h.forward {
-            s.b
-        } else {
-            s.a
-        }
-    };
-    // Next half-edge: arriving at v by h, leave along the one clockwise after h's twin.
-    let next = |h: HalfEdge| -> Option<HalfEdge> {
-        let (v, i) = *place.get(&h.twin())?;
-        debug_assert_eq!(v, end_node(h));
-        let list = &at[&v];
-        Some(list[(i + list.len() - 1) % list.len()].1)
-    };
-    let mut used: BTreeMap<HalfEdge, bool> = place.keys().map(|&h| (h, false)).collect();
-    let mut faces: Vec<Cycle> = Vec::new();
-    let starts: Vec<HalfEdge> = used.keys().copied().collect();
-    for h0 in starts {
-        if used[&h0] {
-            continue;
-        }
-        let mut edges = vec![];
-        let mut h = h0;
-        let ok;
-        loop {
-            if used[&h] {
-                ok = h == h0;
-                break;
-            }
-            used.insert(h, true);
-            edges.push(h);
-            match next(h) {
-                Some(n) => h = n,
-                None => {
-                    ok = false;
-                    break;
+    let rot = Rotation::of(net, &mut out.problems);
+    let faces = rot.faces(net, &mut out);
+    euler_check(net, &rot, faces.len(), &mut out);
+    flipped_normals(net, &mut out.problems);
+    rot.classify(net, faces, &mut out);
+    out
+}
+
+/// The rotation system: at each node, the half-edges leaving it, sorted counter-clockwise
+/// around the node normal (with the angle of each in the tangent plane).
+struct Rotation {
+    at: BTreeMap<u32, Vec<(f64, HalfEdge)>>,
+    /// Every leaving half-edge's node and position in its node's rotation.
+    place: BTreeMap<HalfEdge, (u32, usize)>,
+}
+
+impl Rotation {
+    /// The rotation system of `net`; a node without a normal takes the mean of its segments'
+    /// end normals. Half-edges at a node without any normal, or leaving along it, are
+    /// `problems`.
+    fn of(net: &NetworkSegments, problems: &mut Vec<SurfaceProblem>) -> Self {
+        let mut at: BTreeMap<u32, Vec<(f64, HalfEdge)>> = BTreeMap::new();
+        let mut fallback: BTreeMap<u32, Vector3<f64>> = BTreeMap::new();
+        for s in &net.segments {
+            for (node, n) in [(s.a, s.normals.first()), (s.b, s.normals.last())] {
+                if let (false, Some(n)) = (net.normals.contains_key(&node), n) {
+                    *fallback.entry(node).or_insert_with(Vector3::zeros) += n;
                 }
             }
         }
-        if !ok {
-            out.problems.push(SurfaceProblem::FaceOpen {
-                along: describe(net, h0),
-            });
-            out.rejected.push(Cycle { edges });
-            continue;
+        let fallback: BTreeMap<u32, Vector3<f64>> = fallback
+            .into_iter()
+            .filter_map(|(k, v)| v.try_normalize(1e-12).map(|u| (k, u)))
+            .collect();
+        for (si, s) in net.segments.iter().enumerate() {
+            for (forward, node) in [(true, s.a), (false, s.b)] {
+                let Some(n) = net.normals.get(&node).or_else(|| fallback.get(&node)) else {
+                    problems.push(SurfaceProblem::NoNormal {
+                        node,
+                        curve: s.curve,
+                    });
+                    continue;
+                };
+                let h = HalfEdge {
+                    segment: si,
+                    forward,
+                };
+                let d = s.leaving(!forward);
+                // Angle in a basis of the tangent plane at the node.
+                let e1 = if n.x.abs() < 0.9 {
+                    Vector3::x()
+                } else {
+                    Vector3::y()
+                };
+                let e1 = (e1 - n * n.dot(&e1)).normalize();
+                let e2 = n.cross(&e1);
+                let dp = d - n * n.dot(&d);
+                if dp.norm() < 1e-12 * d.norm().max(1e-300) || !dp.iter().all(|x| x.is_finite()) {
+                    problems.push(SurfaceProblem::AlongNormal {
+                        span: describe(net, h),
+                        node,
+                    });
+                }
+                let angle = dp.dot(&e2).atan2(dp.dot(&e1));
+                at.entry(node).or_default().push((angle, h));
+            }
         }
-        faces.push(Cycle { edges });
+        let mut place: BTreeMap<HalfEdge, (u32, usize)> = BTreeMap::new();
+        for (&node, list) in at.iter_mut() {
+            list.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            for (i, (_, h)) in list.iter().enumerate() {
+                place.insert(*h, (node, i));
+            }
+        }
+        Rotation { at, place }
     }
-    // Components (over nodes, by segments).
-    let nodes: Vec<u32> = at.keys().copied().collect();
+
+    /// The next half-edge of a face: arriving at a node by `h`, leave along the one clockwise
+    /// after `h`'s twin.
+    fn next(&self, net: &NetworkSegments, h: HalfEdge) -> Option<HalfEdge> {
+        let (v, i) = *self.place.get(&h.twin())?;
+        debug_assert_eq!(v, {
+            let s = &net.segments[h.segment];
+            if h.forward {
+                s.b
+            } else {
+                s.a
+            }
+        });
+        let list = &self.at[&v];
+        Some(list[(i + list.len() - 1) % list.len()].1)
+    }
+
+    /// Every face traced by [`next`](Self::next) from every half-edge not yet used; a face
+    /// that does not close is rejected (`out`).
+    fn faces(&self, net: &NetworkSegments, out: &mut Cycles) -> Vec<Cycle> {
+        let mut used: BTreeMap<HalfEdge, bool> = self.place.keys().map(|&h| (h, false)).collect();
+        let mut faces: Vec<Cycle> = Vec::new();
+        let starts: Vec<HalfEdge> = used.keys().copied().collect();
+        for h0 in starts {
+            if used[&h0] {
+                continue;
+            }
+            let mut edges = vec![];
+            let mut h = h0;
+            let ok;
+            loop {
+                if used[&h] {
+                    ok = h == h0;
+                    break;
+                }
+                used.insert(h, true);
+                edges.push(h);
+                match self.next(net, h) {
+                    Some(n) => h = n,
+                    None => {
+                        ok = false;
+                        break;
+                    }
+                }
+            }
+            if !ok {
+                out.problems.push(SurfaceProblem::FaceOpen {
+                    along: describe(net, h0),
+                });
+                out.rejected.push(Cycle { edges });
+                continue;
+            }
+            faces.push(Cycle { edges });
+        }
+        faces
+    }
+
+    /// Sorts the traced `faces` into `out`: rejected if a segment appears in both directions;
+    /// outer if all boundary and the surface is on the other side; else a patch (rejected if
+    /// it turns clockwise).
+    fn classify(&self, net: &NetworkSegments, faces: Vec<Cycle>, out: &mut Cycles) {
+        let interior_at: BTreeMap<u32, bool> = self
+            .at
+            .iter()
+            .map(|(&n, l)| {
+                (
+                    n,
+                    l.iter().any(|(_, h)| !net.segments[h.segment].boundary()),
+                )
+            })
+            .collect();
+        for f in faces {
+            let twice = f
+                .edges
+                .iter()
+                .find(|h| f.edges.contains(&h.twin()))
+                .copied();
+            if let Some(h) = twice {
+                let nodes = f.nodes(net);
+                out.problems.push(SurfaceProblem::BothDirections {
+                    nodes,
+                    along: describe(net, h),
+                });
+                out.rejected.push(f);
+                continue;
+            }
+            let all_boundary = f.edges.iter().all(|h| net.segments[h.segment].boundary());
+            if all_boundary {
+                let nodes = f.nodes(net);
+                let touches_interior = nodes.iter().any(|n| interior_at[n]);
+                let outer = if touches_interior {
+                    true
+                } else {
+                    // Only boundary curves around: the face whose boundary turns clockwise
+                    // around the mean normal is the outside.
+                    vector_area(&f.polyline(net)).dot(&boundary_normal(net, &f)) < 0.0
+                };
+                if outer {
+                    out.outer.push(f);
+                    continue;
+                }
+            }
+            let nodes = f.nodes(net);
+            if vector_area(&f.polyline(net)).dot(&boundary_normal(net, &f)) <= 0.0 {
+                out.problems.push(SurfaceProblem::Clockwise { nodes });
+                out.rejected.push(f);
+                continue;
+            }
+            out.patches.push(f);
+        }
+    }
+}
+
+/// The components (over nodes, by segments) and the Euler characteristic of the traced
+/// complex (`faces` closed, the rejected ones in `out` counted too): a problem when it
+/// cannot be a set of closed surfaces.
+fn euler_check(net: &NetworkSegments, rot: &Rotation, faces: usize, out: &mut Cycles) {
+    let nodes: Vec<u32> = rot.at.keys().copied().collect();
     let idx: BTreeMap<u32, usize> = nodes.iter().enumerate().map(|(i, &n)| (n, i)).collect();
     let mut sets = crate::union_find::UnionFind::new(nodes.len());
     let mut edges_used = 0i64;
@@ -496,17 +574,22 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
         }
     }
     out.components = sets.roots().count();
-    out.euler = nodes.len() as i64 - edges_used + (faces.len() + out.rejected.len()) as i64;
+    out.euler = nodes.len() as i64 - edges_used + (faces + out.rejected.len()) as i64;
     if out.euler > 2 * out.components as i64 || out.euler % 2 != 0 {
         out.problems.push(SurfaceProblem::NotClosed {
             vertices: nodes.len(),
             edges: edges_used,
-            faces: faces.len() + out.rejected.len(),
+            faces: faces + out.rejected.len(),
             euler: out.euler,
             components: out.components,
         });
     }
-    // Node normals against their neighbours' (a flipped normal reverses a node's rotation).
+}
+
+/// Node normals against their neighbours' (a flipped normal reverses a node's rotation):
+/// against every neighbour, clearly (on a coarse network, an octahedron's, correct
+/// neighbours are at 90°).
+fn flipped_normals(net: &NetworkSegments, problems: &mut Vec<SurfaceProblem>) {
     let mut neighbours: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
     for s in &net.segments {
         if s.a != s.b {
@@ -518,71 +601,18 @@ pub fn cycles(net: &NetworkSegments) -> Cycles {
         let Some(nn) = net.normals.get(n) else {
             continue;
         };
-        // Against every neighbour, clearly: on a coarse network (an octahedron's) correct
-        // neighbours are at 90°.
         let closest = list
             .iter()
             .filter_map(|m| net.normals.get(m))
             .map(|m| nn.dot(m))
             .fold(f64::MIN, f64::max);
         if list.len() >= 2 && closest < -0.1 {
-            out.problems.push(SurfaceProblem::NormalFlipped {
+            problems.push(SurfaceProblem::NormalFlipped {
                 node: *n,
                 neighbours: list.clone(),
             });
         }
     }
-    // Classify: rejected if a segment appears in both directions; outer if all boundary and
-    // the surface is on the other side; else a patch.
-    let interior_at: BTreeMap<u32, bool> = at
-        .iter()
-        .map(|(&n, l)| {
-            (
-                n,
-                l.iter().any(|(_, h)| !net.segments[h.segment].boundary()),
-            )
-        })
-        .collect();
-    for f in faces {
-        let twice = f
-            .edges
-            .iter()
-            .find(|h| f.edges.contains(&h.twin()))
-            .copied();
-        if let Some(h) = twice {
-            let nodes = f.nodes(net);
-            out.problems.push(SurfaceProblem::BothDirections {
-                nodes,
-                along: describe(net, h),
-            });
-            out.rejected.push(f);
-            continue;
-        }
-        let all_boundary = f.edges.iter().all(|h| net.segments[h.segment].boundary());
-        if all_boundary {
-            let nodes = f.nodes(net);
-            let touches_interior = nodes.iter().any(|n| interior_at[n]);
-            let outer = if touches_interior {
-                true
-            } else {
-                // Only boundary curves around: the face whose boundary turns clockwise
-                // around the mean normal is the outside.
-                vector_area(&f.polyline(net)).dot(&boundary_normal(net, &f)) < 0.0
-            };
-            if outer {
-                out.outer.push(f);
-                continue;
-            }
-        }
-        let nodes = f.nodes(net);
-        if vector_area(&f.polyline(net)).dot(&boundary_normal(net, &f)) <= 0.0 {
-            out.problems.push(SurfaceProblem::Clockwise { nodes });
-            out.rejected.push(f);
-            continue;
-        }
-        out.patches.push(f);
-    }
-    out
 }
 
 /// Vector area of a closed polygon (half the sum of cross products about its centroid).
