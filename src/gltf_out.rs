@@ -207,50 +207,7 @@ pub fn network_glb(
     b.root.asset.generator = Some(format!("sfs {}", env!("CARGO_PKG_VERSION")));
     let mut prims = Vec::new();
     for c in curves {
-        if c.points.len() != c.normals.len() {
-            return Err(GltfError::LengthMismatch {
-                curve: c.index,
-                points: c.points.len(),
-                normals: c.normals.len(),
-            });
-        }
-        if c.points.len() < 2 {
-            continue; // a line strip needs two points
-        }
-        let mut pos = Vec::with_capacity(c.points.len());
-        let mut nrm = Vec::with_capacity(c.points.len());
-        for (i, (p, n)) in c.points.iter().zip(&c.normals).enumerate() {
-            if !finite(p) {
-                return Err(GltfError::NonFinitePoint {
-                    curve: c.index,
-                    index: i,
-                });
-            }
-            pos.push(to_gltf(p));
-            nrm.push(unit(n).ok_or(GltfError::BadNormal {
-                curve: c.index,
-                index: i,
-            })?);
-        }
-        let pa = b.vec3(&pos, true);
-        let na = b.vec3(&nrm, false);
-        let mut attributes = BTreeMap::new();
-        attributes.insert(Checked::Valid(json::mesh::Semantic::Positions), pa);
-        attributes.insert(Checked::Valid(json::mesh::Semantic::Normals), na);
-        prims.push(json::mesh::Primitive {
-            attributes,
-            extensions: None,
-            extras: raw(serde_json::json!({
-                "curve": c.index,
-                "kind": c.kind.name(),
-                "boundary": c.kind == CurveKind::Boundary,
-                "nodes": c.nodes,
-            })),
-            indices: None,
-            material: None,
-            mode: Checked::Valid(json::mesh::Mode::LineStrip),
-            targets: None,
-        });
+        prims.extend(b.curve(c)?);
     }
     let mut scene_nodes = Vec::new();
     let node_json: serde_json::Map<String, serde_json::Value> = nodes
@@ -274,6 +231,64 @@ pub fn network_glb(
         ..Default::default()
     }));
     if let Some(s) = surface.filter(|s| !s.triangles.is_empty()) {
+        scene_nodes.push(b.surface(s)?);
+    }
+    b.glb(scene_nodes)
+}
+
+impl Builder {
+    /// A curve's line strip (`None` for a curve of fewer than two points), with its index,
+    /// kind and nodes as extras.
+    fn curve(&mut self, c: &NetworkCurve) -> Result<Option<json::mesh::Primitive>, GltfError> {
+        if c.points.len() != c.normals.len() {
+            return Err(GltfError::LengthMismatch {
+                curve: c.index,
+                points: c.points.len(),
+                normals: c.normals.len(),
+            });
+        }
+        if c.points.len() < 2 {
+            return Ok(None); // a line strip needs two points
+        }
+        let mut pos = Vec::with_capacity(c.points.len());
+        let mut nrm = Vec::with_capacity(c.points.len());
+        for (i, (p, n)) in c.points.iter().zip(&c.normals).enumerate() {
+            if !finite(p) {
+                return Err(GltfError::NonFinitePoint {
+                    curve: c.index,
+                    index: i,
+                });
+            }
+            pos.push(to_gltf(p));
+            nrm.push(unit(n).ok_or(GltfError::BadNormal {
+                curve: c.index,
+                index: i,
+            })?);
+        }
+        let pa = self.vec3(&pos, true);
+        let na = self.vec3(&nrm, false);
+        let mut attributes = BTreeMap::new();
+        attributes.insert(Checked::Valid(json::mesh::Semantic::Positions), pa);
+        attributes.insert(Checked::Valid(json::mesh::Semantic::Normals), na);
+        Ok(Some(json::mesh::Primitive {
+            attributes,
+            extensions: None,
+            extras: raw(serde_json::json!({
+                "curve": c.index,
+                "kind": c.kind.name(),
+                "boundary": c.kind == CurveKind::Boundary,
+                "nodes": c.nodes,
+            })),
+            indices: None,
+            material: None,
+            mode: Checked::Valid(json::mesh::Mode::LineStrip),
+            targets: None,
+        }))
+    }
+
+    /// The surface's node: its mesh, checked (finite vertices, unit normals, indices in
+    /// range, no triangle degenerate once written in f32).
+    fn surface(&mut self, s: &SurfaceMesh) -> Result<json::Index<json::Node>, GltfError> {
         let n = s.positions.len();
         let mut pos = Vec::with_capacity(n);
         let mut nrm = Vec::with_capacity(n);
@@ -303,13 +318,13 @@ pub fn network_glb(
                 return Err(GltfError::DegenerateTriangle { index: i });
             }
         }
-        let pa = b.vec3(&pos, true);
-        let na = b.vec3(&nrm, false);
-        let ia = b.indices(&s.triangles);
+        let pa = self.vec3(&pos, true);
+        let na = self.vec3(&nrm, false);
+        let ia = self.indices(&s.triangles);
         let mut attributes = BTreeMap::new();
         attributes.insert(Checked::Valid(json::mesh::Semantic::Positions), pa);
         attributes.insert(Checked::Valid(json::mesh::Semantic::Normals), na);
-        let mesh = b.root.push(json::Mesh {
+        let mesh = self.root.push(json::Mesh {
             extensions: None,
             extras: None,
             name: Some("surface".into()),
@@ -324,49 +339,59 @@ pub fn network_glb(
             }],
             weights: None,
         });
-        scene_nodes.push(b.root.push(json::Node {
+        Ok(self.root.push(json::Node {
             mesh: Some(mesh),
             name: Some("surface".into()),
             ..Default::default()
-        }));
+        }))
     }
-    while !b.bin.len().is_multiple_of(4) {
-        b.bin.push(0);
-    }
-    if !b.bin.is_empty() {
-        b.root.push(json::Buffer {
-            byte_length: USize64::from(b.bin.len()),
-            name: None,
-            uri: None,
+
+    /// The glb of the scene of `scene_nodes`: the JSON and the binary chunk, each padded to 4
+    /// bytes.
+    fn glb(mut self, scene_nodes: Vec<json::Index<json::Node>>) -> Result<Vec<u8>, GltfError> {
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
+        if !self.bin.is_empty() {
+            self.root.push(json::Buffer {
+                byte_length: USize64::from(self.bin.len()),
+                name: None,
+                uri: None,
+                extensions: None,
+                extras: None,
+            });
+        }
+        let scene = self.root.push(json::Scene {
             extensions: None,
             extras: None,
+            name: None,
+            nodes: scene_nodes,
         });
+        self.root.scene = Some(scene);
+        let json_text = json::serialize::to_string(&self.root)
+            .map_err(|e| GltfError::Serialise(e.to_string()))?;
+        let mut json_bytes = json_text.into_bytes();
+        while json_bytes.len() % 4 != 0 {
+            json_bytes.push(b' ');
+        }
+        let bin_chunk = if self.bin.is_empty() {
+            0
+        } else {
+            8 + self.bin.len()
+        };
+        let length = 12 + 8 + json_bytes.len() + bin_chunk;
+        let glb = gltf::binary::Glb {
+            header: gltf::binary::Header {
+                magic: *b"glTF",
+                version: 2,
+                length: length as u32,
+            },
+            json: std::borrow::Cow::Owned(json_bytes),
+            bin: (!self.bin.is_empty()).then_some(std::borrow::Cow::Owned(self.bin)),
+        };
+        glb.to_vec()
+            .map_err(|e| GltfError::Serialise(e.to_string()))
     }
-    let scene = b.root.push(json::Scene {
-        extensions: None,
-        extras: None,
-        name: None,
-        nodes: scene_nodes,
-    });
-    b.root.scene = Some(scene);
-    let json_text =
-        json::serialize::to_string(&b.root).map_err(|e| GltfError::Serialise(e.to_string()))?;
-    let mut json_bytes = json_text.into_bytes();
-    while json_bytes.len() % 4 != 0 {
-        json_bytes.push(b' ');
-    }
-    let length = 12 + 8 + json_bytes.len() + if b.bin.is_empty() { 0 } else { 8 + b.bin.len() };
-    let glb = gltf::binary::Glb {
-        header: gltf::binary::Header {
-            magic: *b"glTF",
-            version: 2,
-            length: length as u32,
-        },
-        json: std::borrow::Cow::Owned(json_bytes),
-        bin: (!b.bin.is_empty()).then_some(std::borrow::Cow::Owned(b.bin)),
-    };
-    glb.to_vec()
-        .map_err(|e| GltfError::Serialise(e.to_string()))
 }
 
 /// The curves of a reconstructed network as they are written.

@@ -101,20 +101,7 @@ pub async fn run(
 ) -> Result<Outcome, SessionError> {
     // Everything that can refuse the session is done before a byte is captured: the port
     // bound, the directory prepared, the monitor's outputs opened; then the source starts.
-    let mut addrs: Vec<std::net::SocketAddr> = settings.view.into_iter().collect();
-    if let Some(a) = settings.monitor.as_ref().and_then(|m| m.http) {
-        if !addrs.contains(&a) {
-            addrs.push(a);
-        }
-    }
-    let mut listeners = Vec::new();
-    for addr in addrs {
-        listeners.push(
-            crate::view::bind(addr)
-                .await
-                .map_err(|source| SessionError::Serve { addr, source })?,
-        );
-    }
+    let listeners = bind_all(settings).await?;
     let prepared = prepare(&spec, out_dir, settings, &start)?;
     let description = spec.describe();
     let progress = replay_progress(&spec);
@@ -161,16 +148,8 @@ pub async fn run(
     };
     // Resume: the capture files to decode again, from the newest that starts before what a
     // monitor needs (all of them otherwise).
-    let prior = prepared.prior.map(|mut files| {
-        let from = monitor.as_ref().and_then(|m| m.replay_from());
-        let k = from.map_or(0, |t| {
-            files
-                .iter()
-                .rposition(|f| f.start.elapsed_us as f64 * 1e-6 <= t)
-                .unwrap_or(0)
-        });
-        files.split_off(k)
-    });
+    let from = monitor.as_ref().and_then(|m| m.replay_from());
+    let prior = prepared.prior.map(|files| decoded_again(files, from));
     if let (Some(v), Some(p)) = (&view, &src.phone) {
         let url = p.url().to_owned();
         v.update(|s| s.phone_url = Some(url));
@@ -232,24 +211,63 @@ pub async fn run(
             source_name: description,
         });
     }
-    let serving = match (server, settings.keep_serving) {
-        (Some(task), true) => Some(Serving {
-            task,
-            _stop: _stop_server,
-        }),
-        (Some(task), false) => {
-            server_stop.trigger();
-            let _ = tokio::time::timeout(std::time::Duration::from_secs(2), task).await;
-            None
-        }
-        (None, _) => None,
-    };
+    let serving = keep_or_stop(server, settings.keep_serving, _stop_server).await;
     Ok(Outcome {
         report,
         report_path,
         capture_path: prepared.capture_path,
         serving,
     })
+}
+
+/// Binds the view's address and the monitor's metrics address (one server when they are the
+/// same).
+async fn bind_all(settings: &Settings) -> Result<Vec<tokio::net::TcpListener>, SessionError> {
+    let mut addrs: Vec<std::net::SocketAddr> = settings.view.into_iter().collect();
+    if let Some(a) = settings.monitor.as_ref().and_then(|m| m.http) {
+        if !addrs.contains(&a) {
+            addrs.push(a);
+        }
+    }
+    let mut listeners = Vec::new();
+    for addr in addrs {
+        listeners.push(
+            crate::view::bind(addr)
+                .await
+                .map_err(|source| SessionError::Serve { addr, source })?,
+        );
+    }
+    Ok(listeners)
+}
+
+/// Of a resumed session's capture files, those to decode again: from the newest that starts
+/// at or before `from` (s of session time, what a monitor needs), all of them otherwise.
+fn decoded_again(mut files: Vec<PriorFile>, from: Option<f64>) -> Vec<PriorFile> {
+    let k = from.map_or(0, |t| {
+        files
+            .iter()
+            .rposition(|f| f.start.elapsed_us as f64 * 1e-6 <= t)
+            .unwrap_or(0)
+    });
+    files.split_off(k)
+}
+
+/// The view's server after the session: kept serving (`keep`) until the [`Serving`] is told
+/// to stop, or stopped now (waiting up to 2 s for it).
+async fn keep_or_stop(
+    server: Option<tokio::task::JoinHandle<()>>,
+    keep: bool,
+    stop: StopOnDrop,
+) -> Option<Serving> {
+    match (server, keep) {
+        (Some(task), true) => Some(Serving { task, _stop: stop }),
+        (Some(task), false) => {
+            stop.0.trigger();
+            let _ = tokio::time::timeout(std::time::Duration::from_secs(2), task).await;
+            None
+        }
+        (None, _) => None,
+    }
 }
 
 /// The view of a finished session, still served (`keep_serving`: a replay watched with

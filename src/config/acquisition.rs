@@ -79,64 +79,9 @@ impl ConfigFile {
     /// The acquisition settings (calibration included) this configuration describes.
     pub(super) fn acquisition_config(&self, file: &Path) -> Result<AcquisitionConfig, ConfigError> {
         let err = |key: &str, reason: String| ConfigError::new(file, key.to_owned(), reason);
-        let c = &self.calibration;
-        let finite = |key: &str, v: &[f64]| -> Result<(), ConfigError> {
-            match v.iter().find(|x| !x.is_finite()) {
-                Some(x) => Err(err(key, format!("{x} is not a finite number"))),
-                None => Ok(()),
-            }
-        };
-        finite("calibration.acc_bias", &c.acc_bias)?;
-        finite("calibration.acc_scale", &c.acc_scale)?;
-        finite("calibration.mag_hard_iron", &c.mag_hard_iron)?;
-        finite("calibration.mag_soft_iron", c.mag_soft_iron.as_flattened())?;
-        finite("calibration.gyro_bias", &c.gyro_bias)?;
-        finite("calibration.mounting_deg", &c.mounting_deg)?;
-        if let Some(x) = c.acc_scale.iter().find(|&&x| x <= 0.0) {
-            return Err(err(
-                "calibration.acc_scale",
-                format!("{x} is not a positive scale"),
-            ));
-        }
-        let soft = Matrix3::from_row_slice(c.mag_soft_iron.as_flattened());
-        if soft.determinant().abs() < 1e-6 {
-            return Err(err(
-                "calibration.mag_soft_iron",
-                "the matrix is singular".into(),
-            ));
-        }
-        if let Some(x) = c.mounting_deg.iter().find(|x| x.abs() > 45.0) {
-            return Err(err(
-                "calibration.mounting_deg",
-                format!("{x}° is not a small mounting offset (at most 45°); fix `axes` instead"),
-            ));
-        }
-        let axes = match &c.axes {
-            Some(names) => {
-                Some(AxisMap::parse(names).map_err(|e| err("calibration.axes", e.to_string()))?)
-            }
-            None => None,
-        };
-        let [r, p, y] = c.mounting_deg.map(f64::to_radians);
-        let calibration = CalibrationSpec {
-            acc_bias: Vector3::from(c.acc_bias),
-            acc_scale: Vector3::from(c.acc_scale),
-            mag_hard_iron: Vector3::from(c.mag_hard_iron),
-            mag_soft_iron: soft,
-            gyro_bias: Vector3::from(c.gyro_bias),
-            axes,
-            // No offset is the identity exactly (Euler angles of zero give a -0.0 entry), as in
-            // the default calibration of a session without a configuration file.
-            mounting: if c.mounting_deg == [0.0; 3] {
-                Rotation3::identity()
-            } else {
-                Rotation3::from_euler_angles(r, p, y)
-            },
-        };
-
         let a = &self.acquisition;
         let mut out = AcquisitionConfig {
-            calibration,
+            calibration: self.calibration_spec(file)?,
             ..AcquisitionConfig::default()
         };
         let positive = |key: &str, v: Option<f64>, max: f64| -> Result<Option<f64>, ConfigError> {
@@ -244,5 +189,66 @@ impl ConfigFile {
             out.segment_lengths.insert(idx, v.clone());
         }
         Ok(out)
+    }
+
+    /// `[calibration]`, checked: finite numbers, positive scales, a soft-iron matrix that is
+    /// not singular, a small mounting offset, axes `AxisMap` can read.
+    fn calibration_spec(&self, file: &Path) -> Result<CalibrationSpec, ConfigError> {
+        let err = |key: &str, reason: String| ConfigError::new(file, key.to_owned(), reason);
+        let c = &self.calibration;
+        let finite = |key: &str, v: &[f64]| -> Result<(), ConfigError> {
+            match v.iter().find(|x| !x.is_finite()) {
+                Some(x) => Err(err(key, format!("{x} is not a finite number"))),
+                None => Ok(()),
+            }
+        };
+        finite("calibration.acc_bias", &c.acc_bias)?;
+        finite("calibration.acc_scale", &c.acc_scale)?;
+        finite("calibration.mag_hard_iron", &c.mag_hard_iron)?;
+        finite("calibration.mag_soft_iron", c.mag_soft_iron.as_flattened())?;
+        finite("calibration.gyro_bias", &c.gyro_bias)?;
+        finite("calibration.mounting_deg", &c.mounting_deg)?;
+        if let Some(x) = c.acc_scale.iter().find(|&&x| x <= 0.0) {
+            return Err(err(
+                "calibration.acc_scale",
+                format!("{x} is not a positive scale"),
+            ));
+        }
+        let soft = Matrix3::from_row_slice(c.mag_soft_iron.as_flattened());
+        if soft.determinant().abs() < 1e-6 {
+            return Err(err(
+                "calibration.mag_soft_iron",
+                "the matrix is singular".into(),
+            ));
+        }
+        if let Some(x) = c.mounting_deg.iter().find(|x| x.abs() > 45.0) {
+            return Err(err(
+                "calibration.mounting_deg",
+                format!("{x}° is not a small mounting offset (at most 45°); fix `axes` instead"),
+            ));
+        }
+        let axes = match &c.axes {
+            Some(names) => {
+                Some(AxisMap::parse(names).map_err(|e| err("calibration.axes", e.to_string()))?)
+            }
+            None => None,
+        };
+        let [r, p, y] = c.mounting_deg.map(f64::to_radians);
+        let calibration = CalibrationSpec {
+            acc_bias: Vector3::from(c.acc_bias),
+            acc_scale: Vector3::from(c.acc_scale),
+            mag_hard_iron: Vector3::from(c.mag_hard_iron),
+            mag_soft_iron: soft,
+            gyro_bias: Vector3::from(c.gyro_bias),
+            axes,
+            // No offset is the identity exactly (Euler angles of zero give a -0.0 entry), as in
+            // the default calibration of a session without a configuration file.
+            mounting: if c.mounting_deg == [0.0; 3] {
+                Rotation3::identity()
+            } else {
+                Rotation3::from_euler_angles(r, p, y)
+            },
+        };
+        Ok(calibration)
     }
 }

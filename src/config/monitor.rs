@@ -2,6 +2,8 @@
 
 use super::{ConfigError, ConfigFile};
 use crate::monitor::alarm::AlarmMetric;
+use crate::monitor::layout::{Layout, LayoutCurve, LayoutError};
+use crate::monitor::metrics::Shape;
 use crate::monitor::settings::{AlarmSpec, MonitorConfig};
 use serde::Deserialize;
 use sfs_geometry::network::NetworkParams;
@@ -71,46 +73,23 @@ impl ConfigFile {
             return Ok(None);
         };
         let err = |key: String, reason: String| ConfigError::new(file, key, reason);
-        let layout = crate::monitor::layout::Layout {
-            curves: m
-                .curve
-                .iter()
-                .enumerate()
-                .map(|(index, c)| crate::monitor::layout::LayoutCurve {
-                    index,
-                    nodes: c.nodes.clone(),
-                    node_s: c.node_s.clone(),
-                    length: c.length,
-                })
-                .collect(),
-            sensors: m.sensor.clone(),
+        let layout = layout(m, file)?;
+        let in_range = |key: &str, v: f64, range: std::ops::RangeInclusive<f64>, shown: &str| {
+            if v.is_finite() && range.contains(&v) {
+                Ok(v)
+            } else {
+                Err(err(
+                    format!("monitor.{key}"),
+                    format!("{v} is out of range {shown}"),
+                ))
+            }
         };
-        if layout.curves.is_empty() {
-            return Err(err(
-                "monitor.curve".into(),
-                "a monitoring layout needs at least one [[monitor.curve]]".into(),
-            ));
-        }
-        layout.validate().map_err(|e| match &e {
-            crate::monitor::layout::LayoutError::Curve { curve, .. } => {
-                err(format!("monitor.curve[{curve}]"), e.to_string())
-            }
-            crate::monitor::layout::LayoutError::Sensor { sensor, .. } => {
-                let k = m
-                    .sensor
-                    .iter()
-                    .position(|s| s.sensor == *sensor)
-                    .unwrap_or(0);
-                err(format!("monitor.sensor[{k}]"), e.to_string())
-            }
-        })?;
-        let epoch_hz = m.epoch_hz.unwrap_or(5.0);
-        if !(epoch_hz.is_finite() && (0.01..=100.0).contains(&epoch_hz)) {
-            return Err(err(
-                "monitor.epoch_hz".into(),
-                format!("{epoch_hz} is out of range [0.01, 100]"),
-            ));
-        }
+        let epoch_hz = in_range(
+            "epoch_hz",
+            m.epoch_hz.unwrap_or(5.0),
+            0.01..=100.0,
+            "[0.01, 100]",
+        )?;
         let anchor = m.anchor.unwrap_or(layout.curves[0].nodes[0]);
         if !layout.curves.iter().any(|c| c.nodes.contains(&anchor)) {
             return Err(err(
@@ -118,20 +97,18 @@ impl ConfigFile {
                 format!("node {anchor} is on no curve of the layout"),
             ));
         }
-        let x_azimuth_deg = m.x_azimuth_deg.unwrap_or(90.0);
-        if !(x_azimuth_deg.is_finite() && (-360.0..=360.0).contains(&x_azimuth_deg)) {
-            return Err(err(
-                "monitor.x_azimuth_deg".into(),
-                format!("{x_azimuth_deg} is out of range [-360, 360] degrees"),
-            ));
-        }
-        let reference_s = m.reference_s.unwrap_or(10.0);
-        if !(reference_s.is_finite() && (0.0..=86_400.0).contains(&reference_s)) {
-            return Err(err(
-                "monitor.reference_s".into(),
-                format!("{reference_s} is out of range [0, 86400] s"),
-            ));
-        }
+        let x_azimuth_deg = in_range(
+            "x_azimuth_deg",
+            m.x_azimuth_deg.unwrap_or(90.0),
+            -360.0..=360.0,
+            "[-360, 360] degrees",
+        )?;
+        let reference_s = in_range(
+            "reference_s",
+            m.reference_s.unwrap_or(10.0),
+            0.0..=86_400.0,
+            "[0, 86400] s",
+        )?;
         let reference = match &m.reference_file {
             None => None,
             Some(_) if m.reference_s.is_some() => {
@@ -140,41 +117,14 @@ impl ConfigFile {
                     "give reference_s (a reference built from the first seconds) or reference_file, not both".into(),
                 ))
             }
-            Some(p) => {
-                let key = || "monitor.reference_file".to_string();
-                let path = if p.is_relative() {
-                    file.parent().unwrap_or(Path::new("")).join(p)
-                } else {
-                    p.clone()
-                };
-                let text = super::read_limited(&path, super::MAX_NAMED_FILE)
-                    .map_err(|e| err(key(), format!("{}: {e}", path.display())))?;
-                let r = crate::monitor::metrics::ReferenceFile::parse(&text)
-                    .map_err(|e| err(key(), format!("{}: {e}", path.display())))?;
-                if r.anchor != anchor {
-                    return Err(err(
-                        key(),
-                        format!(
-                            "{}: anchored at node {}, the configuration at node {anchor}",
-                            path.display(),
-                            r.anchor
-                        ),
-                    ));
-                }
-                let step = crate::monitor::epoch::EpochParams::default().step;
-                Some(
-                    r.shape(&layout.curves, step)
-                        .map_err(|e| err(key(), format!("{}: {e}", path.display())))?,
-                )
-            }
+            Some(p) => Some(reference_shape(p, file, anchor, &layout)?),
         };
-        let smoothing_s = m.smoothing_s.unwrap_or(0.0);
-        if !(smoothing_s.is_finite() && (0.0..=3600.0).contains(&smoothing_s)) {
-            return Err(err(
-                "monitor.smoothing_s".into(),
-                format!("{smoothing_s} is out of range [0, 3600] s"),
-            ));
-        }
+        let smoothing_s = in_range(
+            "smoothing_s",
+            m.smoothing_s.unwrap_or(0.0),
+            0.0..=3600.0,
+            "[0, 3600] s",
+        )?;
         let latest_every = m.latest_every.unwrap_or(5);
         if latest_every == 0 {
             return Err(err(
@@ -203,64 +153,14 @@ impl ConfigFile {
             Some(true) => Some(network.regression),
             _ => None,
         };
-        let max_mb = m.metrics_max_mb.unwrap_or(64.0);
-        if !(max_mb.is_finite() && (0.01..=1e6).contains(&max_mb)) {
-            return Err(err(
-                "monitor.metrics_max_mb".into(),
-                format!("{max_mb} is out of range [0.01, 1e6] MB"),
-            ));
-        }
-        let mut alarms = Vec::new();
-        for (k, a) in m.alarm.iter().enumerate() {
-            let key = |f: &str| format!("monitor.alarm[{k}].{f}");
-            let Some(metric) = AlarmMetric::from_name(&a.metric) else {
-                return Err(err(
-                    key("metric"),
-                    format!(
-                        "{:?} is not one of {:?}",
-                        a.metric,
-                        AlarmMetric::ALL.map(AlarmMetric::name)
-                    ),
-                ));
-            };
-            if !(a.threshold.is_finite() && a.threshold > 0.0) {
-                return Err(err(
-                    key("threshold"),
-                    format!("{} is not positive", a.threshold),
-                ));
-            }
-            let h = a.hysteresis.unwrap_or(0.1 * a.threshold);
-            if !(h.is_finite() && (0.0..a.threshold).contains(&h)) {
-                return Err(err(
-                    key("hysteresis"),
-                    format!("{h} is not in [0, threshold = {})", a.threshold),
-                ));
-            }
-            alarms.push(AlarmSpec {
-                metric,
-                threshold: a.threshold,
-                hysteresis: h,
-            });
-        }
-        let http = match m.http_port {
-            None => None,
-            Some(0) => {
-                return Err(err(
-                    "monitor.http_port".into(),
-                    "0 is not a port; leave the key out to serve no metrics".into(),
-                ))
-            }
-            Some(port) => {
-                let address = m.http_address.as_deref().unwrap_or("127.0.0.1");
-                let ip: std::net::IpAddr = address.parse().map_err(|e| {
-                    err(
-                        "monitor.http_address".into(),
-                        format!("{address:?} is not an IP address: {e}"),
-                    )
-                })?;
-                Some(std::net::SocketAddr::new(ip, port))
-            }
-        };
+        let max_mb = in_range(
+            "metrics_max_mb",
+            m.metrics_max_mb.unwrap_or(64.0),
+            0.01..=1e6,
+            "[0.01, 1e6] MB",
+        )?;
+        let alarms = alarms(m, file)?;
+        let http = http(m, file)?;
         Ok(Some(MonitorConfig {
             http,
             layout,
@@ -277,5 +177,134 @@ impl ConfigFile {
             metrics_keep: m.metrics_keep.unwrap_or(4).min(1000),
             alarms,
         }))
+    }
+}
+
+/// The layout of `[[monitor.curve]]` and `[[monitor.sensor]]`, validated (an error names the
+/// curve or sensor to blame).
+fn layout(m: &MonitorToml, file: &Path) -> Result<Layout, ConfigError> {
+    let err = |key: String, reason: String| ConfigError::new(file, key, reason);
+    let layout = Layout {
+        curves: m
+            .curve
+            .iter()
+            .enumerate()
+            .map(|(index, c)| LayoutCurve {
+                index,
+                nodes: c.nodes.clone(),
+                node_s: c.node_s.clone(),
+                length: c.length,
+            })
+            .collect(),
+        sensors: m.sensor.clone(),
+    };
+    if layout.curves.is_empty() {
+        return Err(err(
+            "monitor.curve".into(),
+            "a monitoring layout needs at least one [[monitor.curve]]".into(),
+        ));
+    }
+    layout.validate().map_err(|e| match &e {
+        LayoutError::Curve { curve, .. } => err(format!("monitor.curve[{curve}]"), e.to_string()),
+        LayoutError::Sensor { sensor, .. } => {
+            let k = m
+                .sensor
+                .iter()
+                .position(|s| s.sensor == *sensor)
+                .unwrap_or(0);
+            err(format!("monitor.sensor[{k}]"), e.to_string())
+        }
+    })?;
+    Ok(layout)
+}
+
+/// The fixed reference shape of `reference_file` (`p`, relative to the configuration
+/// `file`'s directory), anchored at `anchor` as the configuration is, sampled along the
+/// layout's curves.
+fn reference_shape(
+    p: &Path,
+    file: &Path,
+    anchor: u32,
+    layout: &Layout,
+) -> Result<Shape, ConfigError> {
+    let err = |reason: String| ConfigError::new(file, "monitor.reference_file", reason);
+    let path = if p.is_relative() {
+        file.parent().unwrap_or(Path::new("")).join(p)
+    } else {
+        p.to_path_buf()
+    };
+    let text = super::read_limited(&path, super::MAX_NAMED_FILE)
+        .map_err(|e| err(format!("{}: {e}", path.display())))?;
+    let r = crate::monitor::metrics::ReferenceFile::parse(&text)
+        .map_err(|e| err(format!("{}: {e}", path.display())))?;
+    if r.anchor != anchor {
+        return Err(err(format!(
+            "{}: anchored at node {}, the configuration at node {anchor}",
+            path.display(),
+            r.anchor
+        )));
+    }
+    let step = crate::monitor::epoch::EpochParams::default().step;
+    r.shape(&layout.curves, step)
+        .map_err(|e| err(format!("{}: {e}", path.display())))
+}
+
+/// `[[monitor.alarm]]`, checked: a known metric, a positive threshold, a hysteresis below it
+/// (a tenth of it by default).
+fn alarms(m: &MonitorToml, file: &Path) -> Result<Vec<AlarmSpec>, ConfigError> {
+    let mut alarms = Vec::new();
+    for (k, a) in m.alarm.iter().enumerate() {
+        let err = |f: &str, reason: String| {
+            ConfigError::new(file, format!("monitor.alarm[{k}].{f}"), reason)
+        };
+        let Some(metric) = AlarmMetric::from_name(&a.metric) else {
+            return Err(err(
+                "metric",
+                format!(
+                    "{:?} is not one of {:?}",
+                    a.metric,
+                    AlarmMetric::ALL.map(AlarmMetric::name)
+                ),
+            ));
+        };
+        if !(a.threshold.is_finite() && a.threshold > 0.0) {
+            return Err(err("threshold", format!("{} is not positive", a.threshold)));
+        }
+        let h = a.hysteresis.unwrap_or(0.1 * a.threshold);
+        if !(h.is_finite() && (0.0..a.threshold).contains(&h)) {
+            return Err(err(
+                "hysteresis",
+                format!("{h} is not in [0, threshold = {})", a.threshold),
+            ));
+        }
+        alarms.push(AlarmSpec {
+            metric,
+            threshold: a.threshold,
+            hysteresis: h,
+        });
+    }
+    Ok(alarms)
+}
+
+/// The address the metrics are served on (`http_port`, on `http_address` or 127.0.0.1), if
+/// any.
+fn http(m: &MonitorToml, file: &Path) -> Result<Option<std::net::SocketAddr>, ConfigError> {
+    let err = |key: &str, reason: String| ConfigError::new(file, key, reason);
+    match m.http_port {
+        None => Ok(None),
+        Some(0) => Err(err(
+            "monitor.http_port",
+            "0 is not a port; leave the key out to serve no metrics".into(),
+        )),
+        Some(port) => {
+            let address = m.http_address.as_deref().unwrap_or("127.0.0.1");
+            let ip: std::net::IpAddr = address.parse().map_err(|e| {
+                err(
+                    "monitor.http_address",
+                    format!("{address:?} is not an IP address: {e}"),
+                )
+            })?;
+            Ok(Some(std::net::SocketAddr::new(ip, port)))
+        }
     }
 }

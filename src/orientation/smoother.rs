@@ -250,6 +250,9 @@ fn hand_motion(m: &Measurements, q: &[UnitQuaternion<f64>], factor: f64) -> Vec<
         .collect()
 }
 
+/// One smoothing pass: the forward filter from `(q0, b0)` with σ `angle0` (rad) and `bias0`
+/// (rad/s), then the backward (Rauch–Tung–Striebel) sweep on the error state. `motion`: the
+/// hand's acceleration per sample (in g), added to gravity's noise.
 fn pass(
     m: &Measurements,
     q0: UnitQuaternion<f64>,
@@ -269,116 +272,42 @@ fn pass(
     .into_iter()
     .min()
     .unwrap_or(0);
-    let gyro_var = m.gyro_noise.max(1e-4).powi(2);
-    let walk_var = p.bias_walk.powi(2);
-    let acc_var = (m.acc_noise.max(1e-3) / G).powi(2) + p.acc_motion.powi(2);
-    let rate = |k: usize, b: &Vector3<f64>| -> Vector3<f64> {
-        let (g0, g1) = (m.gyro[k - 1], m.gyro[k]);
-        match (finite(&g0), finite(&g1)) {
-            (true, true) => (g0 + g1) * 0.5 - b,
-            (false, true) => g1 - b,
-            (true, false) => g0 - b,
-            (false, false) => Vector3::zeros(),
-        }
+    let noise = Noise {
+        gyro_var: m.gyro_noise.max(1e-4).powi(2),
+        walk_var: p.bias_walk.powi(2),
+        acc_var: (m.acc_noise.max(1e-3) / G).powi(2) + p.acc_motion.powi(2),
     };
-    let dt_of = |k: usize| {
-        let dt = m.t[k] - m.t[k - 1];
-        if dt.is_finite() && dt > 0.0 {
-            dt.min(1.0)
-        } else {
-            0.0
-        }
+    let mut f = Filter {
+        q: q0,
+        b: b0,
+        cov: Matrix6::from_diagonal(&Vector6::new(
+            angle0 * angle0,
+            angle0 * angle0,
+            angle0 * angle0,
+            bias0 * bias0,
+            bias0 * bias0,
+            bias0 * bias0,
+        )),
+        gravity_lost: None,
+        heading_lost: None,
     };
-    let up = Vector3::z();
-    let dip = m.field.map(|(_, d)| d.to_radians());
     let mut out = Smoothed {
         q: Vec::with_capacity(n),
         bias: Vec::with_capacity(n),
         ..Smoothed::default()
     };
     let mut covs: Vec<Matrix6<f64>> = Vec::with_capacity(n);
-    // Since when every gravity / heading measurement was refused.
-    let (mut gravity_lost, mut heading_lost): (Option<f64>, Option<f64>) = (None, None);
-    // Notes whether a measurement at time `t` was taken; after `lost_after` of refusals the
-    // orientation's σ is widened (the filter is lost, not the measurements wrong).
-    let note = |taken: bool, since: &mut Option<f64>, t: f64, cov: &mut Matrix6<f64>| {
-        if taken {
-            *since = None;
-        } else if t - *since.get_or_insert(t) > p.lost_after {
-            for i in 0..3 {
-                cov[(i, i)] += p.restart_angle * p.restart_angle;
-            }
-            *since = None;
-        }
-    };
-    let mut q = q0;
-    let mut b = b0;
-    let mut cov = Matrix6::from_diagonal(&Vector6::new(
-        angle0 * angle0,
-        angle0 * angle0,
-        angle0 * angle0,
-        bias0 * bias0,
-        bias0 * bias0,
-        bias0 * bias0,
-    ));
+    let dip = m.field.map(|(_, d)| d.to_radians());
     for k in 0..n {
         if k > 0 {
-            let dt = dt_of(k);
-            if dt > 0.0 {
-                let w = rate(k, &b);
-                let (f, qn) = transition(&w, dt, gyro_var, walk_var);
-                q *= UnitQuaternion::from_scaled_axis(w * dt);
-                cov = f * cov * f.transpose() + qn;
-            } else {
-                let a = p.restart_angle * p.restart_angle;
-                for i in 0..3 {
-                    cov[(i, i)] += a;
-                }
-            }
+            f.predict(m, k, &noise, p);
         }
-        // Gravity.
-        let a = m.acc[k];
-        let an = a.norm();
-        if finite(&a) && (an - G).abs() <= p.acc_tol && an > 0.0 {
-            let h_dir = q.inverse() * up;
-            let y = a / an - h_dir;
-            let mut h = SMatrix::<f64, 3, 6>::zeros();
-            h.fixed_view_mut::<3, 3>(0, 0).copy_from(&skew(&h_dir));
-            let extra = motion.get(k).copied().unwrap_or(0.0);
-            let taken = update(
-                &mut q,
-                &mut b,
-                &mut cov,
-                y,
-                h,
-                acc_var + extra * extra,
-                p.gate,
-            );
+        let extra = motion.get(k).copied().unwrap_or(0.0);
+        if let Some(taken) = f.gravity(m, k, noise.acc_var + extra * extra, p) {
             out.refused_gravity += usize::from(!taken);
-            note(taken, &mut gravity_lost, m.t[k], &mut cov);
         }
-        // Heading.
-        let mg = m.mag[k];
-        if let (Some((norm, dip_deg)), Some(dip), true) = (m.field, dip, finite(&mg) && finite(&a))
-        {
-            let field_ok = !m.disturbed.get(k).copied().unwrap_or(false)
-                && (mg.norm() - norm).abs() <= p.mag_norm_rel * norm
-                && super::disturbance::dip_deg(&a, &mg)
-                    .is_some_and(|d| (d - dip_deg).abs() <= p.mag_dip);
-            let mw = q * mg;
-            let mh = mw.x.hypot(mw.y);
-            if field_ok && mh > 1e-3 {
-                let psi = mw.x.atan2(mw.y);
-                let row =
-                    (up + Vector3::y() * dip.tan()).transpose() * q.to_rotation_matrix().matrix();
-                let mut h = SMatrix::<f64, 1, 6>::zeros();
-                h.fixed_view_mut::<1, 3>(0, 0).copy_from(&row);
-                let var = (m.mag_noise.max(0.05) / mh).powi(2) + p.mag_heading.powi(2);
-                let y = SMatrix::<f64, 1, 1>::new(psi);
-                let taken = update(&mut q, &mut b, &mut cov, y, h, var, p.gate);
-                out.refused_heading += usize::from(!taken);
-                note(taken, &mut heading_lost, m.t[k], &mut cov);
-            }
+        if let Some(taken) = f.heading(m, k, dip, p) {
+            out.refused_heading += usize::from(!taken);
         }
         // Rest: the gyroscope reads its bias.
         let g = m.gyro[k];
@@ -386,20 +315,163 @@ fn pass(
             let mut h = SMatrix::<f64, 3, 6>::zeros();
             h.fixed_view_mut::<3, 3>(0, 3)
                 .copy_from(&Matrix3::identity());
-            let y = g - b;
-            update(&mut q, &mut b, &mut cov, y, h, gyro_var, p.gate);
+            let y = g - f.b;
+            update(&mut f.q, &mut f.b, &mut f.cov, y, h, noise.gyro_var, p.gate);
         }
-        out.q.push(q);
-        out.bias.push(b);
-        covs.push(cov);
+        out.q.push(f.q);
+        out.bias.push(f.b);
+        covs.push(f.cov);
     }
-    // Backward (Rauch–Tung–Striebel) on the error state.
+    smooth_backward(m, &noise, p, &mut out, &covs);
+    out
+}
+
+/// The process and gravity noise of a pass (variances).
+struct Noise {
+    gyro_var: f64,
+    walk_var: f64,
+    acc_var: f64,
+}
+
+/// The mean rate over the step to sample `k` (gyroscope at both ends, or the finite one),
+/// bias `b` taken off.
+fn rate(m: &Measurements, k: usize, b: &Vector3<f64>) -> Vector3<f64> {
+    let (g0, g1) = (m.gyro[k - 1], m.gyro[k]);
+    match (finite(&g0), finite(&g1)) {
+        (true, true) => (g0 + g1) * 0.5 - b,
+        (false, true) => g1 - b,
+        (true, false) => g0 - b,
+        (false, false) => Vector3::zeros(),
+    }
+}
+
+/// The step to sample `k`, s (0 where time does not advance, at most 1 s).
+fn dt_of(m: &Measurements, k: usize) -> f64 {
+    let dt = m.t[k] - m.t[k - 1];
+    if dt.is_finite() && dt > 0.0 {
+        dt.min(1.0)
+    } else {
+        0.0
+    }
+}
+
+/// The forward filter's state: orientation, gyroscope bias, the error state's covariance,
+/// and since when every gravity / heading measurement was refused.
+struct Filter {
+    q: UnitQuaternion<f64>,
+    b: Vector3<f64>,
+    cov: Matrix6<f64>,
+    gravity_lost: Option<f64>,
+    heading_lost: Option<f64>,
+}
+
+impl Filter {
+    /// Integrates the gyroscope to sample `k` (a step without time widens the orientation's
+    /// σ by the restart angle).
+    fn predict(&mut self, m: &Measurements, k: usize, noise: &Noise, p: &SmootherParams) {
+        let dt = dt_of(m, k);
+        if dt > 0.0 {
+            let w = rate(m, k, &self.b);
+            let (f, qn) = transition(&w, dt, noise.gyro_var, noise.walk_var);
+            self.q *= UnitQuaternion::from_scaled_axis(w * dt);
+            self.cov = f * self.cov * f.transpose() + qn;
+        } else {
+            let a = p.restart_angle * p.restart_angle;
+            for i in 0..3 {
+                self.cov[(i, i)] += a;
+            }
+        }
+    }
+
+    /// Gravity at sample `k` (variance `var`), when the accelerometer reads about g: whether
+    /// its gate took it, `None` when not measured.
+    fn gravity(
+        &mut self,
+        m: &Measurements,
+        k: usize,
+        var: f64,
+        p: &SmootherParams,
+    ) -> Option<bool> {
+        let a = m.acc[k];
+        let an = a.norm();
+        if !(finite(&a) && (an - G).abs() <= p.acc_tol && an > 0.0) {
+            return None;
+        }
+        let h_dir = self.q.inverse() * Vector3::z();
+        let y = a / an - h_dir;
+        let mut h = SMatrix::<f64, 3, 6>::zeros();
+        h.fixed_view_mut::<3, 3>(0, 0).copy_from(&skew(&h_dir));
+        let taken = update(&mut self.q, &mut self.b, &mut self.cov, y, h, var, p.gate);
+        note(taken, &mut self.gravity_lost, m.t[k], &mut self.cov, p);
+        Some(taken)
+    }
+
+    /// The heading at sample `k` from the magnetometer (the field's dip `dip`, rad), where the
+    /// field is the site's in norm and dip and not disturbed: whether its gate took it, `None`
+    /// when not measured.
+    fn heading(
+        &mut self,
+        m: &Measurements,
+        k: usize,
+        dip: Option<f64>,
+        p: &SmootherParams,
+    ) -> Option<bool> {
+        let (a, mg) = (m.acc[k], m.mag[k]);
+        let (Some((norm, dip_deg)), Some(dip), true) = (m.field, dip, finite(&mg) && finite(&a))
+        else {
+            return None;
+        };
+        let field_ok = !m.disturbed.get(k).copied().unwrap_or(false)
+            && (mg.norm() - norm).abs() <= p.mag_norm_rel * norm
+            && super::disturbance::dip_deg(&a, &mg)
+                .is_some_and(|d| (d - dip_deg).abs() <= p.mag_dip);
+        let mw = self.q * mg;
+        let mh = mw.x.hypot(mw.y);
+        if !(field_ok && mh > 1e-3) {
+            return None;
+        }
+        let psi = mw.x.atan2(mw.y);
+        let row = (Vector3::z() + Vector3::y() * dip.tan()).transpose()
+            * self.q.to_rotation_matrix().matrix();
+        let mut h = SMatrix::<f64, 1, 6>::zeros();
+        h.fixed_view_mut::<1, 3>(0, 0).copy_from(&row);
+        let var = (m.mag_noise.max(0.05) / mh).powi(2) + p.mag_heading.powi(2);
+        let y = SMatrix::<f64, 1, 1>::new(psi);
+        let taken = update(&mut self.q, &mut self.b, &mut self.cov, y, h, var, p.gate);
+        note(taken, &mut self.heading_lost, m.t[k], &mut self.cov, p);
+        Some(taken)
+    }
+}
+
+/// Notes whether a measurement at time `t` was taken; after `p.lost_after` of refusals the
+/// orientation's σ is widened (the filter is lost, not the measurements wrong).
+fn note(taken: bool, since: &mut Option<f64>, t: f64, cov: &mut Matrix6<f64>, p: &SmootherParams) {
+    if taken {
+        *since = None;
+    } else if t - *since.get_or_insert(t) > p.lost_after {
+        for i in 0..3 {
+            cov[(i, i)] += p.restart_angle * p.restart_angle;
+        }
+        *since = None;
+    }
+}
+
+/// The backward (Rauch–Tung–Striebel) sweep on the error state over the forward filter's
+/// output `out` and covariances `covs`.
+fn smooth_backward(
+    m: &Measurements,
+    noise: &Noise,
+    p: &SmootherParams,
+    out: &mut Smoothed,
+    covs: &[Matrix6<f64>],
+) {
+    let n = covs.len();
     for k in (0..n.saturating_sub(1)).rev() {
-        let dt = dt_of(k + 1);
+        let dt = dt_of(m, k + 1);
         let (qf, bf) = (out.q[k], out.bias[k]);
         let (f, qn, q_pred) = if dt > 0.0 {
-            let w = rate(k + 1, &bf);
-            let (f, qn) = transition(&w, dt, gyro_var, walk_var);
+            let w = rate(m, k + 1, &bf);
+            let (f, qn) = transition(&w, dt, noise.gyro_var, noise.walk_var);
             (f, qn, qf * UnitQuaternion::from_scaled_axis(w * dt))
         } else {
             let mut qn = Matrix6::zeros();
@@ -424,7 +496,6 @@ fn pass(
             out.bias[k] = bf + dk.fixed_rows::<3>(3);
         }
     }
-    out
 }
 
 #[cfg(test)]

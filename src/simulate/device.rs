@@ -366,37 +366,14 @@ pub(crate) fn counts(v: &Vector3<f64>, lsb: f64) -> [i16; 3] {
 
 /// Renders `script` as the bytes the device would send, with the truth of every sample.
 pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, SampleTruth) {
-    let mut em = Emitter {
-        out: Vec::new(),
-        seq: (rng.next_u64() % 256) as u8,
-        rng: rng.fork(),
-        faults: p.faults,
-        next_hello: 0.0,
-        next_status: 0.0,
-        hello: p.hello(),
-        clock_base_us: p.clock_start_us,
-        clock_base_t: 0.0,
-        sent: 0,
-        corrupted: 0,
-        lost: 0,
-        dropped: 0,
-        session: None,
-        restarted: false,
-    };
+    let mut em = Emitter::new(p, rng);
     let mut rebooted = false;
     let mut truth = SampleTruth::default();
     let field = p.earth.field();
     let g = Vector3::new(0.0, 0.0, G);
     // Sensor axes → frame axes: frame = mounting · axes · sensor.
     let frame_from_sensor = p.mounting.matrix() * Calibration::default_for(p.kind).axes.m;
-    let mut gyro_bias = if p.gyro_bias_axis > 0.0 {
-        Vector3::from_fn(|_, _| {
-            let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
-            sign * p.gyro_bias_axis * rng.range(0.8, 1.2)
-        })
-    } else {
-        rng.vec3(p.gyro_bias_sigma)
-    };
+    let mut gyro_bias = initial_gyro_bias(p, rng);
     let mut bias_t = 0.0;
     let m_per_tick = if p.ticks_per_rev > 0 {
         p.wheel_circumference_um as f64 * 1e-6 / p.ticks_per_rev as f64
@@ -410,16 +387,7 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
     let mut wheel_dev = 0.0;
     let mut last_wheel = 0.0;
     let mut keys = script.keys.iter().peekable();
-    let mut seg_lengths: Vec<(f64, u16, f64)> = Vec::new(); // (time, segment, length)
-    if p.kind == DeviceKind::Phone && p.segment_length_sigma > 0.0 {
-        // The app sends each segment's measured length right after the Enter that ends it.
-        for c in &script.curves {
-            for (k, w) in c.tags.windows(2).enumerate() {
-                let len = (w[1].1 - w[0].1) + p.segment_length_sigma * rng.gauss();
-                seg_lengths.push((w[1].2 + 1e-4, k as u16, len.max(1e-3)));
-            }
-        }
-    }
+    let seg_lengths = measured_segment_lengths(script, p, rng);
     let mut segs = seg_lengths.iter().peekable();
     for st in &script.states {
         if let Some(tr) = p.reboot_at {
@@ -434,29 +402,7 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
                 continue;
             }
         }
-        while let Some(&&(tk, k)) = keys.peek() {
-            if tk > st.t {
-                break;
-            }
-            let t_us = em.t_us(tk);
-            em.emit(tk, Packet::Key(Key { t_us, key: k }));
-            keys.next();
-        }
-        while let Some(&&(ts, seg, len)) = segs.peek() {
-            if ts > st.t {
-                break;
-            }
-            let t_us = em.t_us(ts);
-            em.emit(
-                ts,
-                Packet::SegmentLength(SegmentLength {
-                    t_us,
-                    segment: seg,
-                    length_um: (len * 1e6).round() as u32,
-                }),
-            );
-            segs.next();
-        }
+        em.keys_and_lengths_until(st.t, &mut keys, &mut segs);
         let mut slip = st.curve.map_or(1.0, |c| slips[c]);
         for &(a, d, f) in &p.skids {
             if st.t >= a && st.t < a + d {
@@ -518,6 +464,94 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
     truth.packets_corrupted = em.corrupted;
     truth.packets_lost = em.lost;
     (em.out, truth)
+}
+
+impl Emitter {
+    /// The emitter of a device `p` (its sequence number drawn from `rng`, its link's faults
+    /// from a fork of it).
+    fn new(p: &DeviceParams, rng: &mut Rng) -> Self {
+        Emitter {
+            out: Vec::new(),
+            seq: (rng.next_u64() % 256) as u8,
+            rng: rng.fork(),
+            faults: p.faults,
+            next_hello: 0.0,
+            next_status: 0.0,
+            hello: p.hello(),
+            clock_base_us: p.clock_start_us,
+            clock_base_t: 0.0,
+            sent: 0,
+            corrupted: 0,
+            lost: 0,
+            dropped: 0,
+            session: None,
+            restarted: false,
+        }
+    }
+
+    /// Emits the keys and the segment lengths (`(time, segment, length)`) due by `t`.
+    fn keys_and_lengths_until<'a>(
+        &mut self,
+        t: f64,
+        keys: &mut std::iter::Peekable<impl Iterator<Item = &'a (f64, u8)>>,
+        segs: &mut std::iter::Peekable<impl Iterator<Item = &'a (f64, u16, f64)>>,
+    ) {
+        while let Some(&&(tk, k)) = keys.peek() {
+            if tk > t {
+                break;
+            }
+            let t_us = self.t_us(tk);
+            self.emit(tk, Packet::Key(Key { t_us, key: k }));
+            keys.next();
+        }
+        while let Some(&&(ts, seg, len)) = segs.peek() {
+            if ts > t {
+                break;
+            }
+            let t_us = self.t_us(ts);
+            self.emit(
+                ts,
+                Packet::SegmentLength(SegmentLength {
+                    t_us,
+                    segment: seg,
+                    length_um: (len * 1e6).round() as u32,
+                }),
+            );
+            segs.next();
+        }
+    }
+}
+
+/// The gyroscope's bias at the start: about `gyro_bias_axis` per axis with a random sign
+/// (an uncalibrated phone), else Gaussian of σ `gyro_bias_sigma`.
+fn initial_gyro_bias(p: &DeviceParams, rng: &mut Rng) -> Vector3<f64> {
+    if p.gyro_bias_axis > 0.0 {
+        Vector3::from_fn(|_, _| {
+            let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
+            sign * p.gyro_bias_axis * rng.range(0.8, 1.2)
+        })
+    } else {
+        rng.vec3(p.gyro_bias_sigma)
+    }
+}
+
+/// Phone: the segment lengths the app measures, `(time, segment, length)`, each sent right
+/// after the Enter that ends its segment (none without a length error to draw).
+fn measured_segment_lengths(
+    script: &Script,
+    p: &DeviceParams,
+    rng: &mut Rng,
+) -> Vec<(f64, u16, f64)> {
+    let mut seg_lengths = Vec::new();
+    if p.kind == DeviceKind::Phone && p.segment_length_sigma > 0.0 {
+        for c in &script.curves {
+            for (k, w) in c.tags.windows(2).enumerate() {
+                let len = (w[1].1 - w[0].1) + p.segment_length_sigma * rng.gauss();
+                seg_lengths.push((w[1].2 + 1e-4, k as u16, len.max(1e-3)));
+            }
+        }
+    }
+    seg_lengths
 }
 
 #[allow(clippy::too_many_arguments)]

@@ -29,7 +29,7 @@ use device::{render, DeviceParams, Disturbance, LinkFaults, SampleTruth};
 use device_protocol::DeviceKind;
 use nalgebra::{Rotation3, Vector3};
 pub use operator::Mistakes;
-use operator::{perform, OperatorParams};
+use operator::{perform, OperatorParams, Script};
 use rng::Rng;
 use scene::Scene;
 use truth::{um, Truth, TruthCurve, TruthSensor};
@@ -193,86 +193,7 @@ pub fn run_without(
         return run_array(scene, profile, seed, &mut rng);
     }
     if profile == Profile::Field {
-        // A fault turned off for the study keeps the random draws it makes where it can (a
-        // negligible size instead of none), so that the other faults see the same noise.
-        if on(Fault::Noise) {
-            p.acc_sigma *= 3.0;
-            p.mag_sigma *= 3.0;
-            p.gyro_sigma *= 3.0;
-        }
-        if device == DeviceKind::Phone {
-            if on(Fault::GyroBias) {
-                p.gyro_bias_axis = 1.7f64.to_radians();
-                p.gyro_bias_walk = 0.03f64.to_radians();
-                events.push(
-                    "uncalibrated gyroscope: about 1.7°/s of bias per axis, wandering 0.03°/s per √s"
-                        .into(),
-                );
-            } else {
-                p.gyro_bias_axis = 1e-12;
-                p.gyro_bias_walk = 1e-12;
-            }
-        }
-        if on(Fault::Tilt) {
-            op.typing_tilt_deg = 4.0;
-            events.push("the hand tilts the device by 3-5° while typing each index".into());
-        } else {
-            op.typing_tilt_deg = 1e-12;
-        }
-        if on(Fault::Turns) {
-            op.turn_in_place_deg = 45.0;
-            events.push(
-                "the device put down turned by 22-68° at each curve's start, turned in place before moving"
-                    .into(),
-            );
-        } else {
-            op.turn_in_place_deg = 1e-12;
-        }
-        if on(Fault::GentleStops) {
-            op.stop_ramp = 0.5;
-            op.pause_after_enter = 1.5;
-            events.push(
-                "the hand eases the device into and out of each node over 0.5 s, and stands 1.5 s after each Enter"
-                    .into(),
-            );
-        }
-        if on(Fault::Mounting) {
-            p.mounting = Rotation3::from_axis_angle(
-                &nalgebra::Unit::new_normalize(Vector3::new(0.2, 0.3, 1.0)),
-                2f64.to_radians(),
-            );
-        }
-        if on(Fault::Link) {
-            p.faults = LinkFaults {
-                corrupt: 0.001,
-                lose: 0.001,
-            };
-        }
-        let c = &scene.curves[n.min(2) - 1];
-        let center = c.points[c.points.len() / 2];
-        let radius = 0.05 * scene.bbox_diagonal();
-        if on(Fault::Magnet) {
-            p.disturbance = Some(Disturbance {
-                center,
-                radius,
-                field_ut: Vector3::new(15.0, 0.0, 5.0),
-            });
-            events.push(format!(
-                "magnetic disturbance of 15.8 µT within {radius:.3} m of ({:.3}, {:.3}, {:.3})",
-                center.x, center.y, center.z
-            ));
-        }
-        if scene.curves[0].tags.len() > 2 && on(Fault::WrongIndex) {
-            op.mistakes.wrong_index = Some((0, 1));
-            events.push("curve 0: a wrong index typed at its second node, undone with U".into());
-        }
-        let cancel = n.min(2) - 1;
-        if on(Fault::Cancel) {
-            op.mistakes.cancel_and_rescan = Some(cancel);
-            events.push(format!(
-                "curve {cancel}: started, cancelled with C, rescanned"
-            ));
-        }
+        field_setup(scene, device, &on, &mut p, &mut op, &mut events);
     }
     let m = &mut op.mistakes;
     m.wrong_index = more.wrong_index.or(m.wrong_index);
@@ -292,56 +213,7 @@ pub fn run_without(
     }
     let duration = script.states.last().map_or(0.0, |s| s.t);
     if profile == Profile::Field {
-        // Reboot while carrying the device to the middle curve.
-        if n >= 2 && on(Fault::Reboot) {
-            let target = n / 2;
-            let start = script
-                .states
-                .iter()
-                .position(|s| s.curve == Some(target))
-                .unwrap_or(0);
-            let carry_mid = script.states[..start]
-                .iter()
-                .rposition(|s| s.curve.is_some())
-                .map_or(0.5, |i| (script.states[i].t + script.states[start].t) / 2.0);
-            p.reboot_silence = 2.0;
-            p.reboot_at = Some(carry_mid - 1.0);
-            events.push(format!(
-                "device reboots at t = {:.1} s, silent for 2 s while carried and turned to curve {target}",
-                carry_mid - 1.0
-            ));
-        }
-        // The clock wraps mid-way (before the reboot, which restarts it).
-        if on(Fault::ClockWrap) {
-            let t_wrap = p.reboot_at.map_or(duration / 2.0, |r| r / 2.0);
-            p.clock_start_us = u32::MAX - (t_wrap * 1e6) as u32;
-            events.push(format!("device clock wraps at t = {t_wrap:.1} s"));
-        }
-        // Three wheel skids while rolling, each losing about 25 mm of a segment at the mean
-        // speed (issue 33: the independent simulator's skids lose 16–29 mm; ours lost 10 mm,
-        // below what the network's loops could tell from the orientations' noise).
-        let rolling: Vec<f64> = script
-            .states
-            .iter()
-            .filter(|s| s.curve.is_some() && !s.standing)
-            .map(|s| s.t)
-            .collect();
-        for k in 0..if on(Fault::Skids) { 3 } else { 0 } {
-            if let Some(&t) = rolling.get(rolling.len() * (2 * k + 1) / 6) {
-                p.skids.push((t, 0.6, 0.2));
-                events.push(format!("wheel skid at t = {t:.1} s (0.6 s at 20 %)"));
-            }
-        }
-        // The sample stream stalls once in the middle of a move.
-        if let Some(&t) = rolling
-            .get(rolling.len() * 2 / 5)
-            .filter(|_| on(Fault::Stall))
-        {
-            p.stalls.push((t, 0.3));
-            events.push(format!(
-                "the sample stream stalls at t = {t:.1} s for 0.3 s (samples dropped, the device moving)"
-            ));
-        }
+        field_timeline(&script, n, duration, &on, &mut p, &mut events);
     }
     let (mut bytes, samples) = render(&script, &p, &mut rng);
     if on(Fault::MidPacket) {
@@ -358,6 +230,161 @@ pub fn run_without(
         bytes,
         truth,
         samples,
+    }
+}
+
+/// The field profile's faults that set up the device and the operator (each unless `on` says
+/// it is left out for the study), and the events they add to the truth.
+fn field_setup(
+    scene: &Scene,
+    device: DeviceKind,
+    on: &dyn Fn(Fault) -> bool,
+    p: &mut DeviceParams,
+    op: &mut OperatorParams,
+    events: &mut Vec<String>,
+) {
+    let n = scene.curves.len();
+    // A fault turned off for the study keeps the random draws it makes where it can (a
+    // negligible size instead of none), so that the other faults see the same noise.
+    if on(Fault::Noise) {
+        p.acc_sigma *= 3.0;
+        p.mag_sigma *= 3.0;
+        p.gyro_sigma *= 3.0;
+    }
+    if device == DeviceKind::Phone {
+        if on(Fault::GyroBias) {
+            p.gyro_bias_axis = 1.7f64.to_radians();
+            p.gyro_bias_walk = 0.03f64.to_radians();
+            events.push(
+                "uncalibrated gyroscope: about 1.7°/s of bias per axis, wandering 0.03°/s per √s"
+                    .into(),
+            );
+        } else {
+            p.gyro_bias_axis = 1e-12;
+            p.gyro_bias_walk = 1e-12;
+        }
+    }
+    if on(Fault::Tilt) {
+        op.typing_tilt_deg = 4.0;
+        events.push("the hand tilts the device by 3-5° while typing each index".into());
+    } else {
+        op.typing_tilt_deg = 1e-12;
+    }
+    if on(Fault::Turns) {
+        op.turn_in_place_deg = 45.0;
+        events.push(
+                "the device put down turned by 22-68° at each curve's start, turned in place before moving"
+                    .into(),
+            );
+    } else {
+        op.turn_in_place_deg = 1e-12;
+    }
+    if on(Fault::GentleStops) {
+        op.stop_ramp = 0.5;
+        op.pause_after_enter = 1.5;
+        events.push(
+                "the hand eases the device into and out of each node over 0.5 s, and stands 1.5 s after each Enter"
+                    .into(),
+            );
+    }
+    if on(Fault::Mounting) {
+        p.mounting = Rotation3::from_axis_angle(
+            &nalgebra::Unit::new_normalize(Vector3::new(0.2, 0.3, 1.0)),
+            2f64.to_radians(),
+        );
+    }
+    if on(Fault::Link) {
+        p.faults = LinkFaults {
+            corrupt: 0.001,
+            lose: 0.001,
+        };
+    }
+    let c = &scene.curves[n.min(2) - 1];
+    let center = c.points[c.points.len() / 2];
+    let radius = 0.05 * scene.bbox_diagonal();
+    if on(Fault::Magnet) {
+        p.disturbance = Some(Disturbance {
+            center,
+            radius,
+            field_ut: Vector3::new(15.0, 0.0, 5.0),
+        });
+        events.push(format!(
+            "magnetic disturbance of 15.8 µT within {radius:.3} m of ({:.3}, {:.3}, {:.3})",
+            center.x, center.y, center.z
+        ));
+    }
+    if scene.curves[0].tags.len() > 2 && on(Fault::WrongIndex) {
+        op.mistakes.wrong_index = Some((0, 1));
+        events.push("curve 0: a wrong index typed at its second node, undone with U".into());
+    }
+    let cancel = n.min(2) - 1;
+    if on(Fault::Cancel) {
+        op.mistakes.cancel_and_rescan = Some(cancel);
+        events.push(format!(
+            "curve {cancel}: started, cancelled with C, rescanned"
+        ));
+    }
+}
+
+/// The field profile's faults placed on the operator's timeline (`script` over `n` curves,
+/// `duration` s): a reboot, the clock's wrap, wheel skids and a stall of the sample stream.
+fn field_timeline(
+    script: &Script,
+    n: usize,
+    duration: f64,
+    on: &dyn Fn(Fault) -> bool,
+    p: &mut DeviceParams,
+    events: &mut Vec<String>,
+) {
+    // Reboot while carrying the device to the middle curve.
+    if n >= 2 && on(Fault::Reboot) {
+        let target = n / 2;
+        let start = script
+            .states
+            .iter()
+            .position(|s| s.curve == Some(target))
+            .unwrap_or(0);
+        let carry_mid = script.states[..start]
+            .iter()
+            .rposition(|s| s.curve.is_some())
+            .map_or(0.5, |i| (script.states[i].t + script.states[start].t) / 2.0);
+        p.reboot_silence = 2.0;
+        p.reboot_at = Some(carry_mid - 1.0);
+        events.push(format!(
+                "device reboots at t = {:.1} s, silent for 2 s while carried and turned to curve {target}",
+                carry_mid - 1.0
+            ));
+    }
+    // The clock wraps mid-way (before the reboot, which restarts it).
+    if on(Fault::ClockWrap) {
+        let t_wrap = p.reboot_at.map_or(duration / 2.0, |r| r / 2.0);
+        p.clock_start_us = u32::MAX - (t_wrap * 1e6) as u32;
+        events.push(format!("device clock wraps at t = {t_wrap:.1} s"));
+    }
+    // Three wheel skids while rolling, each losing about 25 mm of a segment at the mean
+    // speed (issue 33: the independent simulator's skids lose 16–29 mm; ours lost 10 mm,
+    // below what the network's loops could tell from the orientations' noise).
+    let rolling: Vec<f64> = script
+        .states
+        .iter()
+        .filter(|s| s.curve.is_some() && !s.standing)
+        .map(|s| s.t)
+        .collect();
+    for k in 0..if on(Fault::Skids) { 3 } else { 0 } {
+        if let Some(&t) = rolling.get(rolling.len() * (2 * k + 1) / 6) {
+            p.skids.push((t, 0.6, 0.2));
+            events.push(format!("wheel skid at t = {t:.1} s (0.6 s at 20 %)"));
+        }
+    }
+    // The sample stream stalls once in the middle of a move.
+    if let Some(&t) = rolling
+        .get(rolling.len() * 2 / 5)
+        .filter(|_| on(Fault::Stall))
+    {
+        p.stalls.push((t, 0.3));
+        events.push(format!(
+                "the sample stream stalls at t = {t:.1} s for 0.3 s (samples dropped, the device moving)"
+            ));
     }
 }
 

@@ -613,7 +613,7 @@ impl Reconstructor {
 /// refused tags are warnings.
 fn closure_check(
     curves: &[Curve],
-    uniform: &mut Vec<UniformCurve>,
+    uniform: &mut [UniformCurve],
     p: &NetworkParams,
     warnings: &mut Vec<NetworkWarning>,
 ) -> closure::ClosureReport {
