@@ -9,10 +9,6 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-fn sfs() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_sfs"))
-}
-
 /// `sfs run --stdin --session DIR`, standard input piped, standard output discarded.
 fn run_stdin(log: &str, session: impl AsRef<Path>) -> std::process::Child {
     sfs()

@@ -8,7 +8,6 @@ use sfs::simulate::device::{render, DeviceParams};
 use sfs::simulate::operator::{perform, CurveKind, OperatorParams};
 use sfs::simulate::rng::Rng;
 use std::path::Path;
-use std::process::Command;
 
 /// The dome (boundary equator, two meridians over the pole) with the first meridian scanned
 /// as a crease and the second as a guide curve, as a Morphorider capture.
@@ -33,7 +32,7 @@ fn dome_capture(dir: &Path, kinds: [CurveKind; 3]) -> std::path::PathBuf {
 }
 
 fn replay(cap: &Path, out: &Path, config: Option<&Path>) {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_sfs"));
+    let mut cmd = common::sfs();
     cmd.args(["--log", "warn", "replay"])
         .arg(cap)
         .arg("--out")
@@ -46,7 +45,7 @@ fn replay(cap: &Path, out: &Path, config: Option<&Path>) {
 }
 
 fn config_check(file: &Path) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_sfs"))
+    common::sfs()
         .args(["config", "check"])
         .arg(file)
         .output()

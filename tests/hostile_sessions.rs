@@ -5,11 +5,7 @@
 
 mod common;
 use common::*;
-use std::process::{Command, Stdio};
-
-fn sfs() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_sfs"))
-}
+use std::process::Stdio;
 
 /// `sfs --log LOG replay CAPTURE [--config CONFIG] --out OUT`, which must succeed.
 fn replay(

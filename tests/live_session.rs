@@ -13,10 +13,6 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-fn sfs() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_sfs"))
-}
-
 /// The seed-1 Morphorider scan of a shipped scene: its bytes and its truth file.
 fn simulated(name: &str, dir: &Path) -> (Vec<u8>, PathBuf) {
     let s = scene::builtin(name).unwrap();

@@ -17,7 +17,7 @@ fn root() -> PathBuf {
 /// Runs `sfs ARGS` for at most 20 s (killed after: a command that reads for ever or blocks
 /// fails the test instead of hanging it): exit code and standard error.
 fn sfs(args: &[&str], cwd: &Path) -> (Option<i32>, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_sfs"))
+    let mut child = common::sfs()
         .args(["--log", "warn"])
         .args(args)
         .current_dir(cwd)

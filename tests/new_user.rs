@@ -13,8 +13,9 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// `sfs --log warn`: what a new user's terminal shows.
 fn sfs() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_sfs"));
+    let mut c = common::sfs();
     c.args(["--log", "warn"]);
     c
 }

@@ -3,11 +3,6 @@
 
 mod common;
 use common::*;
-use std::process::Command;
-
-fn sfs() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_sfs"))
-}
 
 #[test]
 fn replay_counts_every_fault() {

@@ -6,10 +6,6 @@ use std::os::unix::fs::MetadataExt;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
-fn sfs() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_sfs"))
-}
-
 fn demo() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("replay-logs/cone-morphorider.bin")
 }

@@ -11,12 +11,8 @@ use device_protocol::{Decoder, DeviceKind, Event, Packet};
 use sfs::simulate::{self, scene, Profile};
 use std::io::Write;
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::Duration;
-
-fn sfs() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_sfs"))
-}
 
 fn report(dir: &Path) -> Option<serde_json::Value> {
     serde_json::from_slice(&std::fs::read(dir.join("report.json")).ok()?).ok()

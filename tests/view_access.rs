@@ -7,7 +7,7 @@ use common::tmpdir;
 use common::view::serve_replay_on_a_free_port;
 use std::io::{BufRead, Read, Write};
 use std::path::PathBuf;
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 fn root() -> PathBuf {
@@ -149,7 +149,7 @@ fn issue_31_a_token_is_wanted_on_every_route() {
 #[test]
 fn issue_31_a_view_on_every_interface_warns_of_the_exposure() {
     let dir = tmpdir("view-exposed");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_sfs"))
+    let mut child = common::sfs()
         .args(["--log", "warn", "replay"])
         .arg(root().join("replay-logs/cone-morphorider.bin"))
         .arg("--out")

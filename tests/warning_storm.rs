@@ -6,7 +6,6 @@
 
 mod common;
 use common::{hello, tmpdir, Builder};
-use std::process::Command;
 
 /// Seeded: xorshift64*.
 struct Rng(u64);
@@ -46,7 +45,7 @@ fn issue_31_a_key_storm_keeps_report_json_and_the_log_bounded() {
         .and_then(|k| k.parse().ok())
         .unwrap_or(400_000);
     std::fs::write(&capture, storm(keys, 31)).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_sfs"))
+    let out = common::sfs()
         .args(["--log", "info", "replay"])
         .arg(&capture)
         .arg("--out")
@@ -85,7 +84,7 @@ fn issue_31_a_key_storm_keeps_report_json_and_the_log_bounded() {
     );
 
     // The same storm through the daemon, with live updates after every curve.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_sfs"))
+    let mut child = common::sfs()
         .args(["--log", "info", "run", "--stdin", "--session"])
         .arg(dir.join("session"))
         .stdin(std::process::Stdio::piped())

@@ -11,6 +11,11 @@ pub mod pty;
 pub mod view;
 pub mod webdriver;
 
+/// The `sfs` binary under test.
+pub fn sfs() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+}
+
 /// What a correct decoder must count on a [`fault_stream`].
 #[derive(Debug, Default, Clone, PartialEq)]
 pub struct Expected {
@@ -243,7 +248,7 @@ pub fn assert_link(link: &serde_json::Value, bytes: usize, exp: &Expected) {
 
 /// `sfs eval --truth TRUTH --glb GLB`, which must succeed: its JSON.
 pub fn eval(truth: &std::path::Path, glb: &std::path::Path) -> serde_json::Value {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+    let out = sfs()
         .args(["--log", "off", "eval", "--truth"])
         .arg(truth)
         .arg("--glb")
@@ -260,7 +265,7 @@ pub fn eval(truth: &std::path::Path, glb: &std::path::Path) -> serde_json::Value
 
 /// `sfs --log off replay CAPTURE --out OUT`, which must succeed.
 pub fn replay_to(capture: &std::path::Path, out: &std::path::Path) {
-    let st = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+    let st = sfs()
         .args(["--log", "off", "replay"])
         .arg(capture)
         .arg("--out")
@@ -285,7 +290,7 @@ pub fn assert_same_files(a: &std::path::Path, b: &std::path::Path, files: &[&str
 /// `sfs run --stdin ARGS SESSION` (`--session` or `--resume`), logs off, its standard input
 /// piped.
 pub fn run_stdin(args: &[&str], session: &std::path::Path) -> std::process::Child {
-    std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+    sfs()
         .args(["--log", "off", "run", "--stdin"])
         .args(args)
         .arg(session)

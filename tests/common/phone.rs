@@ -36,7 +36,7 @@ impl Daemon {
                 |p: &Path| std::os::unix::fs::MetadataExt::ino(&std::fs::metadata(p).ok()?).into();
             let old: Option<u64> = inode(&dir.join("phone.url"));
             let log = std::fs::File::create(dir.with_extension("log")).unwrap();
-            let mut child = Command::new(env!("CARGO_BIN_EXE_sfs"))
+            let mut child = super::sfs()
                 .args(["--log", "info", "run", "--phone"])
                 .arg(format!("127.0.0.1:{port}"))
                 .arg(if resume { "--resume" } else { "--session" })
