@@ -291,6 +291,60 @@ struct Emitter {
 }
 
 impl Emitter {
+    /// The emitter of a device `p` (its sequence number drawn from `rng`, its link's faults
+    /// from a fork of it).
+    fn new(p: &DeviceParams, rng: &mut Rng) -> Self {
+        Emitter {
+            out: Vec::new(),
+            seq: (rng.next_u64() % 256) as u8,
+            rng: rng.fork(),
+            faults: p.faults,
+            next_hello: 0.0,
+            next_status: 0.0,
+            hello: p.hello(),
+            clock_base_us: p.clock_start_us,
+            clock_base_t: 0.0,
+            sent: 0,
+            corrupted: 0,
+            lost: 0,
+            dropped: 0,
+            session: None,
+            restarted: false,
+        }
+    }
+
+    /// Emits the keys and the segment lengths (`(time, segment, length)`) due by `t`.
+    fn keys_and_lengths_until<'a>(
+        &mut self,
+        t: f64,
+        keys: &mut std::iter::Peekable<impl Iterator<Item = &'a (f64, u8)>>,
+        segs: &mut std::iter::Peekable<impl Iterator<Item = &'a (f64, u16, f64)>>,
+    ) {
+        while let Some(&&(tk, k)) = keys.peek() {
+            if tk > t {
+                break;
+            }
+            let t_us = self.t_us(tk);
+            self.emit(tk, Packet::Key(Key { t_us, key: k }));
+            keys.next();
+        }
+        while let Some(&&(ts, seg, len)) = segs.peek() {
+            if ts > t {
+                break;
+            }
+            let t_us = self.t_us(ts);
+            self.emit(
+                ts,
+                Packet::SegmentLength(SegmentLength {
+                    t_us,
+                    segment: seg,
+                    length_um: (len * 1e6).round() as u32,
+                }),
+            );
+            segs.next();
+        }
+    }
+
     fn t_us(&self, t: f64) -> u32 {
         // The device clock wraps every 2³² µs (71.6 min): truncate through u64 (an `as u32`
         // of the float would saturate and stop the clock).
@@ -464,62 +518,6 @@ pub fn render(script: &Script, p: &DeviceParams, rng: &mut Rng) -> (Vec<u8>, Sam
     truth.packets_corrupted = em.corrupted;
     truth.packets_lost = em.lost;
     (em.out, truth)
-}
-
-impl Emitter {
-    /// The emitter of a device `p` (its sequence number drawn from `rng`, its link's faults
-    /// from a fork of it).
-    fn new(p: &DeviceParams, rng: &mut Rng) -> Self {
-        Emitter {
-            out: Vec::new(),
-            seq: (rng.next_u64() % 256) as u8,
-            rng: rng.fork(),
-            faults: p.faults,
-            next_hello: 0.0,
-            next_status: 0.0,
-            hello: p.hello(),
-            clock_base_us: p.clock_start_us,
-            clock_base_t: 0.0,
-            sent: 0,
-            corrupted: 0,
-            lost: 0,
-            dropped: 0,
-            session: None,
-            restarted: false,
-        }
-    }
-
-    /// Emits the keys and the segment lengths (`(time, segment, length)`) due by `t`.
-    fn keys_and_lengths_until<'a>(
-        &mut self,
-        t: f64,
-        keys: &mut std::iter::Peekable<impl Iterator<Item = &'a (f64, u8)>>,
-        segs: &mut std::iter::Peekable<impl Iterator<Item = &'a (f64, u16, f64)>>,
-    ) {
-        while let Some(&&(tk, k)) = keys.peek() {
-            if tk > t {
-                break;
-            }
-            let t_us = self.t_us(tk);
-            self.emit(tk, Packet::Key(Key { t_us, key: k }));
-            keys.next();
-        }
-        while let Some(&&(ts, seg, len)) = segs.peek() {
-            if ts > t {
-                break;
-            }
-            let t_us = self.t_us(ts);
-            self.emit(
-                ts,
-                Packet::SegmentLength(SegmentLength {
-                    t_us,
-                    segment: seg,
-                    length_um: (len * 1e6).round() as u32,
-                }),
-            );
-            segs.next();
-        }
-    }
 }
 
 /// The gyroscope's bias at the start: about `gyro_bias_axis` per axis with a random sign
