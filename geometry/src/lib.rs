@@ -10,7 +10,8 @@
 //! - [`network`]: tagged curves → filtered frames (pre-filter, loop-closure test of the tags,
 //!   regression on SO(3)) → positions of the network (Poisson), nodes shared.
 //! - [`surface`]: network → surface (cycles from normals, tessellation per cycle, cotangent
-//!   Laplacian, biharmonic propagation, the mean-curvature-guided fit; the faces kept between
+//!   Laplacian, biharmonic propagation, the mean-curvature-guided fit, [`surface::fit`], in
+//!   its steps: assembly, energy, system, curvature guide, output; the faces kept between
 //!   surfaces, [`surface::faces`]); [`surface::SurfaceMesh`] is the output mesh.
 //! - Shared tools: [`sparse_llt`], the sparse Cholesky with a cached symbolic factorisation
 //!   ([`sparse_llt::SpdPattern`]) reused while only values change; [`union_find`], connected
