@@ -108,7 +108,7 @@ struct Plan {
 
 /// An open curve's raw samples read back: calibrated, oriented and flagged, with what the
 /// later steps need of the sensors.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub(super) struct ReadBack {
     pub(super) s: Samples,
     /// Morphorider: the session wheel distance at each sample, m.

@@ -50,15 +50,6 @@ impl Split {
     }
 }
 
-/// The start node of a half-edge.
-fn start(s: &Segment, forward: bool) -> u32 {
-    if forward {
-        s.a
-    } else {
-        s.b
-    }
-}
-
 /// Splits the patches of `cyc` along the creases of `net` (see the module docs).
 pub fn split(net: &NetworkSegments, cyc: &Cycles) -> Split {
     let patches = &cyc.patches;
@@ -208,7 +199,7 @@ fn sectors(
         let p = &patches[pi];
         let h = p.edges[e];
         let s = &net.segments[h.segment];
-        let node = start(s, h.forward);
+        let node = h.start(net);
         let list = sums.entry(node).or_default();
         let root = sets.find(k);
         let sector = *sector_of_root.entry(root).or_insert_with(|| {

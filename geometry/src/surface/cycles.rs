@@ -302,6 +302,16 @@ impl HalfEdge {
             forward: !self.forward,
         }
     }
+
+    /// The node it leaves from.
+    pub(crate) fn start(self, net: &NetworkSegments) -> u32 {
+        let s = &net.segments[self.segment];
+        if self.forward {
+            s.a
+        } else {
+            s.b
+        }
+    }
 }
 
 /// A face: its half-edges in order, the face on their left seen from the normals' side.
@@ -313,17 +323,7 @@ pub struct Cycle {
 impl Cycle {
     /// Nodes at the start of each half-edge.
     pub fn nodes(&self, net: &NetworkSegments) -> Vec<u32> {
-        self.edges
-            .iter()
-            .map(|h| {
-                let s = &net.segments[h.segment];
-                if h.forward {
-                    s.a
-                } else {
-                    s.b
-                }
-            })
-            .collect()
+        self.edges.iter().map(|h| h.start(net)).collect()
     }
 
     /// Its boundary polyline (closed; the last point is not repeated).
@@ -451,14 +451,7 @@ impl Rotation {
     /// after `h`'s twin.
     fn next(&self, net: &NetworkSegments, h: HalfEdge) -> Option<HalfEdge> {
         let (v, i) = *self.place.get(&h.twin())?;
-        debug_assert_eq!(v, {
-            let s = &net.segments[h.segment];
-            if h.forward {
-                s.b
-            } else {
-                s.a
-            }
-        });
+        debug_assert_eq!(v, h.twin().start(net));
         let list = &self.at[&v];
         Some(list[(i + list.len() - 1) % list.len()].1)
     }
