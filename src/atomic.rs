@@ -1,7 +1,6 @@
 //! Atomic replacement of output files: write a temporary file in the same directory, `fsync`
 //! it, then rename it over the target, so a reader (or a crash) never sees a partial file.
 
-use std::fs::File;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
@@ -27,10 +26,26 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     write_atomic_with(path, |w| w.write_all(bytes))
 }
 
+/// Replaces `path` with `bytes` atomically, the new file readable and writable by its owner
+/// only (mode 0600 from its creation: a secret is never readable by others, not even for a
+/// moment).
+pub fn write_atomic_private(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    write_atomic_mode(path, 0o600, |w| w.write_all(bytes))
+}
+
 /// Replaces `path` atomically with what `fill` writes (streamed through a buffer: a large
 /// output is never held in memory whole).
 pub fn write_atomic_with(
     path: &Path,
+    fill: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+) -> io::Result<()> {
+    write_atomic_mode(path, 0o666, fill)
+}
+
+/// [`write_atomic_with`], the new file created with `mode` (before the umask).
+fn write_atomic_mode(
+    path: &Path,
+    mode: u32,
     fill: impl FnOnce(&mut dyn Write) -> io::Result<()>,
 ) -> io::Result<()> {
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
@@ -45,7 +60,15 @@ pub fn write_atomic_with(
         None => tmp_name.into(),
     };
     let result = (|| {
-        let mut w = io::BufWriter::with_capacity(1 << 16, File::create(&tmp)?);
+        use std::os::unix::fs::OpenOptionsExt;
+        // A temporary file left by a crash keeps its mode: made anew.
+        remove_if_present(&tmp)?;
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .mode(mode)
+            .open(&tmp)?;
+        let mut w = io::BufWriter::with_capacity(1 << 16, file);
         fill(&mut w)?;
         let f = w.into_inner().map_err(|e| e.into_error())?;
         f.sync_data()?;

@@ -151,8 +151,7 @@ pub async fn run(
     let from = monitor.as_ref().and_then(|m| m.replay_from());
     let prior = prepared.prior.map(|files| decoded_again(files, from));
     if let (Some(v), Some(p)) = (&view, &src.phone) {
-        let url = p.url().to_owned();
-        v.update(|s| s.phone_url = Some(url));
+        v.phone(p.url(), p.fingerprint());
     }
     let clock_start = match &prior {
         Some(files) => files[0].start.clone(),

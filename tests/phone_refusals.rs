@@ -12,168 +12,12 @@
 
 mod common;
 use common::phone::Daemon;
+use common::phone_client::{frames, Client};
 use common::*;
 use futures_util::{SinkExt, StreamExt};
-use rustls::client::danger::{HandshakeSignatureValid, ServerCertVerified, ServerCertVerifier};
-use rustls::pki_types::pem::PemObject;
-use rustls::pki_types::{CertificateDer, ServerName, UnixTime};
-use rustls::{DigitallySignedStruct, SignatureScheme};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_tungstenite::tungstenite::Message;
-
-/// Accepts exactly one certificate: the session's (what the operator checks by fingerprint).
-#[derive(Debug)]
-struct Pinned {
-    cert: Vec<u8>,
-    provider: Arc<rustls::crypto::CryptoProvider>,
-}
-
-impl ServerCertVerifier for Pinned {
-    fn verify_server_cert(
-        &self,
-        end_entity: &CertificateDer<'_>,
-        _: &[CertificateDer<'_>],
-        _: &ServerName<'_>,
-        _: &[u8],
-        _: UnixTime,
-    ) -> Result<ServerCertVerified, rustls::Error> {
-        if end_entity.as_ref() == self.cert.as_slice() {
-            Ok(ServerCertVerified::assertion())
-        } else {
-            Err(rustls::Error::General(
-                "not the session's certificate".into(),
-            ))
-        }
-    }
-
-    fn verify_tls12_signature(
-        &self,
-        message: &[u8],
-        cert: &CertificateDer<'_>,
-        dss: &DigitallySignedStruct,
-    ) -> Result<HandshakeSignatureValid, rustls::Error> {
-        rustls::crypto::verify_tls12_signature(
-            message,
-            cert,
-            dss,
-            &self.provider.signature_verification_algorithms,
-        )
-    }
-
-    fn verify_tls13_signature(
-        &self,
-        message: &[u8],
-        cert: &CertificateDer<'_>,
-        dss: &DigitallySignedStruct,
-    ) -> Result<HandshakeSignatureValid, rustls::Error> {
-        rustls::crypto::verify_tls13_signature(
-            message,
-            cert,
-            dss,
-            &self.provider.signature_verification_algorithms,
-        )
-    }
-
-    fn supported_verify_schemes(&self) -> Vec<SignatureScheme> {
-        self.provider
-            .signature_verification_algorithms
-            .supported_schemes()
-    }
-}
-
-struct Client {
-    tls: tokio_rustls::TlsConnector,
-    port: u16,
-}
-
-type Tls = tokio_rustls::client::TlsStream<tokio::net::TcpStream>;
-
-impl Client {
-    fn of(d: &Daemon) -> Client {
-        let cert = CertificateDer::from_pem_file(d.dir.join("phone-cert.pem")).unwrap();
-        let provider = Arc::new(rustls::crypto::ring::default_provider());
-        let config = rustls::ClientConfig::builder_with_provider(provider.clone())
-            .with_safe_default_protocol_versions()
-            .unwrap()
-            .dangerous()
-            .with_custom_certificate_verifier(Arc::new(Pinned {
-                cert: cert.to_vec(),
-                provider,
-            }))
-            .with_no_client_auth();
-        Client {
-            tls: tokio_rustls::TlsConnector::from(Arc::new(config)),
-            port: d.port,
-        }
-    }
-
-    async fn connect(&self) -> Tls {
-        let tcp = tokio::net::TcpStream::connect(("127.0.0.1", self.port))
-            .await
-            .unwrap();
-        self.tls
-            .connect(ServerName::try_from("localhost").unwrap(), tcp)
-            .await
-            .unwrap()
-    }
-
-    /// `GET path`: the status and the body.
-    async fn get(&self, path: &str) -> (u16, String) {
-        let mut s = self.connect().await;
-        let req = format!("GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n");
-        s.write_all(req.as_bytes()).await.unwrap();
-        let mut text = String::new();
-        let _ = s.read_to_string(&mut text).await;
-        let status = text
-            .split_whitespace()
-            .nth(1)
-            .and_then(|c| c.parse().ok())
-            .unwrap_or(0);
-        (status, text)
-    }
-
-    /// The WebSocket at `/phone/ws?token=…`: the socket, or the refusal's status.
-    async fn ws(&self, token: &str) -> Result<tokio_tungstenite::WebSocketStream<Tls>, u16> {
-        let url = format!("wss://127.0.0.1:{}/phone/ws?token={token}", self.port);
-        match tokio_tungstenite::client_async(url, self.connect().await).await {
-            Ok((ws, _)) => Ok(ws),
-            Err(tokio_tungstenite::tungstenite::Error::Http(r)) => Err(r.status().as_u16()),
-            Err(e) => panic!("WebSocket: {e}"),
-        }
-    }
-}
-
-/// A phone's first frames: HELLO and `n` samples.
-fn frames(n: u32) -> Vec<u8> {
-    use device_protocol::*;
-    let mut out = Vec::new();
-    Packet::Hello(Hello {
-        proto: 1,
-        kind: DeviceKind::Phone,
-        device_id: 7,
-        firmware: 1,
-        rate_hz: 60,
-        acc_scale: 0.0024,
-        gyro_scale: 0.001,
-        mag_scale: 0.15,
-        ticks_per_rev: 0,
-        wheel_circumference_um: 0,
-        sensors: 1,
-    })
-    .encode(0, &mut out);
-    for i in 0..n {
-        Packet::PhoneSample(PhoneSample {
-            t_us: 1000 + i * 16_667,
-            acc: [0, 0, 4096],
-            gyro: [0; 3],
-            mag: [0, 140, -287],
-        })
-        .encode((i + 1) as u8, &mut out);
-    }
-    out
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn issue_32_the_phone_port_refuses_what_it_must() {
@@ -255,21 +99,30 @@ async fn issue_32_the_phone_port_refuses_what_it_must() {
     assert!(text.starts_with("HTTP/1.1 400"), "{text}");
     assert!(text.contains("https://") && !text.contains(&token));
 
-    // Four failures so far: the fifth is answered at once, the next ones ever later
-    // (250 ms, 500 ms, 1 s, …).
+    // Four failures so far: the fifth is answered at once with 403, the sixth too, and from
+    // then on the address is refused a while (250 ms, then 500 ms, …): 429 at once with
+    // Retry-After, the token not even looked at, and no answer ever waits.
     let t0 = Instant::now();
     assert_eq!(c.get("/phone?token=x").await.0, 403);
-    let t1 = Instant::now();
-    assert_eq!(c.get("/phone?token=x").await.0, 403);
-    let t2 = Instant::now();
-    assert_eq!(c.get("/phone?token=x").await.0, 403);
-    assert!(t1 - t0 < Duration::from_millis(200), "{:?}", t1 - t0);
-    assert!(t2 - t1 >= Duration::from_millis(240), "{:?}", t2 - t1);
+    let (st, text) = c.get("/phone?token=x").await;
+    assert_eq!(st, 403);
     assert!(
-        t2.elapsed() >= Duration::from_millis(490),
-        "{:?}",
-        t2.elapsed()
+        text.to_ascii_lowercase().contains("connection: close"),
+        "{text}"
     );
+    let (st, text) = c.get(&format!("/phone?token={token}")).await;
+    assert_eq!(st, 429, "{text}");
+    assert!(
+        text.to_ascii_lowercase().contains("retry-after: 1"),
+        "{text}"
+    );
+    assert!(
+        t0.elapsed() < Duration::from_millis(240),
+        "{:?}",
+        t0.elapsed()
+    );
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(c.get(&format!("/phone?token={token}")).await.0, 200);
 
     // The view shows the page's address and its QR code.
     let view = format!("http://127.0.0.1:{view_port}");
@@ -283,6 +136,7 @@ async fn issue_32_the_phone_port_refuses_what_it_must() {
         .await
         .unwrap();
     assert_eq!(st["phone_url"], d.url.as_str());
+    assert_eq!(st["phone"]["page"], d.url.split_once('?').unwrap().0);
     let qr = http
         .get(format!("{view}/phone-qr.svg"))
         .send()
@@ -293,8 +147,8 @@ async fn issue_32_the_phone_port_refuses_what_it_must() {
 
     let report = d.stop();
     let refused = &report["phone"]["refused"];
-    assert_eq!(refused["token"], 7, "{refused}");
-    assert_eq!(refused["slowed"], 2, "{refused}");
+    assert_eq!(refused["token"], 6, "{refused}");
+    assert_eq!(refused["slowed"], 1, "{refused}");
     assert_eq!(refused["busy"], 1, "{refused}");
     assert_eq!(refused["plain_http"], 1, "{refused}");
     assert_eq!(refused["oversized"], 1, "{refused}");

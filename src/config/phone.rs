@@ -16,6 +16,10 @@ pub struct PhoneToml {
     /// directory for every session keeps one certificate, so the phone's browser accepts it
     /// once. Relative to the configuration file.
     pub cert_dir: Option<PathBuf>,
+    /// Names (besides `localhost` and IP addresses) by which the phone may reach the page,
+    /// e.g. `["scanner.local"]`: a request whose `Host` names none of them is refused (421).
+    #[serde(default)]
+    pub allowed_hosts: Vec<String>,
 }
 
 impl ConfigFile {
@@ -38,6 +42,16 @@ impl ConfigFile {
             other => other.clone(),
         };
         spec.cert_dir = cert_dir;
+        for h in &p.allowed_hosts {
+            if h.is_empty() || h.len() > 253 || h.contains(['/', ' ', '@']) {
+                return Err(ConfigError::new(
+                    file,
+                    "phone.allowed_hosts",
+                    format!("{h:?} is not a host name"),
+                ));
+            }
+        }
+        spec.allowed_hosts = p.allowed_hosts.clone();
         Ok(Some(spec))
     }
 }

@@ -8,9 +8,9 @@
 //!   head sent a byte a second never completes);
 //! - nothing has been read or written for [`IDLE_TIMEOUT`] (an idle keep-alive connection; an
 //!   event stream writes at least every second, so it is never idle);
-//! - the client has not drained what was written for [`STALL_TIMEOUT`]: its receive window
-//!   has not grown (a client that stopped reading; an event stream would otherwise fill the
-//!   kernel's buffers for a minute before a write blocked), or a write has been blocked.
+//! - the client has not drained what was written for [`STALL_TIMEOUT`] (a client that stopped
+//!   reading, whatever its receive buffer: see [`Drain`]; an event stream would otherwise fill
+//!   the kernel's buffers for minutes before a write blocked), or a write has been blocked.
 
 use std::future::Future;
 use std::io;
@@ -109,57 +109,93 @@ impl axum::serve::Listener for GuardedListener {
     }
 }
 
-/// Whether the peer drains what is written: the receive window it advertises (Linux's
-/// `TCP_INFO`, `tcpi_snd_wnd`, kernels from 6.2) shrinks while data waits in its buffer and
-/// grows again when its application reads. A window below the largest seen that has not grown
-/// for [`STALL_TIMEOUT`] is a client that stopped reading, found long before the kernel's
-/// buffers (megabytes on the loopback) are full and writes block.
+/// Whether the peer drains what is written, from what the kernel knows of the connection
+/// (Linux's `TCP_INFO` and `SIOCOUTQ`): the *right edge* of the peer's receive window, the
+/// bytes it has acknowledged plus the window it still offers (`tcpi_bytes_acked +
+/// tcpi_snd_wnd`), moves on only when its application reads. A client that reads moves it by
+/// about what it was sent; one that does not read keeps it where it was, whatever its receive
+/// buffer: a small buffer fills, its window goes to zero and nothing more is acknowledged while
+/// bytes wait here; a large one acknowledges everything and offers ever less window.
+///
+/// Checked at most once a second, after a write. A check is evidence of draining when bytes
+/// were acknowledged and the edge moved by at least half of them; of a stall when bytes were
+/// acknowledged and the edge did not follow, or when bytes wait unacknowledged and none were;
+/// when nothing was sent, the peer owes nothing. A peer with no evidence of draining for
+/// [`STALL_TIMEOUT`] and a stall at its latest check has stopped reading. (Window sizes alone
+/// do not tell: a reading client's window wobbles by a scaling step, and a non-reading one's
+/// can grow for its first seconds.)
 #[derive(Debug)]
 struct Drain {
     checked: Instant,
-    largest: u32,
-    last: u32,
-    grew: Instant,
+    acked: u64,
+    edge: u64,
+    drained: Instant,
 }
 
 impl Drain {
     fn new(now: Instant) -> Self {
         Drain {
             checked: now,
-            largest: 0,
-            last: 0,
-            grew: now,
+            acked: 0,
+            edge: 0,
+            drained: now,
         }
     }
 
-    /// Looks at the window (at most once a second); whether the peer has not drained for
+    /// Looks at the connection (at most once a second); whether the peer has not drained for
     /// [`STALL_TIMEOUT`].
     fn stalled(&mut self, io: &TcpStream, now: Instant) -> bool {
         if now.duration_since(self.checked) < Duration::from_secs(1) {
             return false;
         }
         self.checked = now;
-        let Some(w) = peer_window(io) else {
+        let Some(p) = peer_state(io) else {
             return false;
         };
-        if w > self.last || w >= self.largest {
-            self.grew = now;
+        self.judge(p, now)
+    }
+
+    /// [`Drain::stalled`] on a state read.
+    fn judge(&mut self, p: PeerState, now: Instant) -> bool {
+        let edge = p.acked + u64::from(p.window);
+        let acked = p.acked.saturating_sub(self.acked);
+        let moved = edge.saturating_sub(self.edge);
+        let stall = if acked > 0 {
+            2 * moved < acked
+        } else {
+            p.waiting > 0
+        };
+        self.acked = p.acked;
+        self.edge = self.edge.max(edge);
+        if !stall {
+            self.drained = now;
         }
-        self.largest = self.largest.max(w);
-        self.last = w;
-        now.duration_since(self.grew) > STALL_TIMEOUT
+        stall && now.duration_since(self.drained) > STALL_TIMEOUT
     }
 }
 
-/// The receive window the peer advertises, bytes (`None` where the kernel does not say).
-fn peer_window(io: &TcpStream) -> Option<u32> {
+/// What the kernel says of a connection's sending side.
+#[derive(Debug, Clone, Copy)]
+struct PeerState {
+    /// Bytes the peer has acknowledged, in all (`tcpi_bytes_acked`).
+    acked: u64,
+    /// The receive window it offers now, bytes (`tcpi_snd_wnd`).
+    window: u32,
+    /// Bytes written here and not yet acknowledged, sent or not (`SIOCOUTQ`).
+    waiting: u32,
+}
+
+/// The connection's [`PeerState`] (`None` where the kernel does not say: before 6.2 it gives
+/// no `tcpi_snd_wnd`).
+fn peer_state(io: &TcpStream) -> Option<PeerState> {
     use std::os::fd::AsRawFd;
+    let fd = io.as_raw_fd();
     // SAFETY: tcp_info is plain data; getsockopt writes at most `len` bytes into it.
     let mut info: libc::tcp_info = unsafe { std::mem::zeroed() };
     let mut len = std::mem::size_of::<libc::tcp_info>() as libc::socklen_t;
     let rc = unsafe {
         libc::getsockopt(
-            io.as_raw_fd(),
+            fd,
             libc::IPPROTO_TCP,
             libc::TCP_INFO,
             (&mut info as *mut libc::tcp_info).cast(),
@@ -167,7 +203,19 @@ fn peer_window(io: &TcpStream) -> Option<u32> {
         )
     };
     let end = std::mem::offset_of!(libc::tcp_info, tcpi_snd_wnd) + 4;
-    (rc == 0 && len as usize >= end).then_some(info.tcpi_snd_wnd)
+    if rc != 0 || (len as usize) < end {
+        return None;
+    }
+    let mut waiting: libc::c_int = 0;
+    // SAFETY: SIOCOUTQ (TIOCOUTQ) writes one int.
+    if unsafe { libc::ioctl(fd, libc::TIOCOUTQ, &mut waiting) } != 0 {
+        return None;
+    }
+    Some(PeerState {
+        acked: info.tcpi_bytes_acked,
+        window: info.tcpi_snd_wnd,
+        waiting: waiting.max(0) as u32,
+    })
 }
 
 /// A TCP stream that fails its reads and writes once it breaks one of the rules of the
@@ -240,6 +288,34 @@ impl Guarded {
                 "view connection closed: idle, slow or stalled",
             ))),
             Poll::Pending => Poll::Pending,
+        }
+    }
+}
+
+/// Both ends of a view connection (axum's connect info): whether the client is this machine.
+#[derive(Debug, Clone, Copy)]
+pub struct Ends {
+    pub peer: std::net::SocketAddr,
+    /// This server's end (`None` where the socket does not say).
+    pub local: Option<std::net::SocketAddr>,
+}
+
+impl Ends {
+    /// Whether the client runs on this machine: a connection from this host to one of its own
+    /// addresses leaves from that same address (127.0.0.1 to 127.0.0.1, the LAN address to
+    /// itself). Another host, or another loopback address standing in for one, does not.
+    pub fn same_machine(&self) -> bool {
+        self.local.is_some_and(|l| l.ip() == self.peer.ip())
+    }
+}
+
+impl axum::extract::connect_info::Connected<axum::serve::IncomingStream<'_, GuardedListener>>
+    for Ends
+{
+    fn connect_info(stream: axum::serve::IncomingStream<'_, GuardedListener>) -> Ends {
+        Ends {
+            peer: *stream.remote_addr(),
+            local: stream.io().io.local_addr().ok(),
         }
     }
 }
@@ -319,6 +395,67 @@ impl AsyncWrite for Guarded {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The kernel's figures each second for a client that reads, one that does not with a
+    /// large buffer, and one with a small buffer (as measured on loopback, Linux 6.18: the
+    /// large buffer's window first grew, then fell by what it was sent).
+    #[test]
+    fn a_reader_drains_and_a_sleeper_does_not_whatever_its_buffer() {
+        let t0 = Instant::now();
+        let run = |states: &[(u64, u32, u32)]| {
+            let mut d = Drain::new(t0);
+            states
+                .iter()
+                .enumerate()
+                .map(|(i, &(acked, window, waiting))| {
+                    let now = t0 + Duration::from_secs(i as u64 + 1);
+                    d.judge(
+                        PeerState {
+                            acked,
+                            window,
+                            waiting,
+                        },
+                        now,
+                    )
+                })
+                .position(|s| s)
+        };
+        // Reads: the window wobbles by a scaling step below its largest, bursts and lulls.
+        let reader: Vec<_> = (0..120u64)
+            .map(|i| {
+                let sent = if (i / 10) % 2 == 0 {
+                    30_000 * i
+                } else {
+                    800 * i
+                };
+                (sent, if i % 3 == 0 { 101_376 } else { 100_352 }, 0)
+            })
+            .collect();
+        assert_eq!(run(&reader), None);
+        // Does not read, 4 MB: the window grows for two seconds, then falls by what it gets.
+        let big: Vec<_> = (0..30u64)
+            .map(|i| {
+                let acked = 800 * (i + 1);
+                let w = if i < 2 {
+                    4_300_000 + 1_000_000 * i
+                } else {
+                    5_300_000 - acked + 32 * i
+                };
+                (acked, w as u32, 0)
+            })
+            .collect();
+        let at = run(&big).expect("a sleeper with a large buffer is found");
+        assert!(at <= 14, "{at}");
+        // Does not read, 2 KiB: a zero window, the bytes wait here.
+        let small: Vec<_> = (0..30u64)
+            .map(|i| (2048, 0, 2000 + 800 * i as u32))
+            .collect();
+        let at = run(&small).expect("a sleeper with a small buffer is found");
+        assert!(at <= 12, "{at}");
+        // Nothing sent: nothing owed.
+        let idle: Vec<_> = (0..60).map(|_| (5000, 65_536, 0)).collect();
+        assert_eq!(run(&idle), None);
+    }
 
     #[test]
     fn the_cap_keeps_a_reserve_of_descriptors() {

@@ -118,10 +118,24 @@ pub struct Status {
     /// nobody tagged proposed, and joins refused (`report.json` `network.joined`,
     /// `proposed`, `joins_refused` in brief; issue 34).
     pub joins: JoinsStatus,
-    /// The phone page's address with its token (`sfs run --phone`); its QR code is at
-    /// `/phone-qr.svg`.
+    /// The phone page (`sfs run --phone`): its address without the token, and its
+    /// certificate's fingerprint. The token never goes to every client.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub phone: Option<PhoneStatus>,
+    /// The phone page's address with its token, in `GET /status` only, and only to a client
+    /// that may write into the session (on this machine, or with the view's token); its QR
+    /// code is at `/phone-qr.svg` for the same clients. Never in the `status` events.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub phone_url: Option<String>,
+}
+
+/// The phone page as every client of the view sees it.
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct PhoneStatus {
+    /// `https://HOST:PORT/phone`, without the token.
+    pub page: String,
+    /// SHA-256 of its certificate, `AB:CD:…`.
+    pub fingerprint: String,
 }
 
 /// The joins of the latest network as the view shows them.
@@ -382,6 +396,9 @@ struct Shared {
     preview_generation: AtomicU64,
     /// Node positions of the latest network, world frame (where a preview starts).
     nodes: Mutex<std::collections::BTreeMap<u32, nalgebra::Vector3<f64>>>,
+    /// The phone page's address with its token (kept out of [`Status`]: see
+    /// [`Status::phone_url`]).
+    phone_url: Mutex<Option<String>>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -406,6 +423,7 @@ impl View {
                 preview: Mutex::new(None),
                 preview_generation: AtomicU64::new(0),
                 nodes: Mutex::new(Default::default()),
+                phone_url: Mutex::new(None),
             }),
         }
     }
@@ -423,6 +441,20 @@ impl View {
     }
 
     /// The status now.
+    /// The phone page served in this session: `url` with its token (given only to clients
+    /// that may write) and its certificate's `fingerprint`.
+    pub fn phone(&self, url: &str, fingerprint: &str) {
+        *lock(&self.shared.phone_url) = Some(url.to_owned());
+        let page = url.split_once('?').map_or(url, |(p, _)| p).to_owned();
+        let fingerprint = fingerprint.to_owned();
+        self.update(|s| s.phone = Some(PhoneStatus { page, fingerprint }));
+    }
+
+    /// The phone page's address with its token, for a client that may write.
+    pub fn phone_url(&self) -> Option<String> {
+        lock(&self.shared.phone_url).clone()
+    }
+
     pub fn status(&self) -> Status {
         lock(&self.shared.status).clone()
     }

@@ -1,10 +1,11 @@
 //! The view's HTTP server (axum): the routes of [`super`], the status ticker, and the limits
 //! that keep a browser from holding up the session.
 
+use super::conn::Ends;
 use super::{assets, Event, View};
 use crate::shutdown::Shutdown;
 use axum::error_handling::HandleErrorLayer;
-use axum::extract::{Path, State};
+use axum::extract::{ConnectInfo, Path, State};
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::sse::{KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
@@ -42,6 +43,17 @@ struct App {
     view: View,
     streams: Arc<AtomicUsize>,
     stop: Shutdown,
+    /// Whether the view wants its token (then every client answered has shown it).
+    token: bool,
+}
+
+impl App {
+    /// Whether this client may see the phone page's token (the right to write into the
+    /// session): one that has shown the view's token, or, without one, a client on this
+    /// machine.
+    fn may_write(&self, ends: &super::conn::Ends) -> bool {
+        self.token || ends.same_machine()
+    }
 }
 
 /// Serves `view` on every listener (from [`bind`]) until `stop`, with the status ticker,
@@ -64,6 +76,7 @@ pub fn serve(
         view: view.clone(),
         streams: Arc::new(AtomicUsize::new(0)),
         stop: stop.clone(),
+        token: !exposed,
     };
     let router = Router::new()
         .route("/", get(index))
@@ -113,9 +126,12 @@ pub fn serve(
         let router = router.clone();
         let listener = super::conn::GuardedListener::new(listener, live.clone(), cap);
         servers.push(tokio::spawn(async move {
-            let served = axum::serve(listener, router)
-                .with_graceful_shutdown(async move { stop.triggered().await })
-                .await;
+            let served = axum::serve(
+                listener,
+                router.into_make_service_with_connect_info::<super::conn::Ends>(),
+            )
+            .with_graceful_shutdown(async move { stop.triggered().await })
+            .await;
             if let Err(e) = served {
                 tracing::warn!("view server: {e}");
             }
@@ -201,14 +217,15 @@ async fn glb(State(app): State<App>) -> Response {
 }
 
 /// The phone page's address as a QR code (`sfs run --phone`), for the operator to scan from
-/// the view's screen.
-async fn phone_qr(State(app): State<App>) -> Response {
-    match app
-        .view
-        .status()
-        .phone_url
-        .and_then(|u| crate::source::phone::qr::svg(&u))
-    {
+/// the view's screen: only to a client that may write ([`App::may_write`]).
+async fn phone_qr(State(app): State<App>, ConnectInfo(ends): ConnectInfo<Ends>) -> Response {
+    let Some(url) = app.view.phone_url() else {
+        return (StatusCode::NOT_FOUND, "no phone page in this session\n").into_response();
+    };
+    if !app.may_write(&ends) {
+        return phone_withheld();
+    }
+    match crate::source::phone::qr::svg(&url) {
         Some(svg) => (
             [
                 (header::CONTENT_TYPE, "image/svg+xml"),
@@ -221,12 +238,22 @@ async fn phone_qr(State(app): State<App>) -> Response {
     }
 }
 
-async fn status(State(app): State<App>) -> Response {
+/// 403 for the phone page's address asked by a client that may not write.
+fn phone_withheld() -> Response {
     (
+        StatusCode::FORBIDDEN,
         [(header::CACHE_CONTROL, "no-store")],
-        axum::Json(app.view.status()),
+        "the phone page's address carries the right to write into the session: it is shown on the machine that runs sfs (its terminal, SESSION/phone.url, or this view opened there), or with the view's token ([view] token)\n",
     )
         .into_response()
+}
+
+async fn status(State(app): State<App>, ConnectInfo(ends): ConnectInfo<Ends>) -> Response {
+    let mut status = app.view.status();
+    if app.may_write(&ends) {
+        status.phone_url = app.view.phone_url();
+    }
+    ([(header::CACHE_CONTROL, "no-store")], axum::Json(status)).into_response()
 }
 
 async fn metrics(State(app): State<App>) -> Response {

@@ -7,6 +7,8 @@ use std::path::PathBuf;
 
 #[allow(dead_code)]
 pub mod phone;
+#[allow(dead_code)]
+pub mod phone_client;
 pub mod pty;
 pub mod view;
 pub mod webdriver;

@@ -29,9 +29,14 @@ impl Certificate {
         if !cert_path.exists() && !key_path.exists() {
             make(dir)?;
         }
-        let cert = CertificateDer::from_pem_file(&cert_path)
+        // Both read (regular files, bounded) before either is parsed.
+        let (cert_pem, key_pem) = (
+            read_pem(&cert_path, "a certificate")?,
+            read_pem(&key_path, "a private key")?,
+        );
+        let cert = CertificateDer::from_pem_slice(&cert_pem)
             .map_err(|e| format!("{}: {e}", cert_path.display()))?;
-        let key = PrivateKeyDer::from_pem_file(&key_path)
+        let key = PrivateKeyDer::from_pem_slice(&key_pem)
             .map_err(|e| format!("{}: {e}", key_path.display()))?;
         Ok(Certificate {
             fingerprint: fingerprint(&cert),
@@ -39,7 +44,21 @@ impl Certificate {
             key,
         })
     }
+}
 
+/// The largest certificate or key file read, bytes (a PEM certificate chain is a few KiB).
+pub const MAX_PEM: u64 = 64 * 1024;
+
+/// The bytes of `path`, a regular file of at most [`MAX_PEM`] bytes, checked before it is
+/// opened: a FIFO, a device (`/dev/zero`, `/dev/urandom`) or a huge file is an error naming
+/// the file at once, never a hang or an allocation of its size.
+fn read_pem(path: &Path, what: &str) -> Result<Vec<u8>, String> {
+    crate::named_file::read_text(path, MAX_PEM, what)
+        .map(String::into_bytes)
+        .map_err(|e| format!("{}: {e}", path.display()))
+}
+
+impl Certificate {
     /// A rustls server configuration serving it (TLS 1.2 and 1.3, HTTP/1.1).
     pub fn server_config(&self) -> Result<Arc<rustls::ServerConfig>, String> {
         let provider = Arc::new(rustls::crypto::ring::default_provider());

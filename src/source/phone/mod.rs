@@ -16,14 +16,20 @@
 //! directory, the self-signed certificate `phone-cert.pem` and its key `phone-key.pem` (made
 //! with rcgen on the first start, kept so that the phone's accepted exception holds).
 //!
-//! Security ([`server`]): the token guards the page and the WebSocket (403 without it, failures
-//! from one address slowed down); one phone at a time; messages over [`MAX_MESSAGE`] bytes close
-//! the connection; plain HTTP on the port is refused; nothing the phone sends is more than
-//! bytes for the decoder. The token is not logged (but in the printed URL).
+//! Security ([`server`], [`slots`]): the token is the right to write into the session. It
+//! guards the page and the WebSocket (403 without it; an address that fails too often is
+//! refused a while, 429 at once); one phone at a time; messages over [`MAX_MESSAGE`] bytes and
+//! text messages close the connection; plain HTTP on the port is refused, and so is a `Host`
+//! that does not name this server; connections without the token can never take the slots
+//! the phone needs. Nothing the phone sends is more than bytes for the decoder. The token is
+//! printed on standard error (with its QR code) and kept in `phone.url` (mode 0600); it is
+//! not logged otherwise, and the live view shows it only to a client that may write
+//! ([`crate::view`]: on this machine, or with the view's own token).
 
 mod cert;
 pub mod qr;
 mod server;
+pub mod slots;
 mod stats;
 
 pub use cert::Certificate;
@@ -40,6 +46,8 @@ use std::sync::{Arc, Mutex};
 pub const DEFAULT_ADDRESS: &str = "0.0.0.0:8443";
 /// The largest WebSocket message taken, bytes; a bigger one closes the connection.
 pub const MAX_MESSAGE: usize = 64 * 1024;
+/// Connections waiting to be accepted on the phone port.
+const BACKLOG: libc::c_int = 4096;
 /// The page's address with its token, one line, in the session directory.
 pub const URL_FILE: &str = "phone.url";
 
@@ -51,6 +59,9 @@ pub struct PhoneSpec {
     pub cert_dir: Option<PathBuf>,
     /// The session directory (set by the session before the source starts).
     pub session_dir: PathBuf,
+    /// Names a request's `Host` may give besides `localhost` and address literals
+    /// (`[phone] allowed_hosts`).
+    pub allowed_hosts: Vec<String>,
 }
 
 /// A phone page's address: `IP:PORT`, or a port alone (every interface).
@@ -74,6 +85,7 @@ impl PhoneSpec {
             addr,
             cert_dir: None,
             session_dir: PathBuf::new(),
+            allowed_hosts: Vec::new(),
         }
     }
 }
@@ -162,6 +174,14 @@ pub(super) fn spawn(
             addr: spec.addr,
             source,
         })?;
+    // A deeper queue of connections not yet accepted than the standard library's 128, so that
+    // a flood of connections (which the server lets go: [`slots`]) does not make the phone's
+    // wait for a retransmitted SYN. Listening again on a listening socket sets its backlog
+    // (the kernel caps it at net.core.somaxconn).
+    // SAFETY: listen on a descriptor the listener owns.
+    unsafe {
+        libc::listen(std::os::fd::AsRawFd::as_raw_fd(&listener), BACKLOG);
+    }
     let bound = listener.local_addr().map_err(|source| SourceError::Bind {
         addr: spec.addr,
         source,
@@ -172,19 +192,24 @@ pub(super) fn spawn(
         message: e,
     })?;
     let url_path = spec.session_dir.join(URL_FILE);
-    let token = token_of(&url_path)
+    let kept = token_of(&url_path).map_err(|source| SourceError::Open {
+        path: url_path.clone(),
+        source,
+    })?;
+    let token = kept
         .map_or_else(new_token, Ok)
         .map_err(|e| SourceError::Phone {
             path: spec.session_dir.clone(),
             message: format!("cannot make the page's token: {e}"),
         })?;
     let url = format!("https://{}/phone?token={token}", public_host(bound));
-    crate::atomic::write_atomic(&url_path, format!("{url}\n").as_bytes()).map_err(|source| {
-        SourceError::Open {
+    // The token is the right to write into the session: its file is the owner's alone.
+    crate::atomic::write_atomic_private(&url_path, format!("{url}\n").as_bytes()).map_err(
+        |source| SourceError::Open {
             path: url_path.clone(),
             source,
-        }
-    })?;
+        },
+    )?;
     announce(&url, &certificate.fingerprint, bound);
     let phone = Arc::new(Phone {
         url,
@@ -206,6 +231,7 @@ pub(super) fn spawn(
         tx,
         tls: tokio_rustls::TlsAcceptor::from(config),
         port: bound.port(),
+        allowed_hosts: spec.allowed_hosts.clone(),
     };
     let stop = shutdown.clone();
     let gone = writer_gone.clone();
@@ -237,11 +263,19 @@ fn write(mut out: Out, mut rx: tokio::sync::mpsc::Receiver<Msg>, gone: Shutdown)
     out.end(reason);
 }
 
-/// The token in a session's `phone.url` (a resumed session keeps it).
-fn token_of(url_path: &Path) -> Option<String> {
-    let text = crate::named_file::read_text(url_path, 4096, "the phone page's address").ok()?;
-    let token = text.trim().rsplit_once("token=")?.1;
-    (token.len() == 32 && token.bytes().all(|b| b.is_ascii_hexdigit())).then(|| token.to_owned())
+/// The token in a session's `phone.url` (a resumed session keeps it): `None` when there is
+/// no such file or it holds no token; an error when the path is not a regular file of at most
+/// 4 KiB (a FIFO, a device), found before it is opened.
+fn token_of(url_path: &Path) -> std::io::Result<Option<String>> {
+    let text = match crate::named_file::read_text(url_path, 4096, "the phone page's address") {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(e),
+    };
+    let token = text.trim().rsplit_once("token=").map(|(_, t)| t);
+    Ok(token
+        .filter(|t| t.len() == 32 && t.bytes().all(|b| b.is_ascii_hexdigit()))
+        .map(str::to_owned))
 }
 
 /// 128 random bits, as 32 hexadecimal digits.

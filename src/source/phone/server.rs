@@ -1,26 +1,40 @@
 //! The phone page's HTTPS server: its own thread and tokio runtime; TLS by rustls; HTTP/1.1
 //! by hyper with axum's router; the page, its scripts, and the WebSocket the frames arrive on.
 //!
-//! Routes: `GET /phone?token=…` (the page), `GET /phone.js`, `/wire.js`, `/phone.css` (its
-//! code: nothing secret), `GET /phone/ws?token=…` (the WebSocket). Refusals:
+//! Routes: `GET /phone?token=…` (the page; it sets the token as a cookie so that its scripts'
+//! requests show it too), `GET /phone.js`, `/wire.js`, `/phone.css` (its code: nothing
+//! secret), `GET /phone/ws?token=…&origin=…&now=…` (the WebSocket; `origin` and `now` are the
+//! page's clock, checked against the daemon's), `GET /` (where the page is). Refusals:
+//! - a `Host` that does not name this server (an address literal, `localhost` or a name in
+//!   `[phone] allowed_hosts`): 421;
 //! - no token or a wrong one: 403; past [`FREE_FAILURES`] failures within [`FAILURE_WINDOW`]
-//!   from one address, each further answer waits, doubling from 250 ms up to 8 s;
-//! - a second WebSocket while one streams (data within [`TAKEOVER_SILENCE`]): 409; a silent
-//!   one is closed and the new one takes over (a phone that roamed to another network);
-//! - a message over [`super::MAX_MESSAGE`] bytes: the connection is closed (1009);
+//!   from one address, the address is refused for a while, doubling from 250 ms up to 8 s:
+//!   429 at once with `Retry-After`, its token not looked at. Every refusal closes its
+//!   connection; no answer ever waits holding a slot;
+//! - a second WebSocket while one streams (data within [`TAKEOVER_SILENCE`], or
+//!   [`SAME_ADDRESS_SILENCE`] from the streaming phone's own address): 409; a silent one is
+//!   closed and the new one takes over (a phone that roamed, or woke from a screen lock);
+//!   takeovers and their refusals are logged with the address and counted;
+//! - a message over [`super::MAX_MESSAGE`] bytes, whatever its frame declares: closed with
+//!   1009; a text message: closed with 1003 (the page sends binary frames only);
 //! - a connection whose first byte is not a TLS handshake: a plain-text 400 saying to use
-//!   `https://`, then closed.
+//!   `https://`, then closed;
+//! - connections: [`super::slots`] (who holds a slot, who is let go); a TLS handshake must
+//!   finish within [`HANDSHAKE`] of the connection, each request head within [`HEAD`].
 
+use super::slots::{Slot, Slots};
 use super::stats::Conn;
 use super::{lock, Msg, Phone, MAX_MESSAGE};
 use crate::shutdown::Shutdown;
 use crate::source::SourceEvent;
+use crate::view::access::{Access, Verdict};
 use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
-use axum::extract::{ConnectInfo, State};
-use axum::http::{header, StatusCode, Uri};
+use axum::extract::{ConnectInfo, Request, State};
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode, Uri};
+use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
-use axum::Router;
+use axum::{Extension, Router};
 use std::collections::HashMap;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -28,21 +42,28 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tokio::io::AsyncWriteExt;
 
-/// Failures allowed from one address within [`FAILURE_WINDOW`] before answers slow down.
+/// Failures allowed from one address within [`FAILURE_WINDOW`] before it is refused a while.
 pub const FREE_FAILURES: u32 = 5;
 pub const FAILURE_WINDOW: Duration = Duration::from_secs(60);
+/// The first and the longest while an address is refused past its free failures.
+pub const FIRST_PENALTY: Duration = Duration::from_millis(250);
+pub const LONGEST_PENALTY: Duration = Duration::from_secs(8);
 /// Addresses remembered for the slow-down.
 const FAILURE_ADDRESSES: usize = 4096;
 /// A streaming WebSocket silent this long is taken over by a new one.
 pub const TAKEOVER_SILENCE: Duration = Duration::from_secs(2);
+/// ... or this long, when the new one comes from the streaming phone's own address.
+pub const SAME_ADDRESS_SILENCE: Duration = Duration::from_millis(500);
 /// A WebSocket silent this long is closed (the page streams at its sensor rate).
 pub const WATCHDOG: Duration = Duration::from_secs(3);
 /// What the page is told, this often.
 const FEEDBACK_PERIOD: Duration = Duration::from_millis(250);
-/// TLS handshake, and the head of a request, must arrive within this.
-const HANDSHAKE: Duration = Duration::from_secs(10);
-/// Connections at once (the page and its scripts, the WebSocket, a few refused).
-const MAX_CONNECTIONS: usize = 64;
+/// The TLS handshake must be done within this of the connection.
+pub const HANDSHAKE: Duration = Duration::from_secs(3);
+/// Each request's head must arrive within this.
+pub const HEAD: Duration = Duration::from_secs(3);
+/// The cookie the page sets with its token, so that its own requests show it.
+const COOKIE: &str = "sfs_phone";
 
 pub(super) struct Context {
     pub token: String,
@@ -50,19 +71,33 @@ pub(super) struct Context {
     pub tx: tokio::sync::mpsc::Sender<Msg>,
     pub tls: tokio_rustls::TlsAcceptor,
     pub port: u16,
+    /// Names besides `localhost` and address literals that `Host` may give.
+    pub allowed_hosts: Vec<String>,
 }
 
 /// The streaming WebSocket.
 struct Live {
     id: u64,
+    ip: IpAddr,
     last_data: Instant,
     kick: Arc<tokio::sync::Notify>,
 }
 
+/// One address's failures: how many within the window since `since`, and until when it is
+/// refused.
+#[derive(Debug, Clone, Copy)]
+struct Failures {
+    n: u32,
+    since: Instant,
+    until: Option<Instant>,
+}
+
 struct Shared {
     ctx: Context,
+    access: Access,
     live: Mutex<Option<Live>>,
-    failures: Mutex<HashMap<IpAddr, (u32, Instant)>>,
+    failures: Mutex<HashMap<IpAddr, Failures>>,
+    slots: Arc<Slots>,
     next_id: AtomicU64,
 }
 
@@ -89,14 +124,16 @@ pub(super) fn run(listener: std::net::TcpListener, ctx: Context, stop: Shutdown,
                 return;
             }
         };
+        let access = Access::new(vec![ctx.port], ctx.allowed_hosts.clone(), None);
         let app: App = Arc::new(Shared {
             ctx,
+            access,
             live: Mutex::new(None),
             failures: Mutex::new(HashMap::new()),
+            slots: Slots::new(),
             next_id: AtomicU64::new(1),
         });
         let router = router(app.clone());
-        let slots = Arc::new(tokio::sync::Semaphore::new(MAX_CONNECTIONS));
         loop {
             let (stream, peer) = tokio::select! {
                 _ = stop.triggered() => break,
@@ -110,13 +147,15 @@ pub(super) fn run(listener: std::net::TcpListener, ctx: Context, stop: Shutdown,
                     }
                 },
             };
-            let Ok(permit) = slots.clone().try_acquire_owned() else {
-                continue; // dropped: too many connections at once
-            };
+            let fd = std::os::fd::AsRawFd::as_raw_fd(&stream);
+            let slot = Arc::new(app.slots.admit_socket(peer.ip(), Some(fd)));
+            lock(&app.ctx.phone.stats).refused.let_go = app.slots.evicted();
             let (app, router) = (app.clone(), router.clone());
             tokio::spawn(async move {
-                connection(app, router, stream, peer).await;
-                drop(permit);
+                tokio::select! {
+                    _ = slot.let_go() => {}
+                    _ = connection(app, router, stream, peer, slot.clone()) => {}
+                }
             });
         }
     });
@@ -124,33 +163,48 @@ pub(super) fn run(listener: std::net::TcpListener, ctx: Context, stop: Shutdown,
 }
 
 /// One TCP connection: refused if it is not TLS, else served over HTTP/1.1 with upgrades.
-async fn connection(app: App, router: Router, stream: tokio::net::TcpStream, peer: SocketAddr) {
+async fn connection(
+    app: App,
+    router: Router,
+    stream: tokio::net::TcpStream,
+    peer: SocketAddr,
+    slot: Arc<Slot>,
+) {
     let _ = stream.set_nodelay(true);
+    let deadline = tokio::time::Instant::now() + HANDSHAKE;
     let mut first = [0u8; 1];
-    match tokio::time::timeout(HANDSHAKE, stream.peek(&mut first)).await {
+    match tokio::time::timeout_at(deadline, stream.peek(&mut first)).await {
         Ok(Ok(1)) => {}
-        _ => return,
+        Ok(_) => return,
+        Err(_) => {
+            lock(&app.ctx.phone.stats).refused.tls += 1;
+            return;
+        }
     }
+    slot.progress();
     // A TLS connection starts with a handshake record (content type 22).
     if first[0] != 0x16 {
         lock(&app.ctx.phone.stats).refused.plain_http += 1;
         refuse_plain_http(stream, app.ctx.port).await;
         return;
     }
-    let tls = match tokio::time::timeout(HANDSHAKE, app.ctx.tls.accept(stream)).await {
+    let tls = match tokio::time::timeout_at(deadline, app.ctx.tls.accept(stream)).await {
         Ok(Ok(s)) => s,
         _ => {
             lock(&app.ctx.phone.stats).refused.tls += 1;
             return;
         }
     };
+    slot.progress();
     let svc = hyper::service::service_fn(move |mut req: hyper::Request<hyper::body::Incoming>| {
+        slot.progress();
         req.extensions_mut().insert(ConnectInfo(peer));
+        req.extensions_mut().insert(slot.clone());
         tower::ServiceExt::oneshot(router.clone(), req)
     });
     let served = hyper::server::conn::http1::Builder::new()
         .timer(hyper_util::rt::TokioTimer::new())
-        .header_read_timeout(HANDSHAKE)
+        .header_read_timeout(HEAD)
         .serve_connection(hyper_util::rt::TokioIo::new(tls), svc)
         .with_upgrades()
         .await;
@@ -177,13 +231,53 @@ async fn refuse_plain_http(mut stream: tokio::net::TcpStream, port: u16) {
 
 fn router(app: App) -> Router {
     Router::new()
+        .route("/", get(root))
         .route("/phone", get(page))
         .route("/phone/ws", get(ws))
         .route("/phone.js", get(|| asset("phone.js")))
         .route("/wire.js", get(|| asset("wire.js")))
         .route("/phone.css", get(|| asset("phone.css")))
         .fallback(|| async { (StatusCode::NOT_FOUND, "not found\n") })
+        .layer(axum::middleware::from_fn_with_state(app.clone(), admit))
         .with_state(app)
+}
+
+/// Every request: its `Host` must name this server (421), and one that shows the token makes
+/// its connection the phone's ([`super::slots`]).
+async fn admit(
+    State(app): State<App>,
+    Extension(slot): Extension<Arc<Slot>>,
+    req: Request,
+    next: Next,
+) -> Response {
+    let host = req
+        .headers()
+        .get(header::HOST)
+        .and_then(|h| h.to_str().ok());
+    if app.access.host(host) != Verdict::Allowed {
+        lock(&app.ctx.phone.stats).refused.host += 1;
+        return closing(
+            StatusCode::MISDIRECTED_REQUEST,
+            "this Host is not the phone page's: open the address sfs printed, or add the name to [phone] allowed_hosts\n",
+        );
+    }
+    if shows_token(&app, req.uri(), req.headers()) {
+        slot.promote();
+    }
+    next.run(req).await
+}
+
+/// A plain-text refusal that closes its connection (a refused client holds no slot).
+fn closing(status: StatusCode, text: &'static str) -> Response {
+    (status, [(header::CONNECTION, "close")], text).into_response()
+}
+
+async fn root() -> Response {
+    (
+        [(header::CACHE_CONTROL, "no-cache")],
+        "This is sfs's phone port. The phone page is at /phone?token=…: open the address sfs printed when it started (or scan its QR code), or read it in the session directory's phone.url.\n",
+    )
+        .into_response()
 }
 
 async fn asset(name: &'static str) -> Response {
@@ -201,11 +295,25 @@ async fn asset(name: &'static str) -> Response {
     }
 }
 
-/// The token in `uri`'s query, if any.
-fn token_in(uri: &Uri) -> Option<&str> {
+/// The value of `key` in `uri`'s query, if any.
+fn query<'a>(uri: &'a Uri, key: &str) -> Option<&'a str> {
     uri.query()?
         .split('&')
-        .find_map(|kv| kv.strip_prefix("token="))
+        .find_map(|kv| kv.strip_prefix(key)?.strip_prefix('='))
+}
+
+/// Whether the request carries the token: in the query, or in the page's cookie.
+fn shows_token(app: &App, uri: &Uri, headers: &HeaderMap) -> bool {
+    let want = app.ctx.token.as_str();
+    let in_query = query(uri, "token").is_some_and(|t| same(t, want));
+    in_query
+        || headers
+            .get_all(header::COOKIE)
+            .iter()
+            .filter_map(|v| v.to_str().ok())
+            .flat_map(|v| v.split(';'))
+            .filter_map(|c| c.trim().strip_prefix(COOKIE)?.strip_prefix('='))
+            .any(|t| same(t, want))
 }
 
 /// Compares in time independent of where the strings differ.
@@ -213,57 +321,79 @@ fn same(a: &str, b: &str) -> bool {
     a.len() == b.len() && a.bytes().zip(b.bytes()).fold(0u8, |d, (x, y)| d | (x ^ y)) == 0
 }
 
-/// `Ok` when `uri` carries the token; else the 403 to answer, after the slow-down the
-/// address has earned.
-async fn check(app: &App, peer: SocketAddr, uri: &Uri) -> Result<(), Response> {
-    if token_in(uri).is_some_and(|t| same(t, &app.ctx.token)) {
-        return Ok(());
+/// `None` when the request shows the token; else the refusal to answer at once: 429 with
+/// `Retry-After` while the address is refused for its failures (the token not looked at),
+/// else 403, counted toward the address's failures.
+fn check(app: &App, peer: SocketAddr, uri: &Uri, headers: &HeaderMap) -> Option<Response> {
+    let now = Instant::now();
+    let refused_until = lock(&app.failures)
+        .get(&peer.ip())
+        .and_then(|f| f.until)
+        .filter(|&until| until > now);
+    if let Some(until) = refused_until {
+        lock(&app.ctx.phone.stats).refused.slowed += 1;
+        let wait = (until - now).as_secs_f64().ceil().max(1.0) as u64;
+        tracing::debug!(%peer, "phone page: an address that failed too often refused a while");
+        let mut r = closing(
+            StatusCode::TOO_MANY_REQUESTS,
+            "too many requests without the token from this address: wait, then open the address sfs printed\n",
+        );
+        r.headers_mut()
+            .insert(header::RETRY_AFTER, HeaderValue::from(wait));
+        return Some(r);
     }
-    let n = {
+    if shows_token(app, uri, headers) {
+        return None;
+    }
+    {
         let mut f = lock(&app.failures);
-        let now = Instant::now();
         if f.len() >= FAILURE_ADDRESSES {
-            f.retain(|_, (_, since)| now - *since < FAILURE_WINDOW);
+            f.retain(|_, e| now - e.since < FAILURE_WINDOW);
             if f.len() >= FAILURE_ADDRESSES {
                 f.clear();
             }
         }
-        let e = f.entry(peer.ip()).or_insert((0, now));
-        if now - e.1 >= FAILURE_WINDOW {
-            *e = (0, now);
+        let e = f.entry(peer.ip()).or_insert(Failures {
+            n: 0,
+            since: now,
+            until: None,
+        });
+        if now - e.since >= FAILURE_WINDOW {
+            *e = Failures {
+                n: 0,
+                since: now,
+                until: None,
+            };
         }
-        e.0 += 1;
-        e.0
-    };
-    {
-        let mut s = lock(&app.ctx.phone.stats);
-        s.refused.token += 1;
-        if n > FREE_FAILURES {
-            s.refused.slowed += 1;
+        e.n += 1;
+        if e.n > FREE_FAILURES {
+            let k = (e.n - FREE_FAILURES - 1).min(5);
+            e.until = Some(now + (FIRST_PENALTY * (1 << k)).min(LONGEST_PENALTY));
         }
     }
-    if n > FREE_FAILURES {
-        let k = (n - FREE_FAILURES - 1).min(5);
-        tokio::time::sleep(Duration::from_millis(250 << k)).await;
-    }
+    lock(&app.ctx.phone.stats).refused.token += 1;
     tracing::debug!(%peer, "phone page: refused a request without the right token");
-    Err((
+    Some(closing(
         StatusCode::FORBIDDEN,
         "the phone page needs its token: open the address sfs printed (or its QR code)\n",
-    )
-        .into_response())
+    ))
 }
 
 async fn page(
     State(app): State<App>,
     ConnectInfo(peer): ConnectInfo<SocketAddr>,
     uri: Uri,
+    headers: HeaderMap,
 ) -> Response {
-    if let Err(r) = check(&app, peer, &uri).await {
+    if let Some(r) = check(&app, peer, &uri, &headers) {
         return r;
     }
     let (kind, body) = crate::view::assets::PHONE_PAGE;
-    (
+    let cookie = format!(
+        "{COOKIE}={}; Path=/; Secure; HttpOnly; SameSite=Strict",
+        app.ctx.token
+    );
+    let mut r = (
         [
             (header::CONTENT_TYPE, kind),
             (header::CACHE_CONTROL, "no-store"),
@@ -273,16 +403,42 @@ async fn page(
         ],
         body,
     )
-        .into_response()
+        .into_response();
+    if let Ok(v) = HeaderValue::from_str(&cookie) {
+        r.headers_mut().insert(header::SET_COOKIE, v);
+    }
+    r
+}
+
+/// The page's clock, from its WebSocket's address: `origin` (`performance.timeOrigin`) and
+/// `now` (its wall clock as it connected), ms since the Unix epoch. The origin is kept when the
+/// clocks agree within [`super::stats::CLOCK_TOLERANCE_MS`]; the offset is kept either way.
+fn page_clock(uri: &Uri) -> (Option<f64>, Option<f64>) {
+    let num = |k| {
+        query(uri, k)
+            .and_then(|v| v.parse::<f64>().ok())
+            .filter(|v| v.is_finite())
+    };
+    let (Some(origin), Some(page_now)) = (num("origin"), num("now")) else {
+        return (None, None);
+    };
+    let daemon_now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64() * 1e3);
+    let offset = daemon_now - page_now;
+    let agree = offset.abs() <= super::stats::CLOCK_TOLERANCE_MS && origin <= page_now;
+    (agree.then_some(origin), Some(offset))
 }
 
 async fn ws(
     State(app): State<App>,
     ConnectInfo(peer): ConnectInfo<SocketAddr>,
+    Extension(slot): Extension<Arc<Slot>>,
     uri: Uri,
+    headers: HeaderMap,
     upgrade: WebSocketUpgrade,
 ) -> Response {
-    if let Err(r) = check(&app, peer, &uri).await {
+    if let Some(r) = check(&app, peer, &uri, &headers) {
         return r;
     }
     let kick = Arc::new(tokio::sync::Notify::new());
@@ -290,44 +446,83 @@ async fn ws(
     {
         let mut live = lock(&app.live);
         if let Some(l) = &*live {
-            if l.last_data.elapsed() < TAKEOVER_SILENCE {
+            let silent = l.last_data.elapsed();
+            let enough = if l.ip == peer.ip() {
+                SAME_ADDRESS_SILENCE
+            } else {
+                TAKEOVER_SILENCE
+            };
+            if silent < enough {
                 lock(&app.ctx.phone.stats).refused.busy += 1;
-                tracing::info!(%peer, "phone page: refused a second phone while one streams");
-                return (
+                tracing::info!(
+                    %peer,
+                    streaming = %l.ip,
+                    "phone page: refused a second phone while one streams"
+                );
+                return closing(
                     StatusCode::CONFLICT,
                     "another phone is streaming to this session\n",
-                )
-                    .into_response();
+                );
             }
+            lock(&app.ctx.phone.stats).takeovers += 1;
+            tracing::info!(
+                %peer,
+                silent_ms = silent.as_millis() as u64,
+                was = %l.ip,
+                "phone page: a new connection with the token took over a silent stream"
+            );
             l.kick.notify_one();
         }
         *live = Some(Live {
             id,
+            ip: peer.ip(),
             last_data: Instant::now(),
             kick: kick.clone(),
         });
     }
+    slot.streaming();
+    let (origin, offset) = page_clock(&uri);
+    let agent = headers
+        .get(header::USER_AGENT)
+        .map(|v| super::stats::user_agent(&String::from_utf8_lossy(v.as_bytes())));
+    {
+        let mut s = lock(&app.ctx.phone.stats);
+        s.clock_offset_ms = offset;
+        if agent.is_some() {
+            s.user_agent = agent;
+        }
+    }
+    let mut conn = Conn::default();
+    conn.time_origin_ms = origin;
     upgrade
-        .max_message_size(4 * MAX_MESSAGE)
-        .max_frame_size(4 * MAX_MESSAGE)
-        .on_upgrade(move |socket| stream(app, socket, id, kick, peer))
+        .max_message_size(MAX_MESSAGE)
+        .max_frame_size(MAX_MESSAGE)
+        .on_upgrade(move |socket| stream(app, socket, id, kick, peer, conn, slot))
 }
 
-/// The page's hello (a text message): its clock's origin and its browser.
-#[derive(serde::Deserialize)]
-struct Hello {
-    time_origin_ms: f64,
-    #[serde(default)]
-    user_agent: String,
+/// Closes `socket` with `code` and `reason` (best effort: the peer may be gone).
+async fn close(socket: &mut WebSocket, code: u16, reason: String) {
+    let frame = CloseFrame {
+        code,
+        reason: reason.into(),
+    };
+    let _ = tokio::time::timeout(
+        Duration::from_secs(1),
+        socket.send(Message::Close(Some(frame))),
+    )
+    .await;
 }
 
 /// One streaming WebSocket: its binary messages go to the writer, the feedback comes back.
+/// It holds its connection's slot until it ends.
 async fn stream(
     app: App,
     mut socket: WebSocket,
     id: u64,
     kick: Arc<tokio::sync::Notify>,
     peer: SocketAddr,
+    mut conn: Conn,
+    _slot: Arc<Slot>,
 ) {
     let tx = app.ctx.tx.clone();
     let description = format!("phone at {}", peer.ip());
@@ -342,9 +537,9 @@ async fn stream(
     {
         return;
     }
-    let mut conn = Conn::default();
     let mut feedback = tokio::time::interval(FEEDBACK_PERIOD);
     let mut last_data = Instant::now();
+    let too_long = format!("a message is at most {MAX_MESSAGE} bytes");
     let reason = loop {
         let deadline = tokio::time::Instant::from_std(last_data + WATCHDOG);
         tokio::select! {
@@ -360,18 +555,20 @@ async fn stream(
             m = socket.recv() => match m {
                 None => break "the page closed the connection".to_owned(),
                 Some(Err(e)) => {
-                    if e.to_string().contains("too long") {
+                    // A frame or message declared or grown over the limit: the WebSocket
+                    // layer stops reading it at its header.
+                    let text = e.to_string();
+                    if text.contains("too long") || text.contains("Space limit") {
                         lock(&app.ctx.phone.stats).refused.oversized += 1;
+                        close(&mut socket, 1009, too_long.clone()).await;
+                        break format!("a message over {MAX_MESSAGE} bytes: {text}");
                     }
-                    break format!("{e}");
+                    break text;
                 }
                 Some(Ok(Message::Binary(b))) => {
                     if b.len() > MAX_MESSAGE {
                         lock(&app.ctx.phone.stats).refused.oversized += 1;
-                        let _ = socket.send(Message::Close(Some(CloseFrame {
-                            code: 1009,
-                            reason: format!("a message is at most {MAX_MESSAGE} bytes").into(),
-                        }))).await;
+                        close(&mut socket, 1009, too_long.clone()).await;
                         break format!("a message of {} bytes (at most {MAX_MESSAGE})", b.len());
                     }
                     last_data = Instant::now();
@@ -384,18 +581,9 @@ async fn stream(
                     }
                 }
                 Some(Ok(Message::Text(t))) => {
-                    let hello = (t.len() <= 4096)
-                        .then(|| serde_json::from_str::<Hello>(t.as_str()).ok())
-                        .flatten()
-                        .filter(|h| h.time_origin_ms.is_finite());
-                    let mut s = lock(&app.ctx.phone.stats);
-                    match hello {
-                        Some(h) => {
-                            conn.time_origin_ms = Some(h.time_origin_ms);
-                            s.user_agent = Some(h.user_agent.chars().take(200).collect());
-                        }
-                        None => s.ignored_text += 1,
-                    }
+                    lock(&app.ctx.phone.stats).refused.text += 1;
+                    close(&mut socket, 1003, "the page sends binary frames only".to_owned()).await;
+                    break format!("a text message of {} bytes (binary frames only)", t.len());
                 }
                 Some(Ok(Message::Close(_))) => break "the page closed the connection".to_owned(),
                 Some(Ok(_)) => {}

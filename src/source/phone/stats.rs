@@ -45,16 +45,25 @@ impl Thinned {
 pub struct Refused {
     /// Requests without the token or with a wrong one (403).
     pub token: u64,
-    /// Of those, answered late because the address had failed too often.
+    /// Requests from an address that failed too often, answered 429 at once (with
+    /// `Retry-After`) without looking at their token.
     pub slowed: u64,
     /// A second phone while one was streaming (409).
     pub busy: u64,
     /// Plain HTTP on the HTTPS port.
     pub plain_http: u64,
-    /// Connections closed for a message over the size limit.
+    /// Connections closed for a message over the size limit (1009).
     pub oversized: u64,
-    /// TLS handshakes that failed (a client that does not accept the certificate).
+    /// Connections closed for a text message (1003: the page sends binary frames only).
+    pub text: u64,
+    /// TLS handshakes that failed or did not finish in time (a client that does not accept
+    /// the certificate, or one that holds a connection open without a handshake).
     pub tls: u64,
+    /// Requests whose `Host` does not name this server (421).
+    pub host: u64,
+    /// Connections without the token let go to make room for others (the phone's never for
+    /// a guest's).
+    pub let_go: u64,
 }
 
 /// `report.json` `phone`.
@@ -66,8 +75,9 @@ pub struct PhoneReport {
     /// Binary messages and their bytes.
     pub messages: u64,
     pub bytes: u64,
-    /// Text messages that were not the page's hello (ignored).
-    pub ignored_text: u64,
+    /// A silent phone's stream replaced by a new connection with the token (a phone that
+    /// reconnected).
+    pub takeovers: u64,
     /// PHONE_SAMPLE packets seen.
     pub samples: u64,
     /// The page's sample rate from the samples' timestamps, Hz.
@@ -79,10 +89,39 @@ pub struct PhoneReport {
     /// Between consecutive messages as the daemon received them, ms.
     pub arrival_interval_ms: Percentiles,
     /// From a sample's sensor event (the page's clock) to its arrival here (the daemon's
-    /// clock), ms: meaningful when both clocks agree (the same machine, or both on NTP).
+    /// clock), ms: only from connections whose clock agrees with the daemon's
+    /// (`clock_offset_ms` within ±[`CLOCK_TOLERANCE_MS`]); never negative.
     pub latency_ms: Percentiles,
-    /// The last page's browser (`navigator.userAgent`, at most 200 characters).
+    /// The daemon's clock minus the page's when the last WebSocket opened, ms (the page's
+    /// clock as it sent its address, so a one-way delay is in it): beyond
+    /// ±[`CLOCK_TOLERANCE_MS`] the clocks disagree and no latency is measured.
+    pub clock_offset_ms: Option<f64>,
+    /// The last page's browser (its `User-Agent`, at most [`USER_AGENT_CHARS`] characters,
+    /// control characters escaped).
     pub user_agent: Option<String>,
+}
+
+/// How far the page's clock may be from the daemon's for its latencies to be measured, ms.
+pub const CLOCK_TOLERANCE_MS: f64 = 250.0;
+/// The longest user agent kept, characters.
+pub const USER_AGENT_CHARS: usize = 200;
+
+/// A browser's `User-Agent` as kept: at most [`USER_AGENT_CHARS`] characters, control and
+/// other invisible characters escaped (`\u{1b}`), so that it prints safely in a log, a report
+/// or a page.
+pub fn user_agent(raw: &str) -> String {
+    let mut out = String::new();
+    for c in raw.chars() {
+        if c.is_control() || matches!(c, '\u{200b}'..='\u{200f}' | '\u{2028}'..='\u{202e}') {
+            out.extend(c.escape_unicode());
+        } else {
+            out.push(c);
+        }
+        if out.chars().count() >= USER_AGENT_CHARS {
+            break;
+        }
+    }
+    out.chars().take(USER_AGENT_CHARS).collect()
 }
 
 /// The running statistics.
@@ -92,7 +131,8 @@ pub struct Stats {
     pub connections: u64,
     messages: u64,
     bytes: u64,
-    pub ignored_text: u64,
+    pub takeovers: u64,
+    pub clock_offset_ms: Option<f64>,
     samples: u64,
     span_us: f64,
     intervals: Thinned,
@@ -111,7 +151,8 @@ pub struct Conn {
     decoder: Decoder,
     last_t_us: Option<u32>,
     last_arrival: Option<std::time::Instant>,
-    /// `performance.timeOrigin` of the page, ms since the Unix epoch (from its hello).
+    /// `performance.timeOrigin` of the page, ms since the Unix epoch (from its WebSocket's
+    /// address), when its clock agrees with the daemon's.
     pub time_origin_ms: Option<f64>,
 }
 
@@ -168,7 +209,7 @@ impl Stats {
             let mut event = t_us as f64 * 1e-3;
             event += ((since - event) / wrap).round() * wrap;
             let latency = since - event;
-            if latency.is_finite() && (-60_000.0..60_000.0).contains(&latency) {
+            if latency.is_finite() && (0.0..60_000.0).contains(&latency) {
                 self.latencies.push(latency);
             }
         }
@@ -187,7 +228,7 @@ impl Stats {
             refused: self.refused.clone(),
             messages: self.messages,
             bytes: self.bytes,
-            ignored_text: self.ignored_text,
+            takeovers: self.takeovers,
             samples: self.samples,
             rate_hz: if self.span_us > 0.0 {
                 self.intervals.seen as f64 / (self.span_us * 1e-6)
@@ -198,6 +239,7 @@ impl Stats {
             jitter_ms: jitter,
             arrival_interval_ms: self.arrivals.summary(),
             latency_ms: self.latencies.summary(),
+            clock_offset_ms: self.clock_offset_ms,
             user_agent: self.user_agent.clone(),
         }
     }
@@ -239,6 +281,40 @@ mod tests {
         assert!((r.jitter_ms - 1.0).abs() < 0.05, "{}", r.jitter_ms);
         assert_eq!(r.interval_ms.n, 100);
         assert_eq!(r.arrival_interval_ms.n, 1);
+    }
+
+    #[test]
+    fn user_agents_are_bounded_and_escaped() {
+        assert_eq!(user_agent("Mozilla/5.0 (X11)"), "Mozilla/5.0 (X11)");
+        assert_eq!(user_agent("a\u{1b}[31mb\nc"), "a\\u{1b}[31mb\\u{a}c");
+        assert_eq!(
+            user_agent(&"x".repeat(10_000)).chars().count(),
+            USER_AGENT_CHARS
+        );
+        assert!(!user_agent(&"\u{7}".repeat(500))
+            .chars()
+            .any(char::is_control));
+        assert!(user_agent(&"\u{7}".repeat(500)).chars().count() <= USER_AGENT_CHARS);
+    }
+
+    #[test]
+    fn a_latency_never_goes_negative() {
+        let mut s = Stats::default();
+        let mut c = Conn::default();
+        let now_ms = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_secs_f64()
+            * 1e3;
+        // A page whose origin puts its samples 1.5 s in the daemon's future.
+        c.time_origin_ms = Some(now_ms - 10_000.0);
+        s.message(&mut c, &frames(&[11_500_000]));
+        assert_eq!(s.report().latency_ms.n, 0);
+        c.time_origin_ms = Some(now_ms - 10_000.0);
+        s.message(&mut c, &frames(&[9_990_000]));
+        let l = s.report().latency_ms;
+        assert_eq!(l.n, 1);
+        assert!(l.p50 >= 0.0 && l.p50 < 1000.0, "{}", l.p50);
     }
 
     #[test]

@@ -176,14 +176,17 @@ function showFeedback(f) {
 }
 
 function connect() {
-  const url = `wss://${location.host}/phone/ws?token=${encodeURIComponent(token)}`;
+  // The page's clock (its origin and now, ms since the epoch): the daemon measures the
+  // latency from a sensor event to its arrival only when the two clocks agree. The browser's
+  // name goes in its User-Agent header: the page sends binary frames only.
+  const clock = `origin=${performance.timeOrigin}&now=${performance.timeOrigin + performance.now()}`;
+  const url = `wss://${location.host}/phone/ws?token=${encodeURIComponent(token)}&${clock}`;
   ws = new WebSocket(url);
   ws.binaryType = 'arraybuffer';
   ws.onopen = () => {
     phone.connections += 1;
     retryMs = 500;
     setState('streaming');
-    ws.send(JSON.stringify({ time_origin_ms: performance.timeOrigin, user_agent: navigator.userAgent }));
     lastHello = -Infinity; // a HELLO first on every connection
   };
   ws.onmessage = (m) => {

@@ -361,17 +361,34 @@ function text(id, s, bad) {
 let warningsShown = false;
 // The phone page's address and its QR code (a session reading the phone: sfs run --phone).
 let phoneShown = false;
-function showPhone(url) {
-  if (!url || phoneShown) return;
+// The phone page: every client sees that there is one (its address without the token, and
+// its certificate's fingerprint); its QR code and its address with the token, the right to
+// write into the session, come only to a client that may write (on the machine that runs sfs,
+// or with the view's token).
+function showPhone(phone) {
+  if (!phone || phoneShown) return;
   phoneShown = true;
   const box = document.getElementById('phone');
   box.hidden = false;
+  document.getElementById('phone-fingerprint').textContent = phone.fingerprint;
   const img = document.getElementById('phone-qr');
-  img.src = '/phone-qr.svg';
   const a = document.getElementById('phone-url');
-  a.textContent = url;
-  a.href = url;
-  state.phoneUrl = url;
+  const withheld = () => {
+    img.hidden = true;
+    a.removeAttribute('href');
+    a.textContent = `${phone.page}?token=… (shown on the machine that runs sfs: its terminal, or SESSION/phone.url)`;
+  };
+  img.onerror = withheld;
+  img.src = '/phone-qr.svg';
+  fetch('/status', { cache: 'no-store' })
+    .then((r) => r.json())
+    .then((st) => {
+      if (!st.phone_url) { withheld(); return; }
+      a.textContent = st.phone_url;
+      a.href = st.phone_url;
+      state.phoneUrl = st.phone_url;
+    })
+    .catch(withheld);
 }
 
 function showStatus(s) {
@@ -392,7 +409,7 @@ function showStatus(s) {
     text('curve', 'no curve open');
   }
   text('accepted', `${s.curves_accepted} curve(s) accepted`);
-  showPhone(s.phone_url);
+  showPhone(s.phone);
   const l = s.link;
   text('link', `link ${l.packets_per_s.toFixed(0)} pkt/s · ${l.rejected} rejected · ${l.lost} lost · ${l.reboots} reboots`, l.lost > 0 || l.disconnects > 0);
   if (s.device) {
