@@ -8,9 +8,10 @@
 //!   head sent a byte a second never completes);
 //! - nothing has been read or written for [`IDLE_TIMEOUT`] (an idle keep-alive connection; an
 //!   event stream writes at least every second, so it is never idle);
-//! - the client has not drained what was written for [`STALL_TIMEOUT`] (a client that stopped
+//! - the client has not drained what was written for [`DRAIN_TIMEOUT`] (a client that stopped
 //!   reading, whatever its receive buffer: see [`Drain`]; an event stream would otherwise fill
-//!   the kernel's buffers for minutes before a write blocked), or a write has been blocked.
+//!   the kernel's buffers for minutes before a write blocked), or a write has been blocked for
+//!   [`STALL_TIMEOUT`].
 
 use std::future::Future;
 use std::io;
@@ -29,6 +30,10 @@ pub const HEAD_TIMEOUT: Duration = Duration::from_secs(10);
 pub const IDLE_TIMEOUT: Duration = Duration::from_secs(30);
 /// A connection whose writes have been blocked this long is closed.
 pub const STALL_TIMEOUT: Duration = Duration::from_secs(10);
+/// A connection whose peer has not drained what it was sent for this long is closed (with the
+/// once-a-second check and a buffer's first seconds, a client that does not read is gone within
+/// 15 s whatever its receive buffer).
+pub const DRAIN_TIMEOUT: Duration = Duration::from_secs(6);
 /// Descriptors kept for the session (capture, outputs, the serial port, the runtime).
 pub const RESERVED_FDS: u64 = 256;
 /// The most connections served at once, whatever the file limit.
@@ -120,14 +125,17 @@ impl axum::serve::Listener for GuardedListener {
 /// Checked at most once a second, after a write. A check is evidence of draining when bytes
 /// were acknowledged and the edge moved by at least half of them; of a stall when bytes were
 /// acknowledged and the edge did not follow, or when bytes wait unacknowledged and none were;
-/// when nothing was sent, the peer owes nothing. A peer with no evidence of draining for
-/// [`STALL_TIMEOUT`] and a stall at its latest check has stopped reading. (Window sizes alone
+/// when nothing was sent, the peer owes nothing; a window larger than ever before is no
+/// evidence either way (a receiver offers more of its buffer as data comes, reading or not:
+/// with a large buffer, for its first seconds, TCP does not tell a sleeper from a reader). A peer with no evidence of draining for
+/// [`DRAIN_TIMEOUT`] and a stall at its latest check has stopped reading. (Window sizes alone
 /// do not tell: a reading client's window wobbles by a scaling step, and a non-reading one's
 /// can grow for its first seconds.)
 #[derive(Debug)]
 struct Drain {
     checked: Instant,
     acked: u64,
+    largest: u32,
     edge: u64,
     drained: Instant,
 }
@@ -137,13 +145,14 @@ impl Drain {
         Drain {
             checked: now,
             acked: 0,
+            largest: 0,
             edge: 0,
             drained: now,
         }
     }
 
     /// Looks at the connection (at most once a second); whether the peer has not drained for
-    /// [`STALL_TIMEOUT`].
+    /// [`DRAIN_TIMEOUT`].
     fn stalled(&mut self, io: &TcpStream, now: Instant) -> bool {
         if now.duration_since(self.checked) < Duration::from_secs(1) {
             return false;
@@ -165,12 +174,17 @@ impl Drain {
         } else {
             p.waiting > 0
         };
+        // A window larger than ever before says nothing of reading: a receiver offers more of
+        // its buffer as data comes, whether its application reads or not. (A window reopening
+        // to a size it had is a read.)
+        let growing = acked > 0 && p.window > self.largest;
         self.acked = p.acked;
+        self.largest = self.largest.max(p.window);
         self.edge = self.edge.max(edge);
-        if !stall {
+        if !stall && !growing {
             self.drained = now;
         }
-        stall && now.duration_since(self.drained) > STALL_TIMEOUT
+        stall && now.duration_since(self.drained) > DRAIN_TIMEOUT
     }
 }
 
@@ -421,13 +435,10 @@ mod tests {
                 .position(|s| s)
         };
         // Reads: the window wobbles by a scaling step below its largest, bursts and lulls.
+        let mut sent = 0;
         let reader: Vec<_> = (0..120u64)
             .map(|i| {
-                let sent = if (i / 10) % 2 == 0 {
-                    30_000 * i
-                } else {
-                    800 * i
-                };
+                sent += if (i / 10) % 2 == 0 { 30_000 } else { 800 };
                 (sent, if i % 3 == 0 { 101_376 } else { 100_352 }, 0)
             })
             .collect();
@@ -445,13 +456,13 @@ mod tests {
             })
             .collect();
         let at = run(&big).expect("a sleeper with a large buffer is found");
-        assert!(at <= 14, "{at}");
+        assert!(at <= 11, "{at}");
         // Does not read, 2 KiB: a zero window, the bytes wait here.
         let small: Vec<_> = (0..30u64)
             .map(|i| (2048, 0, 2000 + 800 * i as u32))
             .collect();
         let at = run(&small).expect("a sleeper with a small buffer is found");
-        assert!(at <= 12, "{at}");
+        assert!(at <= 9, "{at}");
         // Nothing sent: nothing owed.
         let idle: Vec<_> = (0..60).map(|_| (5000, 65_536, 0)).collect();
         assert_eq!(run(&idle), None);
