@@ -84,12 +84,18 @@ async fn issue_48_the_phone_gets_in_while_the_lan_floods_its_port() {
     let stop = Arc::new(AtomicBool::new(false));
     let (opened, refused) = (Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)));
     let mut attackers = Vec::new();
-    // Sustained churn: 8 hosts, each holding 24 idle connections reopened as they are
-    // dropped, a third of them with a ClientHello begun and left.
-    for h in 0..8u8 {
-        for k in 0..24 {
+    // Sustained churn: 192 idle connections reopened as they are dropped, a third of them
+    // with a ClientHello begun and left, from 8 hosts (`SFS_FLOOD_HOSTS` for more: 192 is
+    // the most, one connection each).
+    let hosts: usize = std::env::var("SFS_FLOOD_HOSTS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(8)
+        .clamp(1, 192);
+    for h in 0..hosts {
+        for k in 0..192 / hosts {
             attackers.push(tokio::spawn(churn(
-                host(1, h),
+                host(1 + (h / 200) as u8, (h % 200) as u8),
                 d.port,
                 k % 3 == 0,
                 stop.clone(),
@@ -101,7 +107,7 @@ async fn issue_48_the_phone_gets_in_while_the_lan_floods_its_port() {
     for k in 0..64u8 {
         attackers.push(tokio::spawn(wrong_tokens(
             client.clone(),
-            host(2, k % 8),
+            host(3, k % 8),
             stop.clone(),
             refused.clone(),
         )));
@@ -134,7 +140,7 @@ async fn issue_48_the_phone_gets_in_while_the_lan_floods_its_port() {
     took.sort_by(f64::total_cmp);
     let p95 = took.get((took.len() * 95 / 100).min(took.len().saturating_sub(1)));
     println!(
-        "issue 48 point 1: the page on {ok} of 30 tries under attack, max {:.0} ms, p95 {:.0} ms; attackers opened {} idle connections, made {} wrong-token requests",
+        "issue 48 point 1: the page on {ok} of 30 tries under attack from {hosts} + 8 hosts, max {:.0} ms, p95 {:.0} ms; attackers opened {} idle connections, made {} wrong-token requests",
         took.last().copied().unwrap_or(f64::NAN),
         p95.copied().unwrap_or(f64::NAN),
         opened.load(Ordering::Relaxed),
@@ -190,7 +196,10 @@ async fn issue_48_the_phone_gets_in_while_the_lan_floods_its_port() {
     let report = d.stop();
     let refused = &report["phone"]["refused"];
     assert!(refused["let_go"].as_u64().unwrap() > 0, "{refused}");
-    assert!(refused["slowed"].as_u64().unwrap() > 0, "{refused}");
+    // (With many churning hosts the wrong-token requests hardly get through: none slowed.)
+    if hosts <= 8 {
+        assert!(refused["slowed"].as_u64().unwrap() > 0, "{refused}");
+    }
     assert!(report["phone"]["takeovers"].as_u64().unwrap() >= 1);
 }
 

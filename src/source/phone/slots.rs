@@ -15,6 +15,9 @@
 //!   a request) is oldest, passing over any whose bytes wait unread (it is speaking now). A phone speaks within a round trip of
 //!   its connection and completes its handshake within a few; connections opened and left
 //!   idle, however fast they are reopened, go before it.
+//! - An address that showed the token lately (the phone's; the last [`TRUSTED`] of them) is
+//!   trusted: its guests (the page reconnecting after a screen lock, its next request) go
+//!   only after every other guest, within its share of [`PER_ADDRESS`].
 //! - A connection that shows the token becomes the phone's. A guest never takes its slot; the
 //!   phone's own are let go only for the phone's (its idlest keep-alive first; the streaming
 //!   WebSocket never).
@@ -55,6 +58,8 @@ pub const GUEST_SLOTS: usize = MAX_CONNECTIONS - PHONE_SLOTS;
 /// Guests one address holds at once: a dozen addresses are needed to fill the guests' slots
 /// (a phone's page and its scripts show the token with their first request).
 pub const PER_ADDRESS: usize = 4;
+/// Addresses remembered for having shown the token.
+pub const TRUSTED: usize = 8;
 /// A connection is not counted silent before this: a client's first bytes (a ClientHello)
 /// follow its connection within a round trip.
 pub const GRACE: Duration = Duration::from_millis(250);
@@ -94,6 +99,8 @@ pub struct Slots {
 struct Inner {
     next: u64,
     conns: HashMap<u64, Entry>,
+    /// The addresses that showed the token lately (at most [`TRUSTED`], the latest last).
+    trusted: Vec<IpAddr>,
 }
 
 impl Inner {
@@ -104,6 +111,7 @@ impl Inner {
     /// is speaking now: it is passed over, unless its address holds over half its share.
     fn let_go(&mut self, among: impl Fn(&Entry) -> bool) -> bool {
         let now = Instant::now();
+        let trusted = std::mem::take(&mut self.trusted);
         let mut speaking = Vec::new();
         let mut per_ip: HashMap<IpAddr, usize> = HashMap::new();
         for e in self.conns.values() {
@@ -118,16 +126,18 @@ impl Inner {
                 .filter(|(id, e)| !e.let_go && among(e) && !speaking.contains(*id))
                 .min_by_key(|(id, e)| {
                     let rank = match e.stage {
+                        Stage::Silent | Stage::Talking if trusted.contains(&e.ip) => 2,
                         Stage::Silent if now.duration_since(e.last) >= GRACE => 0,
                         Stage::Silent | Stage::Talking => 1,
-                        Stage::Phone => 2,
-                        Stage::Streaming => 3,
+                        Stage::Phone => 3,
+                        Stage::Streaming => 4,
                     };
                     let crowd = per_ip.get(&e.ip).copied().unwrap_or(0);
                     (rank, std::cmp::Reverse(crowd), e.last, **id)
                 })
                 .map(|(id, _)| *id);
             let Some(id) = victim else {
+                self.trusted = trusted;
                 return false;
             };
             let e = self.conns.get_mut(&id).expect("a connection just found");
@@ -141,6 +151,7 @@ impl Inner {
             // Out of the count at once; the connection's task drops its slot soon after.
             e.let_go = true;
             e.kick.notify_one();
+            self.trusted = trusted;
             return true;
         }
     }
@@ -254,6 +265,12 @@ impl Slot {
                 }
                 _ => return (false, 0),
             }
+            let ip = inner.conns[&id].ip;
+            inner.trusted.retain(|&t| t != ip);
+            if inner.trusted.len() >= TRUSTED {
+                inner.trusted.remove(0);
+            }
+            inner.trusted.push(ip);
             let mut evicted = 0;
             while inner.live(false) > PHONE_SLOTS && inner.let_go(|e| e.stage == Stage::Phone) {
                 evicted += 1;
