@@ -280,3 +280,48 @@ async fn issue_34_the_page_marks_the_joined_nodes() {
     }
     browser.close().await;
 }
+
+/// Issue 48, point 2: the view opened on the machine that runs sfs shows the phone page's QR
+/// code, its address with the token and the certificate's fingerprint (fetched from
+/// `/status`, never from the `status` events, which carry no token).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(sfs_chromium),
+    ignore = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
+)]
+async fn issue_48_the_view_on_this_machine_shows_the_phone_address() {
+    available();
+    let dir = tmpdir("view-phone-address");
+    let view_port = common::view::free_port();
+    let d = common::phone::Daemon::start(
+        &dir.join("session"),
+        false,
+        &["--view", &format!("127.0.0.1:{view_port}")],
+    );
+    let browser = Browser::start(&dir.join("profile")).await;
+    browser
+        .goto(&format!("http://127.0.0.1:{view_port}/"))
+        .await;
+    let t0 = std::time::Instant::now();
+    let shown = loop {
+        let v = browser
+            .execute(
+                "const a = document.getElementById('phone-url'), q = document.getElementById('phone-qr');
+                 return [a.getAttribute('href'), q.naturalWidth, document.getElementById('phone-fingerprint').textContent,
+                         document.getElementById('phone').hidden];",
+                serde_json::json!([]),
+            )
+            .await;
+        if v[0].is_string() && v[1].as_u64() > Some(0) {
+            break v;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(20), "not shown: {v}");
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    };
+    assert_eq!(shown[0], d.url.as_str());
+    assert_eq!(shown[3], false);
+    let fingerprint = shown[2].as_str().unwrap();
+    assert_eq!(fingerprint.len(), 95, "{fingerprint}");
+    browser.close().await;
+    d.stop();
+}
