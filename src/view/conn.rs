@@ -127,7 +127,9 @@ impl axum::serve::Listener for GuardedListener {
 /// acknowledged and the edge did not follow, or when bytes wait unacknowledged and none were;
 /// when nothing was sent, the peer owes nothing; a window larger than ever before is no
 /// evidence either way (a receiver offers more of its buffer as data comes, reading or not:
-/// with a large buffer, for its first seconds, TCP does not tell a sleeper from a reader). A peer with no evidence of draining for
+/// with a large buffer, for its first seconds, TCP does not tell a sleeper from a reader);
+/// but a peer with no evidence of draining for twice [`DRAIN_TIMEOUT`] has stopped reading
+/// whatever its latest check said. A peer with no evidence of draining for
 /// [`DRAIN_TIMEOUT`] and a stall at its latest check has stopped reading. (Window sizes alone
 /// do not tell: a reading client's window wobbles by a scaling step, and a non-reading one's
 /// can grow for its first seconds.)
@@ -183,8 +185,12 @@ impl Drain {
         self.edge = self.edge.max(edge);
         if !stall && !growing {
             self.drained = now;
+            return false;
         }
-        stall && now.duration_since(self.drained) > DRAIN_TIMEOUT
+        // A stall for the drain time, or no evidence of reading at all for twice as long (a
+        // window that kept growing: a reader's settles within seconds).
+        let undrained = now.duration_since(self.drained);
+        (stall && undrained > DRAIN_TIMEOUT) || undrained > 2 * DRAIN_TIMEOUT
     }
 }
 
@@ -238,6 +244,7 @@ pub struct Guarded {
     io: TcpStream,
     live: Arc<AtomicUsize>,
     drain: Drain,
+    health: Arc<Health>,
     last_activity: Instant,
     /// When a request's first byte was read with nothing written since.
     head_since: Option<Instant>,
@@ -253,6 +260,7 @@ impl Guarded {
             io,
             live,
             drain: Drain::new(now),
+            health: Arc::new(Health::new(now)),
             last_activity: now,
             head_since: None,
             blocked_since: None,
@@ -280,7 +288,9 @@ impl Guarded {
             self.head_since = None;
         }
         self.blocked_since = None;
-        if self.drain.stalled(&self.io, now) {
+        let stalled = self.drain.stalled(&self.io, now);
+        self.health.drained(self.drain.drained);
+        if stalled {
             return Err(io::Error::new(
                 io::ErrorKind::TimedOut,
                 "view connection closed: the client stopped reading",
@@ -306,12 +316,44 @@ impl Guarded {
     }
 }
 
-/// Both ends of a view connection (axum's connect info): whether the client is this machine.
-#[derive(Debug, Clone, Copy)]
+/// What a handler may know of its connection's draining ([`Drain`]): when its peer last
+/// showed that it reads. Shared by the connection and its requests.
+#[derive(Debug)]
+pub struct Health {
+    epoch: Instant,
+    /// [`Drain`]'s last evidence of draining, ms after `epoch`.
+    drained_ms: std::sync::atomic::AtomicU64,
+}
+
+impl Health {
+    fn new(now: Instant) -> Health {
+        Health {
+            epoch: now,
+            drained_ms: std::sync::atomic::AtomicU64::new(0),
+        }
+    }
+
+    fn drained(&self, at: Instant) {
+        let ms = at.saturating_duration_since(self.epoch).as_millis() as u64;
+        self.drained_ms.store(ms, Ordering::Relaxed);
+    }
+
+    /// How long the peer has shown no sign of reading what it was sent (since the connection
+    /// was made, when never).
+    pub fn undrained_for(&self) -> Duration {
+        let at = self.epoch + Duration::from_millis(self.drained_ms.load(Ordering::Relaxed));
+        Instant::now().saturating_duration_since(at)
+    }
+}
+
+/// Both ends of a view connection (axum's connect info): whether the client is this machine,
+/// and how its peer drains.
+#[derive(Debug, Clone)]
 pub struct Ends {
     pub peer: std::net::SocketAddr,
     /// This server's end (`None` where the socket does not say).
     pub local: Option<std::net::SocketAddr>,
+    pub health: Arc<Health>,
 }
 
 impl Ends {
@@ -330,6 +372,7 @@ impl axum::extract::connect_info::Connected<axum::serve::IncomingStream<'_, Guar
         Ends {
             peer: *stream.remote_addr(),
             local: stream.io().io.local_addr().ok(),
+            health: stream.io().health.clone(),
         }
     }
 }

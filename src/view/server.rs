@@ -19,8 +19,11 @@ use tower::ServiceBuilder;
 
 /// Where `--view` serves when given without an address.
 pub const DEFAULT_ADDRESS: &str = "127.0.0.1:8040";
-/// Event streams open at once; one more is answered 503.
+/// Event streams open at once; one more takes the slot of a stream whose client has shown no
+/// sign of reading for [`UNDRAINED`], else it is answered 503.
 pub const MAX_STREAMS: usize = 32;
+/// A stream whose client has not drained for this long gives its slot to a new client.
+pub const UNDRAINED: Duration = Duration::from_secs(3);
 /// Requests being answered at once (event streams aside); one more is answered 503.
 pub const MAX_IN_FLIGHT: usize = 64;
 /// A request not answered within this is dropped.
@@ -41,7 +44,7 @@ pub async fn bind(addr: SocketAddr) -> std::io::Result<tokio::net::TcpListener> 
 #[derive(Clone)]
 struct App {
     view: View,
-    streams: Arc<AtomicUsize>,
+    streams: Arc<Streams>,
     stop: Shutdown,
     /// Whether the view wants its token (then every client answered has shown it).
     token: bool,
@@ -74,7 +77,7 @@ pub fn serve(
     let access = Arc::new(super::access::Access::new(ports, allowed_hosts, token));
     let app = App {
         view: view.clone(),
-        streams: Arc::new(AtomicUsize::new(0)),
+        streams: Arc::new(Streams::default()),
         stop: stop.clone(),
         token: !exposed,
     };
@@ -271,21 +274,60 @@ async fn not_found() -> Response {
     (StatusCode::NOT_FOUND, "not found\n").into_response()
 }
 
-/// Counts an open event stream while it lives.
-struct StreamSlot(Arc<AtomicUsize>);
+/// An open event stream: its connection's health, and the signal that ends it.
+type OpenStream = (Arc<super::conn::Health>, Arc<tokio::sync::Notify>);
+
+/// The open event streams.
+#[derive(Default)]
+struct Streams {
+    open: std::sync::Mutex<std::collections::HashMap<u64, OpenStream>>,
+    next: std::sync::atomic::AtomicU64,
+}
+
+/// An open event stream's place in [`Streams`], given up when dropped.
+struct StreamSlot(Arc<Streams>, u64);
 
 impl Drop for StreamSlot {
     fn drop(&mut self) {
-        self.0.fetch_sub(1, Ordering::AcqRel);
+        super::lock(&self.0.open).remove(&self.1);
     }
 }
 
-async fn events(State(app): State<App>) -> Response {
-    if app.streams.fetch_add(1, Ordering::AcqRel) >= MAX_STREAMS {
-        app.streams.fetch_sub(1, Ordering::AcqRel);
-        return (StatusCode::SERVICE_UNAVAILABLE, "too many event streams\n").into_response();
+impl Streams {
+    /// A slot for a new stream on a connection of `health`; when all are taken, the one whose
+    /// client has shown no sign of reading longest gives its place (after [`UNDRAINED`]).
+    fn take(
+        self: &Arc<Self>,
+        health: Arc<super::conn::Health>,
+    ) -> Option<(StreamSlot, Arc<tokio::sync::Notify>)> {
+        let mut open = super::lock(&self.open);
+        if open.len() >= MAX_STREAMS {
+            let (id, undrained) = open
+                .iter()
+                .map(|(id, (h, _))| (*id, h.undrained_for()))
+                .max_by_key(|(_, u)| *u)?;
+            if undrained < UNDRAINED {
+                return None;
+            }
+            if let Some((_, end)) = open.remove(&id) {
+                tracing::debug!(
+                    ?undrained,
+                    "view: an event stream not read gave its slot to a new client"
+                );
+                end.notify_one();
+            }
+        }
+        let id = self.next.fetch_add(1, Ordering::Relaxed);
+        let end = Arc::new(tokio::sync::Notify::new());
+        open.insert(id, (health, end.clone()));
+        Some((StreamSlot(self.clone(), id), end))
     }
-    let slot = StreamSlot(app.streams.clone());
+}
+
+async fn events(State(app): State<App>, ConnectInfo(ends): ConnectInfo<Ends>) -> Response {
+    let Some((slot, end)) = app.streams.take(ends.health.clone()) else {
+        return (StatusCode::SERVICE_UNAVAILABLE, "too many event streams\n").into_response();
+    };
     let rx = app.view.subscribe();
     // The first event is the status now, so that a page shows something at once.
     let first = Event {
@@ -294,7 +336,7 @@ async fn events(State(app): State<App>) -> Response {
             .unwrap_or_default()
             .into(),
     };
-    let state = (Some(first), rx, slot, app.stop.clone());
+    let state = (Some(first), rx, (slot, end), app.stop.clone());
     let stream = futures_util::stream::unfold(state, |(first, mut rx, slot, stop)| async move {
         let ev = match first {
             Some(ev) => ev,
@@ -305,6 +347,8 @@ async fn events(State(app): State<App>) -> Response {
                     Err(_) => return None,
                 },
                 _ = stop.triggered() => return None,
+                // Its slot given to a new client (not read for a while).
+                _ = slot.1.notified() => return None,
             },
         };
         let sse = axum::response::sse::Event::default()
@@ -315,7 +359,12 @@ async fn events(State(app): State<App>) -> Response {
             (None, rx, slot, stop),
         ))
     });
-    Sse::new(stream)
+    let mut r = Sse::new(stream)
         .keep_alive(KeepAlive::default())
-        .into_response()
+        .into_response();
+    // Its connection ends with it (a browser opens a new one to reconnect): a stream ended
+    // for a client that does not read leaves nothing held.
+    r.headers_mut()
+        .insert(header::CONNECTION, HeaderValue::from_static("close"));
+    r
 }
