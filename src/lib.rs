@@ -28,6 +28,8 @@
 //!   `network.glb` bytes, warnings), with the caches kept between runs.
 //! - [`gltf_out`]: all glTF writing and reading (the output contract).
 //! - [`live`]: the worker that rebuilds the outputs after every curve (coalescing).
+//! - [`host`]: whether a request's `Host` names this server (the view's and the phone page's
+//!   defence against DNS rebinding).
 //! - [`view`]: the operator's live view, a web page served while the session runs (the
 //!   network, surface, curve being scanned, status and warnings, kept current by server-sent
 //!   events), with the Prometheus [`metrics`] on the same server.
@@ -61,6 +63,7 @@ pub mod clock;
 pub mod config;
 pub mod eval;
 pub mod gltf_out;
+pub mod host;
 pub mod keypad;
 pub mod link;
 pub mod live;

@@ -593,3 +593,42 @@ async fn issue_48_limits_as_documented() {
     assert!(!ua.chars().any(char::is_control), "{ua}");
     assert!(ua.starts_with("Mozilla/5.0 \\u{"), "{ua}");
 }
+
+/// Point 4: SIGINT stops the daemon at any moment before it serves (and after): sent 0 to
+/// 300 ms after the start, the daemon is gone within 2 s.
+#[test]
+fn issue_48_sigint_stops_the_phone_daemon_at_any_moment() {
+    let dir = tmpdir("phone-sigint");
+    for (k, after_ms) in [0u64, 5, 20, 50, 100, 300].into_iter().enumerate() {
+        let session = dir.join(format!("s{k}"));
+        let mut child = sfs()
+            .args([
+                "--log",
+                "warn",
+                "run",
+                "--phone",
+                "127.0.0.1:0",
+                "--session",
+            ])
+            .arg(&session)
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(after_ms));
+        // SAFETY: kill sends a signal to a child of ours.
+        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
+        let t0 = Instant::now();
+        loop {
+            if child.try_wait().unwrap().is_some() {
+                break;
+            }
+            if t0.elapsed() > Duration::from_secs(2) {
+                let _ = child.kill();
+                panic!("SIGINT {after_ms} ms after the start: still running 2 s later");
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}

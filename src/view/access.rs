@@ -24,9 +24,6 @@ use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use std::sync::Arc;
 
-/// The longest `Host` considered (a DNS name has at most 253 characters, plus a port).
-const MAX_HOST: usize = 260;
-
 /// The cookie that carries the token for the page's own requests.
 const COOKIE: &str = "sfs_view_token";
 
@@ -56,7 +53,7 @@ impl Access {
     pub fn new(ports: Vec<u16>, allowed_hosts: Vec<String>, token: Option<String>) -> Access {
         let names = allowed_hosts
             .into_iter()
-            .map(|h| split_port(&h).0.to_ascii_lowercase())
+            .map(|h| crate::host::split_port(&h).0.to_ascii_lowercase())
             .collect();
         Access {
             ports,
@@ -65,31 +62,9 @@ impl Access {
         }
     }
 
-    /// Whether a request with this `Host` header is for this server.
+    /// Whether a request with this `Host` header is for this server ([`crate::host`]).
     pub fn host(&self, host: Option<&str>) -> Verdict {
-        let Some(h) = host.filter(|h| !h.is_empty() && h.len() <= MAX_HOST) else {
-            return Verdict::WrongHost;
-        };
-        let (name, port) = split_port(h);
-        let port = match port {
-            None => 80,
-            Some(p) => match p.parse::<u16>() {
-                Ok(p) => p,
-                Err(_) => return Verdict::WrongHost,
-            },
-        };
-        if !self.ports.contains(&port) {
-            return Verdict::WrongHost;
-        }
-        let name = name.to_ascii_lowercase();
-        let literal = name
-            .strip_prefix('[')
-            .and_then(|n| n.strip_suffix(']'))
-            .map_or_else(
-                || name.parse::<std::net::Ipv4Addr>().is_ok(),
-                |v6| v6.parse::<std::net::Ipv6Addr>().is_ok(),
-            );
-        if literal || name == "localhost" || self.names.contains(&name) {
+        if crate::host::names_this_server(host, &self.ports, &self.names) {
             Verdict::Allowed
         } else {
             Verdict::WrongHost
@@ -156,23 +131,6 @@ fn query_token(query: &str) -> Option<String> {
 /// Compares without stopping at the first difference (the token is a secret).
 fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
-}
-
-/// `name:port` → (`name`, `port`); an IPv6 literal keeps its brackets.
-fn split_port(h: &str) -> (&str, Option<&str>) {
-    if let Some(rest) = h.strip_prefix('[') {
-        return match rest.find(']') {
-            Some(end) => {
-                let (name, after) = h.split_at(end + 2);
-                (name, after.strip_prefix(':'))
-            }
-            None => (h, None),
-        };
-    }
-    match h.rsplit_once(':') {
-        Some((name, port)) => (name, Some(port)),
-        None => (h, None),
-    }
 }
 
 /// The middleware: 421 for a foreign `Host`, 403 without the token; a page opened with a

@@ -24,7 +24,7 @@
 //! the phone needs. Nothing the phone sends is more than bytes for the decoder. The token is
 //! printed on standard error (with its QR code) and kept in `phone.url` (mode 0600); it is
 //! not logged otherwise, and the live view shows it only to a client that may write
-//! ([`crate::view`]: on this machine, or with the view's own token).
+//! (on this machine, or with the view's own token).
 
 mod cert;
 pub mod qr;

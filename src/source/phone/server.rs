@@ -27,7 +27,6 @@ use super::stats::Conn;
 use super::{lock, Msg, Phone, MAX_MESSAGE};
 use crate::shutdown::Shutdown;
 use crate::source::SourceEvent;
-use crate::view::access::{Access, Verdict};
 use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{ConnectInfo, Request, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode, Uri};
@@ -94,7 +93,8 @@ struct Failures {
 
 struct Shared {
     ctx: Context,
-    access: Access,
+    /// `[phone] allowed_hosts`, lower case, without port.
+    names: Vec<String>,
     live: Mutex<Option<Live>>,
     failures: Mutex<HashMap<IpAddr, Failures>>,
     slots: Arc<Slots>,
@@ -124,10 +124,14 @@ pub(super) fn run(listener: std::net::TcpListener, ctx: Context, stop: Shutdown,
                 return;
             }
         };
-        let access = Access::new(vec![ctx.port], ctx.allowed_hosts.clone(), None);
+        let names = ctx
+            .allowed_hosts
+            .iter()
+            .map(|h| crate::host::split_port(h).0.to_ascii_lowercase())
+            .collect();
         let app: App = Arc::new(Shared {
             ctx,
-            access,
+            names,
             live: Mutex::new(None),
             failures: Mutex::new(HashMap::new()),
             slots: Slots::new(),
@@ -254,7 +258,7 @@ async fn admit(
         .headers()
         .get(header::HOST)
         .and_then(|h| h.to_str().ok());
-    if app.access.host(host) != Verdict::Allowed {
+    if !crate::host::names_this_server(host, &[app.ctx.port], &app.names) {
         lock(&app.ctx.phone.stats).refused.host += 1;
         return closing(
             StatusCode::MISDIRECTED_REQUEST,
