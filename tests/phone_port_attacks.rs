@@ -5,10 +5,10 @@
 //!   left, and 64 parallel requests with a wrong token, all at once: the phone still gets its
 //!   page on at least 29 of 30 tries within 2 s, and its WebSocket back within 3 s;
 //! - point 2: the view gives the token (its QR code, the address in `/status`) only to a
-//!   client on this machine, never in its events; `phone.url` is 0600; a takeover needs the
-//!   token, and is logged with the address and counted;
+//!   client on this machine or one with the view's token, never in its events; `phone.url` is
+//!   0600; a takeover needs the token, and is logged with the address and counted;
 //! - point 4: a FIFO or a device as the certificate, the key or `phone.url` is an error exit
-//!   naming the file within a second;
+//!   naming the file within a second; SIGINT stops the daemon at any moment;
 //! - point 5: a message over 64 KiB, whatever its frame declares, is closed with 1009, a text
 //!   message with 1003, each counted; a page whose clock disagrees gives no latency; the user
 //!   agent is stored bounded and escaped; a foreign `Host` gets 421.
@@ -631,4 +631,44 @@ fn issue_48_sigint_stops_the_phone_daemon_at_any_moment() {
             std::thread::sleep(Duration::from_millis(10));
         }
     }
+}
+
+/// Point 2, the other way to the QR code: with `[view] token`, a client on another host that
+/// gives the view's token may write, and gets the phone's address; one without it gets 403 for
+/// every route.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn issue_48_the_views_token_shows_the_phone_address_to_another_host() {
+    let dir = tmpdir("phone-view-token");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("view.toml");
+    let view_token = "0123456789abcdef0123";
+    std::fs::write(&cfg, format!("[view]\ntoken = \"{view_token}\"\n")).unwrap();
+    let view_port = common::view::free_port();
+    let d = Daemon::start(
+        &dir.join("session"),
+        false,
+        &[
+            "--config",
+            cfg.to_str().unwrap(),
+            "--view",
+            &format!("127.0.0.1:{view_port}"),
+        ],
+    );
+    let other = host(4, 1);
+    let (st, _) = view_get(other, view_port, "/status").await;
+    assert_eq!(st, 403);
+    let (st, body) = view_get(other, view_port, &format!("/status?token={view_token}")).await;
+    assert_eq!(st, 200);
+    assert!(
+        body.contains(&format!("\"phone_url\":\"{}\"", d.url)),
+        "{body}"
+    );
+    let (st, _) = view_get(
+        other,
+        view_port,
+        &format!("/phone-qr.svg?token={view_token}"),
+    )
+    .await;
+    assert_eq!(st, 200);
+    d.stop();
 }
