@@ -316,10 +316,7 @@ fn issue_48_a_client_that_does_not_read_is_closed_within_15_s_whatever_its_buffe
         .collect();
     for r in runs {
         let (rcvbuf, served, open) = r.join().unwrap();
-        assert_eq!(
-            open, 0,
-            "{rcvbuf} B: {open} sleepers still connected after 15 s"
-        );
+        assert_eq!(open, 0, "{rcvbuf} B: {open} sleepers still connected");
         println!(
             "issue 48 point 3: receive buffer {rcvbuf} B: a new client served after {served:.1?}"
         );

@@ -344,7 +344,10 @@ async fn events(State(app): State<App>, ConnectInfo(ends): ConnectInfo<Ends>) ->
                 r = rx.recv() => match r {
                     Ok(ev) => ev,
                     // Too far behind (a stalled client): dropped; a browser reconnects.
-                    Err(_) => return None,
+                    Err(e) => {
+                        tracing::debug!("view: an event stream ended: {e}");
+                        return None;
+                    }
                 },
                 _ = stop.triggered() => return None,
                 // Its slot given to a new client (not read for a while).
