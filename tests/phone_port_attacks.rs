@@ -214,12 +214,7 @@ async fn view_get(from: IpAddr, port: u16, path: &str) -> (u16, String) {
     .unwrap();
     let mut text = String::new();
     let _ = tokio::time::timeout(Duration::from_secs(3), tcp.read_to_string(&mut text)).await;
-    let status = text
-        .split_whitespace()
-        .nth(1)
-        .and_then(|c| c.parse().ok())
-        .unwrap_or(0);
-    (status, text)
+    (http_status(&text), text)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -317,6 +312,26 @@ async fn issue_48_the_token_stays_with_the_phone() {
     assert_eq!(log.matches(token.as_str()).count(), 1, "{log}");
 }
 
+/// `sfs run --phone 127.0.0.1:0 --session SESSION`, its standard error to `stderr` (for the
+/// tests that watch it start or fail, not [`Daemon`], which waits until it serves).
+fn phone_daemon(session: &std::path::Path, stderr: std::process::Stdio) -> std::process::Child {
+    sfs()
+        .args([
+            "--log",
+            "warn",
+            "run",
+            "--phone",
+            "127.0.0.1:0",
+            "--session",
+        ])
+        .arg(session)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(stderr)
+        .spawn()
+        .unwrap()
+}
+
 /// The daemon on a session directory whose `name` is `target` (a FIFO or a device): an error
 /// exit within a second that names the file.
 fn refused_within_a_second(name: &str, target: Option<&str>) {
@@ -342,21 +357,7 @@ fn refused_within_a_second(name: &str, target: Option<&str>) {
         std::fs::write(session.join(other), "").unwrap();
     }
     let t0 = Instant::now();
-    let mut child = sfs()
-        .args([
-            "--log",
-            "warn",
-            "run",
-            "--phone",
-            "127.0.0.1:0",
-            "--session",
-        ])
-        .arg(&session)
-        .stdin(std::process::Stdio::null())
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = phone_daemon(&session, std::process::Stdio::piped());
     let status = loop {
         if let Some(st) = child.try_wait().unwrap() {
             break st;
@@ -601,21 +602,7 @@ fn issue_48_sigint_stops_the_phone_daemon_at_any_moment() {
     let dir = tmpdir("phone-sigint");
     for (k, after_ms) in [0u64, 5, 20, 50, 100, 300].into_iter().enumerate() {
         let session = dir.join(format!("s{k}"));
-        let mut child = sfs()
-            .args([
-                "--log",
-                "warn",
-                "run",
-                "--phone",
-                "127.0.0.1:0",
-                "--session",
-            ])
-            .arg(&session)
-            .stdin(std::process::Stdio::null())
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap();
+        let mut child = phone_daemon(&session, std::process::Stdio::null());
         std::thread::sleep(Duration::from_millis(after_ms));
         // SAFETY: kill sends a signal to a child of ours.
         unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };

@@ -28,12 +28,7 @@ fn status_of(port: u16, path: &str, headers: &[String]) -> (u16, String) {
     let mut resp = Vec::new();
     let _ = s.read_to_end(&mut resp);
     let text = String::from_utf8_lossy(&resp).into_owned();
-    let code = text
-        .split_whitespace()
-        .nth(1)
-        .and_then(|c| c.parse().ok())
-        .unwrap_or(0);
-    (code, text)
+    (common::http_status(&text), text)
 }
 
 fn host(h: &str) -> Vec<String> {

@@ -168,15 +168,7 @@ fn issue_31_stalled_event_streams_are_dropped_and_a_new_client_is_served() {
         Some("realtime"),
         &[],
     );
-    let ask = || {
-        let mut s = TcpStream::connect(("127.0.0.1", port)).unwrap();
-        s.write_all(format!("GET /events HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n").as_bytes())
-            .unwrap();
-        s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
-        let mut head = [0u8; 12];
-        let ok = s.read_exact(&mut head).is_ok() && head.starts_with(b"HTTP/1.1 200");
-        (s, ok)
-    };
+    let ask = || stream_with_buffer(port, None);
     let t0 = Instant::now();
     let stalled: Vec<TcpStream> = (0..32)
         .map(|_| {
@@ -187,17 +179,8 @@ fn issue_31_stalled_event_streams_are_dropped_and_a_new_client_is_served() {
         .collect();
     let (_, ok) = ask();
     assert!(!ok, "a 33rd stream was served while 32 were open");
-    let served = loop {
-        let (_, ok) = ask();
-        if ok {
-            break t0.elapsed();
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(30),
-            "no stream slot was freed in 30 s"
-        );
-        std::thread::sleep(Duration::from_millis(250));
-    };
+    let served = served_after(t0, Duration::from_secs(30), || ask().1)
+        .expect("no stream slot was freed in 30 s");
     assert!(served < Duration::from_secs(15), "served after {served:?}");
     drop(stalled);
 }
@@ -233,16 +216,30 @@ fn issue_31_the_soft_file_limit_is_raised_to_the_hard_one() {
     assert_ne!(v[3], "200", "{limits}");
 }
 
+/// Asks `ask` every 250 ms until it is served: how long after `t0`, or `None` past `limit`.
+fn served_after(t0: Instant, limit: Duration, ask: impl Fn() -> bool) -> Option<Duration> {
+    while t0.elapsed() < limit {
+        if ask() {
+            return Some(t0.elapsed());
+        }
+        std::thread::sleep(Duration::from_millis(250));
+    }
+    None
+}
+
 /// `GET /events` on the view at `port` from a socket with a receive buffer of `rcvbuf` bytes
-/// (before connecting, so that the window is scaled for it); whether the stream was served.
-fn stream_with_buffer(port: u16, rcvbuf: u32) -> (TcpStream, bool) {
+/// (set before connecting, so that the window is scaled for it; `None`: the system's);
+/// whether the stream was served.
+fn stream_with_buffer(port: u16, rcvbuf: Option<u32>) -> (TcpStream, bool) {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .unwrap();
     let s = rt.block_on(async {
         let sock = tokio::net::TcpSocket::new_v4().unwrap();
-        sock.set_recv_buffer_size(rcvbuf).unwrap();
+        if let Some(b) = rcvbuf {
+            sock.set_recv_buffer_size(b).unwrap();
+        }
         sock.connect(([127, 0, 0, 1], port).into()).await.unwrap()
     });
     let mut s = s.into_std().unwrap();
@@ -276,7 +273,7 @@ fn issue_48_a_client_that_does_not_read_is_closed_within_15_s_whatever_its_buffe
                 let t0 = Instant::now();
                 let sleepers: Vec<TcpStream> = (0..32)
                     .map(|_| {
-                        let (s, ok) = stream_with_buffer(port, rcvbuf);
+                        let (s, ok) = stream_with_buffer(port, Some(rcvbuf));
                         assert!(
                             ok,
                             "{rcvbuf}: a stream slot was refused before they were all taken"
@@ -284,17 +281,10 @@ fn issue_48_a_client_that_does_not_read_is_closed_within_15_s_whatever_its_buffe
                         s
                     })
                     .collect();
-                let served = loop {
-                    let (_, ok) = stream_with_buffer(port, 1 << 16);
-                    if ok {
-                        break t0.elapsed();
-                    }
-                    assert!(
-                        t0.elapsed() < Duration::from_secs(40),
-                        "{rcvbuf}: no slot freed in 40 s"
-                    );
-                    std::thread::sleep(Duration::from_millis(250));
-                };
+                let served = served_after(t0, Duration::from_secs(40), || {
+                    stream_with_buffer(port, Some(1 << 16)).1
+                })
+                .unwrap_or_else(|| panic!("{rcvbuf}: no slot freed in 40 s"));
                 // Each sleeper's connection is closed by now (15 s after it was opened): what
                 // it holds ends in the end of the stream, whatever it had not read. Not with
                 // 4 MiB: while its window grows to its clamp and stays there (10-15 s of this
@@ -352,7 +342,8 @@ fn issue_48_a_client_that_reads_is_never_cut() {
         .into_iter()
         .map(|every| {
             std::thread::spawn(move || {
-                let (mut s, ok) = stream_with_buffer(port, if every == 4 { 4096 } else { 1 << 16 });
+                let (mut s, ok) =
+                    stream_with_buffer(port, Some(if every == 4 { 4096 } else { 1 << 16 }));
                 assert!(ok);
                 let t0 = Instant::now();
                 let (mut bytes, mut events) = (0u64, 0u64);

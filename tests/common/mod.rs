@@ -13,6 +13,15 @@ pub mod pty;
 pub mod view;
 pub mod webdriver;
 
+/// The status code of an HTTP answer's text (`HTTP/1.1 200 OK …`), 0 when there is none.
+pub fn http_status(answer: &str) -> u16 {
+    answer
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(0)
+}
+
 /// The `sfs` binary under test.
 pub fn sfs() -> std::process::Command {
     std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))

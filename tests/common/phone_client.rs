@@ -138,12 +138,7 @@ impl Client {
         let mut bytes = Vec::new();
         let _ = s.read_to_end(&mut bytes).await;
         let text = String::from_utf8_lossy(&bytes).into_owned();
-        let status = text
-            .split_whitespace()
-            .nth(1)
-            .and_then(|c| c.parse().ok())
-            .unwrap_or(0);
-        Ok((status, text))
+        Ok((super::http_status(&text), text))
     }
 
     /// The WebSocket at `/phone/ws?token=…`: the socket, or the refusal's status.

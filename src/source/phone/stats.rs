@@ -110,18 +110,16 @@ pub const USER_AGENT_CHARS: usize = 200;
 /// other invisible characters escaped (`\u{1b}`), so that it prints safely in a log, a report
 /// or a page.
 pub fn user_agent(raw: &str) -> String {
-    let mut out = String::new();
-    for c in raw.chars() {
-        if c.is_control() || matches!(c, '\u{200b}'..='\u{200f}' | '\u{2028}'..='\u{202e}') {
-            out.extend(c.escape_unicode());
-        } else {
-            out.push(c);
-        }
-        if out.chars().count() >= USER_AGENT_CHARS {
-            break;
-        }
-    }
-    out.chars().take(USER_AGENT_CHARS).collect()
+    let invisible =
+        |c: char| c.is_control() || matches!(c, '\u{200b}'..='\u{200f}' | '\u{2028}'..='\u{202e}');
+    raw.chars()
+        .flat_map(|c| {
+            let escaped = invisible(c).then(|| c.escape_unicode());
+            let plain = (!invisible(c)).then_some(c);
+            escaped.into_iter().flatten().chain(plain)
+        })
+        .take(USER_AGENT_CHARS)
+        .collect()
 }
 
 /// The running statistics.
