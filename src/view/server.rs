@@ -324,6 +324,13 @@ impl Streams {
     }
 }
 
+/// An event as the SSE stream sends it.
+fn sse_event(ev: &Event) -> axum::response::sse::Event {
+    axum::response::sse::Event::default()
+        .event(ev.name)
+        .data(&*ev.data)
+}
+
 async fn events(State(app): State<App>, ConnectInfo(ends): ConnectInfo<Ends>) -> Response {
     let Some((slot, end)) = app.streams.take(ends.health.clone()) else {
         return (StatusCode::SERVICE_UNAVAILABLE, "too many event streams\n").into_response();
@@ -336,32 +343,47 @@ async fn events(State(app): State<App>, ConnectInfo(ends): ConnectInfo<Ends>) ->
             .unwrap_or_default()
             .into(),
     };
-    let state = (Some(first), rx, (slot, end), app.stop.clone());
-    let stream = futures_util::stream::unfold(state, |(first, mut rx, slot, stop)| async move {
-        let ev = match first {
-            Some(ev) => ev,
-            None => tokio::select! {
-                r = rx.recv() => match r {
-                    Ok(ev) => ev,
-                    // Too far behind (a stalled client): dropped; a browser reconnects.
-                    Err(e) => {
-                        tracing::debug!("view: an event stream ended: {e}");
-                        return None;
-                    }
-                },
-                _ = stop.triggered() => return None,
-                // Its slot given to a new client (not read for a while).
-                _ = slot.1.notified() => return None,
-            },
-        };
-        let sse = axum::response::sse::Event::default()
-            .event(ev.name)
-            .data(&*ev.data);
-        Some((
-            Ok::<_, std::convert::Infallible>(sse),
-            (None, rx, slot, stop),
-        ))
-    });
+    // Once a second, whether the connection's drain check asks for padding (see `conn::Drain`).
+    let mut probe_tick = tokio::time::interval(Duration::from_secs(1));
+    probe_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let health = ends.health.clone();
+    let state = (Some(first), rx, (slot, end), app.stop.clone(), probe_tick);
+    let stream =
+        futures_util::stream::unfold(state, move |(first, mut rx, slot, stop, mut tick)| {
+            let health = health.clone();
+            async move {
+                let sse = match first {
+                    Some(ev) => sse_event(&ev),
+                    None => loop {
+                        tokio::select! {
+                            r = rx.recv() => match r {
+                                Ok(ev) => break sse_event(&ev),
+                                // Too far behind: ended; a browser reconnects and loads the
+                                // network again.
+                                Err(e) => {
+                                    tracing::debug!("view: an event stream ended: {e}");
+                                    return None;
+                                }
+                            },
+                            _ = stop.triggered() => return None,
+                            // Its slot given to a new client (not read for a while).
+                            _ = slot.1.notified() => return None,
+                            _ = tick.tick() => {
+                                let n = health.take_probe();
+                                if n > 0 {
+                                    break axum::response::sse::Event::default()
+                                        .comment(" ".repeat(n as usize));
+                                }
+                            }
+                        }
+                    },
+                };
+                Some((
+                    Ok::<_, std::convert::Infallible>(sse),
+                    (None, rx, slot, stop, tick),
+                ))
+            }
+        });
     let mut r = Sse::new(stream)
         .keep_alive(KeepAlive::default())
         .into_response();

@@ -22,7 +22,8 @@ impl Drop for Served {
 }
 
 /// `sfs replay CAPTURE --out OUT --pace PACE --view 127.0.0.1:PORT` (`pace` `None`: as fast
-/// as it goes), with `extra` arguments.
+/// as it goes), with `extra` arguments. Its log is dropped; with `SFS_VIEW_TEST_LOG=FILE` (to
+/// look into a failure), its debug log goes to FILE.
 pub fn serve_replay(
     capture: &Path,
     out: &Path,
@@ -30,22 +31,30 @@ pub fn serve_replay(
     port: u16,
     extra: &[&str],
 ) -> Served {
+    let log = std::env::var_os("SFS_VIEW_TEST_LOG");
     let mut c = Command::new(env!("CARGO_BIN_EXE_sfs"));
-    c.args(["--log", "warn", "replay"])
-        .arg(capture)
-        .arg("--out")
-        .arg(out)
-        .args(["--view", &format!("127.0.0.1:{port}")])
-        .args(extra);
+    c.args([
+        "--log",
+        if log.is_some() {
+            "debug,sfs::view::conn=trace"
+        } else {
+            "warn"
+        },
+        "replay",
+    ])
+    .arg(capture)
+    .arg("--out")
+    .arg(out)
+    .args(["--view", &format!("127.0.0.1:{port}")])
+    .args(extra);
     if let Some(p) = pace {
         c.args(["--pace", p]);
     }
-    Served(
-        c.stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    )
+    let stderr = match log.and_then(|f| std::fs::File::create(f).ok()) {
+        Some(f) => Stdio::from(f),
+        None => Stdio::null(),
+    };
+    Served(c.stdout(Stdio::null()).stderr(stderr).spawn().unwrap())
 }
 
 /// [`serve_replay`] on a free port, and the port: tried again on another port when the daemon
