@@ -669,30 +669,21 @@ mod tests {
             asked,
             [0, 199_000, 299_000, 399_000, 499_000, 499_000, 0, 0]
         );
-        // Never more than PROBE_MAX at once.
+        // Never more than PROBE_MAX at once, nor PROBE_BUDGET in all: a window of 16 MiB that
+        // keeps growing.
         let mut d = Drain::new(t0);
-        for i in 0..2u32 {
-            d.judge(
-                PeerState {
+        let asked: Vec<u32> = (0..10u32)
+            .map(|i| {
+                let p = PeerState {
                     acked: 1 + u64::from(i),
                     window: (1 << 24) + i,
                     waiting: 0,
-                },
-                t0 + Duration::from_secs(u64::from(i) + 1),
-            );
-        }
-        assert_eq!(d.probe, PROBE_MAX);
-        // Never more than PROBE_BUDGET in all.
-        for i in 2..10u32 {
-            d.judge(
-                PeerState {
-                    acked: 1 + u64::from(i),
-                    window: (1 << 24) + i,
-                    waiting: 0,
-                },
-                t0 + Duration::from_secs(u64::from(i) + 1),
-            );
-        }
+                };
+                d.judge(p, t0 + Duration::from_secs(u64::from(i) + 1));
+                d.probe
+            })
+            .collect();
+        assert_eq!(asked[..4], [0, PROBE_MAX, PROBE_MAX, 0]);
         assert_eq!((d.probed, d.probe), (PROBE_BUDGET, 0));
     }
 
