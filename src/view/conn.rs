@@ -11,7 +11,7 @@
 //! - the client has not drained what was written for [`DRAIN_TIMEOUT`] (a client that stopped
 //!   reading, whatever its receive buffer: see [`Drain`]; an event stream would otherwise fill
 //!   the kernel's buffers for minutes before a write blocked), or a write has been blocked for
-//!   [`STALL_TIMEOUT`].
+//!   [`STALL_TIMEOUT`] with no read seen meanwhile.
 
 use std::future::Future;
 use std::io;
@@ -35,7 +35,7 @@ pub const STALL_TIMEOUT: Duration = Duration::from_secs(10);
 /// gone within 15 s whatever its receive buffer: see [`Drain`]).
 pub const DRAIN_TIMEOUT: Duration = Duration::from_secs(6);
 /// A peer that has never read, found neither reading nor owing this long, is asked to show
-/// whether it reads: its stream is sent padding that fills the window it offers (see
+/// whether it reads: its stream is sent padding that fills the window it offers, twice over (see
 /// [`Drain`]).
 pub const PROBE_AFTER: Duration = Duration::from_secs(1);
 /// The most padding asked for at once, bytes.
@@ -148,8 +148,10 @@ impl axum::serve::Listener for GuardedListener {
 ///
 /// A sleeper with a large buffer would stay *neither* until the stream's own events filled its
 /// buffer (a 4 MiB receive buffer took 24–30 s of the demo capture's events). So a peer that
-/// has never read, *neither* for [`PROBE_AFTER`], is asked for a *probe*: padding as large as
-/// the window it offers, which the event stream sends as a comment (ignored by every client).
+/// has never read, *neither* for [`PROBE_AFTER`], is asked for a *probe*: padding twice as
+/// large as the window it offers (a receiver that does not read offers about half its free
+/// space at first: 4.26 MB of a 4 MiB buffer that took 7.16 MB), which the event stream sends
+/// as a comment (ignored by every client).
 /// A sleeper's buffer fills, its window closes and it owes; a reader reads it. That costs a
 /// reader about its window of padding while its window grows, before it has been seen to
 /// read, at most [`PROBE_BUDGET`]; once it has, it is never probed again.
@@ -247,6 +249,7 @@ impl Drain {
                 let left = PROBE_BUDGET.saturating_sub(self.probed);
                 self.probe = p
                     .window
+                    .saturating_mul(2)
                     .saturating_sub(p.waiting)
                     .min(PROBE_MAX)
                     .min(left as u32);
@@ -351,7 +354,27 @@ impl Guarded {
             self.head_since = None;
         }
         self.blocked_since = None;
+        self.check(now).map(|()| n)
+    }
+
+    /// While a write is blocked: the drain check goes on (a peer whose window is shut blocks
+    /// the writes that would otherwise run it), an error when the peer has stopped draining.
+    fn blocked(&mut self) -> io::Result<()> {
+        let now = Instant::now();
+        self.blocked_since.get_or_insert(now);
+        self.check(now)
+    }
+
+    /// The drain check (at most once a second): an error when the peer has stopped draining.
+    /// A read seen restarts the blocked write's clock: a client that reads, if more slowly
+    /// than the stream comes, is not cut for it (it falls behind, and its stream ends once it
+    /// is [`super::EVENT_QUEUE`] events behind).
+    fn check(&mut self, now: Instant) -> io::Result<()> {
+        let reads = self.drain.reads;
         let stalled = self.drain.stalled(&self.io, now);
+        if self.drain.reads > reads && self.blocked_since.is_some() {
+            self.blocked_since = Some(now);
+        }
         self.health.checked(&mut self.drain);
         if stalled {
             tracing::debug!(peer = ?self.io.peer_addr().ok(), drain = ?self.drain, "view: a connection closed: its client stopped reading");
@@ -360,17 +383,26 @@ impl Guarded {
                 "view connection closed: the client stopped reading",
             ));
         }
-        Ok(n)
+        Ok(())
     }
 
     /// After the inner stream said Pending: an error once the deadline has passed, else
-    /// Pending with the timer armed to wake this task then.
+    /// Pending with the timer armed to wake this task then (or, while a write is blocked, at
+    /// the next drain check: the task is woken to poll its write again, which runs it).
     fn pending_or_expired<T>(&mut self, cx: &mut Context<'_>) -> Poll<io::Result<T>> {
         let d = self.deadline();
-        if self.timer.deadline() != d {
-            self.timer.as_mut().reset(d);
+        let wake = match self.blocked_since {
+            Some(_) => d.min(self.drain.checked + Duration::from_secs(1)),
+            None => d,
+        };
+        if self.timer.deadline() != wake {
+            self.timer.as_mut().reset(wake);
         }
         match self.timer.as_mut().poll(cx) {
+            Poll::Ready(()) if Instant::now() < d => {
+                cx.waker().wake_by_ref();
+                Poll::Pending
+            }
             Poll::Ready(()) => {
                 tracing::debug!(
                     idle = ?self.last_activity.elapsed(),
@@ -503,10 +535,10 @@ impl AsyncWrite for Guarded {
         match Pin::new(&mut self.io).poll_write(cx, data) {
             Poll::Ready(Ok(n)) => Poll::Ready(self.wrote(n)),
             Poll::Ready(Err(e)) => Poll::Ready(Err(e)),
-            Poll::Pending => {
-                self.blocked_since.get_or_insert_with(Instant::now);
-                self.pending_or_expired(cx)
-            }
+            Poll::Pending => match self.blocked() {
+                Ok(()) => self.pending_or_expired(cx),
+                Err(e) => Poll::Ready(Err(e)),
+            },
         }
     }
 
@@ -518,10 +550,10 @@ impl AsyncWrite for Guarded {
         match Pin::new(&mut self.io).poll_write_vectored(cx, bufs) {
             Poll::Ready(Ok(n)) => Poll::Ready(self.wrote(n)),
             Poll::Ready(Err(e)) => Poll::Ready(Err(e)),
-            Poll::Pending => {
-                self.blocked_since.get_or_insert_with(Instant::now);
-                self.pending_or_expired(cx)
-            }
+            Poll::Pending => match self.blocked() {
+                Ok(()) => self.pending_or_expired(cx),
+                Err(e) => Poll::Ready(Err(e)),
+            },
         }
     }
 
@@ -635,11 +667,19 @@ mod tests {
                 assert!(at <= 14, "a sleeper with {buffer} B: found after {at} s");
             }
         }
-        // Nothing sent: nothing owed.
-        assert_eq!(stalled_at(4096, |_| false, |_, _| 4096, |_| 0, 60), None);
+        // Nothing sent (a connection that is not an event stream takes no probe): nothing
+        // owed.
+        let t0 = Instant::now();
+        let mut d = Drain::new(t0);
+        let idle = PeerState {
+            acked: 5_000,
+            window: 65_536,
+            waiting: 0,
+        };
+        assert!((1..60).all(|t| !d.judge(idle, t0 + Duration::from_secs(t))));
     }
 
-    /// A window that grows with no read seen asks for padding as large as it (less what waits),
+    /// A window that grows with no read seen asks for padding twice as large (less what waits),
     /// after [`PROBE_AFTER`]; once the peer has read twice, no more.
     #[test]
     fn a_peer_that_never_read_is_probed() {
@@ -667,7 +707,7 @@ mod tests {
         }
         assert_eq!(
             asked,
-            [0, 199_000, 299_000, 399_000, 499_000, 499_000, 0, 0]
+            [0, 399_000, 599_000, 799_000, 999_000, 999_000, 0, 0]
         );
         // Never more than PROBE_MAX at once, nor PROBE_BUDGET in all: a window of 16 MiB that
         // keeps growing.
