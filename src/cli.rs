@@ -176,6 +176,11 @@ pub struct SimulateArgs {
     /// first or last tag). The truth still names every crossing.
     #[arg(long, value_name = "FRACTION", default_value_t = 0.0)]
     pub untagged: f64,
+    /// Plant one operator or field fault: a wrong node typed, a slip over one segment, a
+    /// late Enter, a magnet under one stretch of a curve. Placed and sized on a random stream
+    /// of its own (the rest of the capture is the same seed's); the truth's `faults` says where.
+    #[arg(long, value_enum, value_name = "KIND")]
+    pub fault: Option<crate::simulate::planted::Planted>,
 }
 
 #[derive(Debug, Args)]

@@ -412,6 +412,10 @@ fn simulate(a: SimulateArgs) -> i32 {
         );
         return exit::USAGE;
     }
+    if a.structure.is_some() && a.fault.is_some() {
+        complain!("sfs: --fault applies to a scanned scene, not to a structure's sensor array");
+        return exit::USAGE;
+    }
     if a.structure.is_some() && a.untagged > 0.0 {
         complain!("sfs: --untagged applies to a scanned scene, not to a structure's sensor array");
         return exit::USAGE;
@@ -456,7 +460,18 @@ fn simulate(a: SimulateArgs) -> i32 {
         untagged: simulate::untagged_crossings(&sc, a.untagged, a.seed),
         ..Default::default()
     };
-    let sim = simulate::run_with(&sc, a.device.0, a.profile, a.seed, &mistakes);
+    let sim = match a.fault {
+        None => simulate::run_with(&sc, a.device.0, a.profile, a.seed, &mistakes),
+        Some(f) => {
+            match simulate::run_planted_with(&sc, a.device.0, a.profile, a.seed, &mistakes, f) {
+                Ok(sim) => sim,
+                Err(e) => {
+                    complain!("sfs: {e} (scene {})", sc.name);
+                    return exit::USAGE;
+                }
+            }
+        }
+    };
     let json = match serde_json::to_vec(&sim.truth) {
         Ok(j) => j,
         Err(e) => {
@@ -482,6 +497,17 @@ fn simulate(a: SimulateArgs) -> i32 {
         say!(
             "{} crossing(s) left untagged on one of their curves (listed in the truth's events)",
             mistakes.untagged.len()
+        );
+    }
+    for f in &sim.truth.faults {
+        let at = match (f.tag, f.node) {
+            (Some(t), Some(n)) => format!(", tag {t} (node {n})"),
+            _ => String::new(),
+        };
+        say!(
+            "planted: {} on curve {}{at} (the truth's faults)",
+            f.kind,
+            f.curve
         );
     }
     say!("capture: {}\ntruth:   {}", bin.display(), truth.display());

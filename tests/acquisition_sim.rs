@@ -172,7 +172,7 @@ fn stationary_flags_follow_the_operator() {
 fn magnetic_disturbance_is_flagged() {
     let mut p = DeviceParams::morphorider();
     // A ferromagnetic object near the pole.
-    p.disturbance = Some(sfs::simulate::device::Disturbance {
+    p.disturbances.push(sfs::simulate::device::Disturbance {
         center: Vector3::new(0.0, 0.0, R),
         radius: 0.05,
         field_ut: Vector3::new(15.0, 0.0, 5.0),

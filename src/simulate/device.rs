@@ -99,7 +99,8 @@ pub struct DeviceParams {
     /// Phone: standard deviation of the measured segment lengths, m (0: none sent). Default 0.003.
     pub segment_length_sigma: f64,
     pub earth: Earth,
-    pub disturbance: Option<Disturbance>,
+    /// Ferromagnetic objects near the surface (their fields add up).
+    pub disturbances: Vec<Disturbance>,
     pub faults: LinkFaults,
     /// Device clock at the session's start, µs (to put a clock wrap mid-session).
     pub clock_start_us: u32,
@@ -114,6 +115,9 @@ pub struct DeviceParams {
     pub stalls: Vec<(f64, f64)>,
     /// Wheel skids `(start s, duration s, factor)`: the wheel turns only `factor` of the motion.
     pub skids: Vec<(f64, f64, f64)>,
+    /// Phone: segments whose measured length reads `factor` × the true one
+    /// `(curve, segment, factor)` (a slip, issue 49).
+    pub segment_scale: Vec<(usize, usize, f64)>,
 }
 
 impl DeviceParams {
@@ -137,7 +141,7 @@ impl DeviceParams {
             mounting: Rotation3::from_axis_angle(&Vector3::z_axis(), 0.5f64.to_radians()),
             segment_length_sigma: 0.0,
             earth: Earth::default(),
-            disturbance: None,
+            disturbances: Vec::new(),
             faults: LinkFaults::default(),
             clock_start_us: 1_000_000,
             device_id: 0x5F5_0001,
@@ -145,6 +149,7 @@ impl DeviceParams {
             reboot_silence: 0.5,
             stalls: Vec::new(),
             skids: Vec::new(),
+            segment_scale: Vec::new(),
         }
     }
 
@@ -168,7 +173,7 @@ impl DeviceParams {
             mounting: Rotation3::identity(),
             segment_length_sigma: 0.003,
             earth: Earth::default(),
-            disturbance: None,
+            disturbances: Vec::new(),
             faults: LinkFaults::default(),
             clock_start_us: 2_000_000,
             device_id: 0x5F5_0002,
@@ -176,6 +181,7 @@ impl DeviceParams {
             reboot_silence: 0.5,
             stalls: Vec::new(),
             skids: Vec::new(),
+            segment_scale: Vec::new(),
         }
     }
 
@@ -542,9 +548,17 @@ fn measured_segment_lengths(
 ) -> Vec<(f64, u16, f64)> {
     let mut seg_lengths = Vec::new();
     if p.kind == DeviceKind::Phone && p.segment_length_sigma > 0.0 {
-        for c in &script.curves {
+        for (ci, c) in script.curves.iter().enumerate() {
             for (k, w) in c.tags.windows(2).enumerate() {
-                let len = (w[1].1 - w[0].1) + p.segment_length_sigma * rng.gauss();
+                // From Enter to Enter (a late Enter moves both ends it bounds).
+                let at = |j: usize| c.enter_s.get(j).copied().unwrap_or(c.tags[j].1);
+                let scale = p
+                    .segment_scale
+                    .iter()
+                    .filter(|&&(sc, sk, _)| (sc, sk) == (ci, k))
+                    .map(|x| x.2)
+                    .product::<f64>();
+                let len = scale * (at(k + 1) - at(k)) + p.segment_length_sigma * rng.gauss();
                 seg_lengths.push((w[1].2 + 1e-4, k as u16, len.max(1e-3)));
             }
         }
@@ -568,7 +582,7 @@ fn sensor_sample(
     let r = st.q.to_rotation_matrix();
     let sensor_from_world = (r.matrix() * frame_from_sensor).transpose();
     let mut b = *field;
-    if let Some(d) = &p.disturbance {
+    for d in &p.disturbances {
         b += d.at(&st.pos);
     }
     let acc = sensor_from_world * (st.acc + g) + rng.vec3(p.acc_sigma);

@@ -17,6 +17,7 @@
 pub mod device;
 pub mod mesh;
 pub mod operator;
+pub mod planted;
 pub mod procedural;
 pub use sfs_geometry::rng;
 pub mod scene;
@@ -176,6 +177,57 @@ pub fn run_without(
     more: &Mistakes,
     without: &[Fault],
 ) -> Simulation {
+    run_full(scene, device, profile, seed, more, without, None)
+}
+
+/// [`run`] with one fault planted ([`planted`]): the capture of the same seed without it, but
+/// for the fault; the truth's `faults` says where it is.
+pub fn run_planted(
+    scene: &Scene,
+    device: DeviceKind,
+    profile: Profile,
+    seed: u64,
+    fault: planted::Planted,
+) -> Result<Simulation, planted::NoPlace> {
+    run_planted_with(scene, device, profile, seed, &Mistakes::default(), fault)
+}
+
+/// [`run_planted`], with the operator also making the mistakes set in `more`.
+pub fn run_planted_with(
+    scene: &Scene,
+    device: DeviceKind,
+    profile: Profile,
+    seed: u64,
+    more: &Mistakes,
+    fault: planted::Planted,
+) -> Result<Simulation, planted::NoPlace> {
+    if device == DeviceKind::SensorArray {
+        return Err(planted::NoPlace {
+            kind: fault.name(),
+            reason: "a sensor array is not scanned",
+        });
+    }
+    let plan = planted::plan(fault, scene, seed, more)?;
+    Ok(run_full(
+        scene,
+        device,
+        profile,
+        seed,
+        more,
+        &[],
+        Some(&plan),
+    ))
+}
+
+fn run_full(
+    scene: &Scene,
+    device: DeviceKind,
+    profile: Profile,
+    seed: u64,
+    more: &Mistakes,
+    without: &[Fault],
+    plan: Option<&planted::Plan>,
+) -> Simulation {
     let on = |f: Fault| profile == Profile::Field && !without.contains(&f);
     let mut rng = Rng::new(seed);
     let mut p = match device {
@@ -205,6 +257,9 @@ pub fn run_without(
         ));
     }
     m.untagged.clone_from(&more.untagged);
+    if let Some(plan) = plan {
+        plan.act(m);
+    }
     let script = perform(&scene.specs(), &op, p.rate_hz, p.jitter, &mut rng);
     for &(c, node) in &script.untagged {
         events.push(format!(
@@ -215,6 +270,10 @@ pub fn run_without(
     if profile == Profile::Field {
         field_timeline(&script, n, duration, &on, &mut p, &mut events);
     }
+    let faults: Vec<_> = plan
+        .map(|plan| plan.realise(scene, &script, &mut p, &op.mistakes))
+        .into_iter()
+        .collect();
     let (mut bytes, samples) = render(&script, &p, &mut rng);
     if on(Fault::MidPacket) {
         // The capture starts in the middle of the first packet.
@@ -225,7 +284,8 @@ pub fn run_without(
             first / 2 + 1
         ));
     }
-    let truth = truth_of(scene, device, profile, seed, Vec::new(), events);
+    let mut truth = truth_of(scene, device, profile, seed, Vec::new(), events);
+    truth.faults = faults;
     Simulation {
         bytes,
         truth,
@@ -303,7 +363,7 @@ fn field_setup(
     let center = c.points[c.points.len() / 2];
     let radius = 0.05 * scene.bbox_diagonal();
     if on(Fault::Magnet) {
-        p.disturbance = Some(Disturbance {
+        p.disturbances.push(Disturbance {
             center,
             radius,
             field_ut: Vector3::new(15.0, 0.0, 5.0),
@@ -490,6 +550,7 @@ fn truth_of(
         bbox_diagonal: scene.bbox_diagonal(),
         sensors,
         events,
+        faults: Vec::new(),
     }
 }
 

@@ -71,6 +71,12 @@ pub struct Mistakes {
     /// untagged on this curve, issue 34). Not done at a curve's first or last tag, nor at a
     /// corner (where the operator stands to turn); [`Script::untagged`] says where it was.
     pub untagged: Vec<(usize, usize)>,
+    /// `(curve, tag, node)`: type this node's index there instead of the right one, and go on
+    /// unaware (a wrong node, issue 49; the same number of digits keeps the key timing).
+    pub typed_instead: Option<(usize, usize, u32)>,
+    /// `(curve, tag, m)`: type the index at the node, but press Enter only after rolling this
+    /// far on along the next segment (a late Enter, issue 49; never at a curve's last tag).
+    pub late_enter: Option<(usize, usize, f64)>,
 }
 
 impl Default for OperatorParams {
@@ -120,6 +126,8 @@ pub struct CurveTruth {
     pub kind: CurveKind,
     /// `(node, true distance s, time of Enter, wheel reading then)`.
     pub tags: Vec<(u32, f64, f64, f64)>,
+    /// The true distance at each tag's Enter (its `s`, but for a late Enter).
+    pub enter_s: Vec<f64>,
     pub length: f64,
 }
 
@@ -434,6 +442,14 @@ impl Timeline<'_> {
     /// Stands at the node, types its index and Enter, stands a moment (the hand tilting the
     /// device meanwhile, if `op` says so).
     fn type_index(&mut self, p: &Param, c: Option<usize>, s: f64, node: u32, op: &OperatorParams) {
+        self.type_digits(p, c, s, node, op);
+        self.key(b'\n');
+        self.stand(p, c, s, op.pause_after_enter, op.stand_wobble);
+        self.tilt = None;
+    }
+
+    /// [`Timeline::type_index`] up to its Enter.
+    fn type_digits(&mut self, p: &Param, c: Option<usize>, s: f64, node: u32, op: &OperatorParams) {
         let digits = node.to_string().len() as f64;
         if op.typing_tilt_deg > 0.0 {
             let phi = self.rng.range(0.0, std::f64::consts::TAU);
@@ -449,9 +465,6 @@ impl Timeline<'_> {
             self.key(d);
             self.stand(p, c, s, op.key_interval, op.stand_wobble);
         }
-        self.key(b'\n');
-        self.stand(p, c, s, op.pause_after_enter, op.stand_wobble);
-        self.tilt = None;
     }
 }
 
@@ -541,6 +554,7 @@ pub fn perform(
         let mut truth = CurveTruth {
             kind: spec.kind,
             tags: Vec::new(),
+            enter_s: Vec::new(),
             length: p.length(),
         };
         let mut s = 0.0;
@@ -576,17 +590,44 @@ pub fn perform(
                 tl.key(b'U');
                 tl.stand(&p, Some(ci), s, op.key_interval, op.stand_wobble);
             }
-            tl.type_index(&p, Some(ci), s, node, op);
-            if k == 0 || corner.is_some() {
+            let typed = match op.mistakes.typed_instead {
+                Some((c, t, other)) if (c, t) == (ci, k) => other,
+                _ => node,
+            };
+            let late = match op.mistakes.late_enter {
+                Some((c, t, m)) if (c, t) == (ci, k) && k + 1 < spec.tags.len() => {
+                    Some(m.min(0.5 * (p.cum[spec.tags[k + 1].0] - s)))
+                }
+                _ => None,
+            };
+            let at = s;
+            let mut enter_s = s;
+            match late {
+                None => tl.type_index(&p, Some(ci), s, typed, op),
+                Some(m) => {
+                    // The digits typed at the node, Enter once rolled `m` on.
+                    tl.type_digits(&p, Some(ci), s, typed, op);
+                    tl.tilt = None;
+                    if k == 0 {
+                        tl.turn_in_place(&p, ci, s, op);
+                        tl.turn = None;
+                    }
+                    s = tl.roll(&p, ci, s, s + m, op, period, phase);
+                    tl.key(b'\n');
+                    enter_s = s;
+                }
+            }
+            if late.is_none() && (k == 0 || corner.is_some()) {
                 tl.turn_in_place(&p, ci, s, op);
                 tl.turn = None;
             }
             truth.tags.push((
                 node,
-                s,
+                at,
                 tl.script.keys.last().map_or(tl.t, |k| k.0),
                 tl.wheel,
             ));
+            truth.enter_s.push(enter_s);
             if op.mistakes.repeated_index == Some((ci, k)) {
                 tl.type_index(&p, Some(ci), s, node, op);
                 tl.key(b'U');

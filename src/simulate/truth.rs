@@ -48,6 +48,21 @@ pub struct TruthSensor {
     pub q: [f64; 4],
 }
 
+/// A fault planted in the capture ([`super::planted`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TruthFault {
+    /// `wrong-node`, `slip`, `late-enter` or `magnet`.
+    pub kind: String,
+    /// Scan order of the curve it is on (the program's curve index).
+    pub curve: usize,
+    /// Where it applies: the position in that curve's tags (`None` for a slip or a magnet).
+    pub tag: Option<usize>,
+    /// The true node there.
+    pub node: Option<u32>,
+    /// What was planted, in the kind's own terms.
+    pub details: serde_json::Value,
+}
+
 /// The whole truth file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Truth {
@@ -67,6 +82,9 @@ pub struct Truth {
     /// What the simulation acted out (profile events), in words.
     #[serde(default)]
     pub events: Vec<String>,
+    /// Faults planted on purpose (`sfs simulate --fault`), with where they are.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub faults: Vec<TruthFault>,
 }
 
 /// Why a truth file cannot be read.

@@ -1,0 +1,210 @@
+//! Issue 49, point 2: `sfs simulate --fault` plants one fault, placed and sized on a random
+//! stream of its own, so that the rest of the capture is its unfaulted twin's (same seed); the
+//! truth's `faults` says where. Checked on the decoded bytes and on what acquisition makes of
+//! them, against the twin.
+
+use device_protocol::{Decoder, DeviceKind, Event, Packet};
+use sfs::acquisition::{Acquisition, AcquisitionConfig};
+use sfs::scan::Scan;
+use sfs::simulate::planted::Planted;
+use sfs::simulate::{self, scene, Profile, Simulation};
+
+fn packets(bytes: &[u8]) -> Vec<Packet> {
+    let mut dec = Decoder::new();
+    dec.feed(bytes)
+        .filter_map(|e| match e {
+            Event::Packet { packet, .. } => Some(packet),
+            _ => None,
+        })
+        .collect()
+}
+
+fn acquire(bytes: &[u8]) -> Scan {
+    let mut dec = Decoder::new();
+    let mut acq = Acquisition::new(AcquisitionConfig::default());
+    for chunk in bytes.chunks(4096) {
+        for e in dec.feed(chunk) {
+            acq.event(&e);
+        }
+    }
+    acq.finish()
+}
+
+fn twin_and(device: DeviceKind, seed: u64, kind: Planted) -> (Simulation, Simulation) {
+    let s = scene::builtin("cone").unwrap();
+    let twin = simulate::run(&s, device, Profile::Default, seed);
+    let faulted = simulate::run_planted(&s, device, Profile::Default, seed, kind).unwrap();
+    (twin, faulted)
+}
+
+/// A segment's length as acquired: the distance between two tags of a curve.
+fn segment(scan: &Scan, curve: usize, k: usize) -> f64 {
+    let t = &scan.curves[curve].tags;
+    t[k + 1].d - t[k].d
+}
+
+#[test]
+fn issue_49_a_wrong_node_changes_only_the_keys_typed() {
+    for seed in [1, 2, 3] {
+        let (twin, faulted) = twin_and(DeviceKind::Morphorider, seed, Planted::WrongNode);
+        let f = &faulted.truth.faults[0];
+        assert_eq!(f.kind, "wrong-node");
+        let (tag, node) = (f.tag.unwrap(), f.node.unwrap());
+        let typed = f.details["typed_node"].as_u64().unwrap() as u32;
+        assert_ne!(typed, node);
+        assert_eq!(typed.to_string().len(), node.to_string().len());
+        // The truth is the twin's: the device stood at the true node.
+        assert_eq!(twin.truth.curves, faulted.truth.curves);
+        assert_eq!(faulted.truth.curves[f.curve].nodes[tag], node);
+        // Packet for packet the same, but the digits of one index.
+        let (a, b) = (packets(&twin.bytes), packets(&faulted.bytes));
+        assert_eq!(a.len(), b.len());
+        let differ: Vec<_> = a.iter().zip(&b).filter(|(x, y)| x != y).collect();
+        assert!(!differ.is_empty() && differ.len() <= node.to_string().len());
+        assert!(differ
+            .iter()
+            .all(|(x, y)| matches!((x, y), (Packet::Key(_), Packet::Key(_)))));
+        // Acquisition reads the typed node there.
+        let scan = acquire(&faulted.bytes);
+        assert_eq!(scan.curves[f.curve].tags[tag].node, typed, "seed {seed}");
+    }
+}
+
+#[test]
+fn issue_49_a_slip_shortens_one_segment_by_its_fraction() {
+    for device in [DeviceKind::Morphorider, DeviceKind::Phone] {
+        let (twin, faulted) = twin_and(device, 2, Planted::Slip);
+        let f = &faulted.truth.faults[0];
+        assert_eq!((f.kind.as_str(), f.tag, f.node), ("slip", None, None));
+        let k = f.details["segment"].as_u64().unwrap() as usize;
+        let short = f.details["short_fraction"].as_f64().unwrap();
+        assert!((0.08..=0.15).contains(&short));
+        let (a, b) = (acquire(&twin.bytes), acquire(&faulted.bytes));
+        let ratio = segment(&b, f.curve, k) / segment(&a, f.curve, k);
+        assert!(
+            (ratio - (1.0 - short)).abs() < 0.01,
+            "{device:?}: the segment reads {ratio} of the twin's, planted {}",
+            1.0 - short
+        );
+        // The other segments of the curve read as the twin's.
+        for j in 0..a.curves[f.curve].tags.len() - 1 {
+            if j != k {
+                let (x, y) = (segment(&a, f.curve, j), segment(&b, f.curve, j));
+                assert!((x - y).abs() < 1e-3, "{device:?}: segment {j}: {x} {y}");
+            }
+        }
+    }
+}
+
+#[test]
+fn issue_49_a_late_enter_moves_the_tag_on_by_its_distance() {
+    for device in [DeviceKind::Morphorider, DeviceKind::Phone] {
+        let (twin, faulted) = twin_and(device, 3, Planted::LateEnter);
+        let f = &faulted.truth.faults[0];
+        assert_eq!(f.kind, "late-enter");
+        let (tag, node) = (f.tag.unwrap(), f.node.unwrap());
+        let late = f.details["late_m"].as_f64().unwrap();
+        assert!((0.03..=0.05).contains(&late), "{late}");
+        let (a, b) = (acquire(&twin.bytes), acquire(&faulted.bytes));
+        let (ta, tb) = (&a.curves[f.curve].tags, &b.curves[f.curve].tags);
+        assert_eq!(tb[tag].node, node);
+        // Measured from the curve's first tag (or to the next tag, when it is the first).
+        let shift = if tag == 0 {
+            (ta[1].d - ta[0].d) - (tb[1].d - tb[0].d)
+        } else {
+            (tb[tag].d - tb[0].d) - (ta[tag].d - ta[0].d)
+        };
+        assert!(
+            (shift - late).abs() < 0.01,
+            "{device:?}: the tag moved {shift} m on, planted {late} m"
+        );
+    }
+}
+
+#[test]
+fn issue_49_a_magnet_changes_the_magnetometer_near_one_curve_only() {
+    let (twin, faulted) = twin_and(DeviceKind::Morphorider, 1, Planted::Magnet);
+    let f = &faulted.truth.faults[0];
+    assert_eq!(f.kind, "magnet");
+    let (a, b) = (packets(&twin.bytes), packets(&faulted.bytes));
+    assert_eq!(a.len(), b.len());
+    let mut changed = 0;
+    for (x, y) in a.iter().zip(&b) {
+        match (x, y) {
+            (Packet::RiderSample(p), Packet::RiderSample(q)) => {
+                assert_eq!((p.t_us, p.acc, p.wheel), (q.t_us, q.acc, q.wheel));
+                changed += usize::from(p.mag != q.mag);
+            }
+            _ => assert_eq!(x, y),
+        }
+    }
+    // Some, not most: one stretch of one curve.
+    assert!(
+        changed > 20 && changed < a.len() / 4,
+        "{changed} of {}",
+        a.len()
+    );
+}
+
+#[test]
+fn issue_49_a_planted_fault_is_the_same_for_the_same_seed() {
+    let s = scene::builtin("bowl").unwrap();
+    for kind in [
+        Planted::WrongNode,
+        Planted::Slip,
+        Planted::LateEnter,
+        Planted::Magnet,
+    ] {
+        let run = || simulate::run_planted(&s, DeviceKind::Phone, Profile::Field, 7, kind);
+        let (x, y) = (run().unwrap(), run().unwrap());
+        assert_eq!(x.bytes, y.bytes, "{kind:?}");
+        assert_eq!(x.truth, y.truth, "{kind:?}");
+        assert_eq!(x.truth.faults.len(), 1);
+    }
+}
+
+/// The command line: `--fault KIND` writes the truth's `faults` and says where it planted it;
+/// a structure's sensor array has no place for one (usage, exit 2).
+#[test]
+fn issue_49_sfs_simulate_fault_plants_one_and_says_where() {
+    let dir = std::env::temp_dir().join(format!("sfs-fault-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args([
+            "simulate",
+            "--scene",
+            "bowl",
+            "--fault",
+            "late-enter",
+            "--out",
+        ])
+        .arg(dir.join("bowl"))
+        .output()
+        .expect("runs sfs");
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    let said = String::from_utf8_lossy(&out.stdout);
+    let truth: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("bowl.truth.json")).unwrap()).unwrap();
+    let f = &truth["faults"][0];
+    assert_eq!(f["kind"], "late-enter");
+    let line = format!(
+        "planted: late-enter on curve {}, tag {} (node {})",
+        f["curve"], f["tag"], f["node"]
+    );
+    assert!(said.contains(&line), "{said}");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args([
+            "simulate",
+            "--structure",
+            "riser",
+            "--fault",
+            "slip",
+            "--out",
+        ])
+        .arg(dir.join("pipe"))
+        .output()
+        .expect("runs sfs");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--fault"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
