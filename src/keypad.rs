@@ -8,10 +8,18 @@
 //! | `U` | undo the operator's last Enter in the current curve (a tag, or a repeat of one) |
 //! | `C` | cancel the current curve |
 //! | `E` | end the current curve (it needs at least two tags) |
+//! | no curve open: `0`–`9` then `C` | drop the accepted curve with this index (issue 49) |
+//! | no curve open: `0`–`9` then `B`/`I`/`K`/`G` | start a curve that replaces the accepted curve with this index once it ends with `E` (issue 49) |
+//!
+//! A drop or a replacement needs its digits typed within [`DIGIT_TIMEOUT`] of the key that
+//! follows them, and names a curve accepted and not dropped yet; a replacing curve that is
+//! cancelled or discarded leaves the old one in place. Curve indices never change: a dropped
+//! curve's index is not reused.
 //!
 //! Anything out of grammar yields a [`Warning`] naming the curve, the node and the device
 //! time, and is handled without touching the other curves:
-//! a digit or Enter with no curve open is ignored; Enter with no digits is ignored; digits
+//! digits with no curve open that neither `C` nor a start key follows, and Enter with no
+//! curve open, are ignored; Enter with no digits is ignored; digits
 //! followed by another key are dropped; a repeated tag of the same node is ignored (and a `U`
 //! after it undoes that repeat, not the tag before it); `U` with no tag and `C`/`E` with no
 //! curve are ignored; `E` with fewer than two tags discards the
@@ -81,8 +89,10 @@ pub enum Issue {
     EnterPresumedLost,
     /// Digits not confirmed within [`DIGIT_TIMEOUT`].
     TimedOut { digits: String },
-    /// A digit with no curve open.
-    DigitWithoutCurve,
+    /// Digits with no curve open that no `C` or start key followed in time.
+    DigitWithoutCurve { digits: String },
+    /// A drop (`N C`) or replacement (`N B`…) names no curve accepted and not dropped.
+    NoSuchCurve { curve: u64, key: char },
     /// A seventh digit: the index is not tagged.
     IndexTooLong { digits: String },
     /// An index above the configured maximum: not tagged.
@@ -117,7 +127,8 @@ impl Issue {
             Issue::TooFewTags { .. } => "keypad_too_few_tags",
             Issue::EnterPresumedLost => "keypad_enter_presumed_lost",
             Issue::TimedOut { .. } => "keypad_digits_timed_out",
-            Issue::DigitWithoutCurve => "keypad_digit_without_curve",
+            Issue::DigitWithoutCurve { .. } => "keypad_digit_without_curve",
+            Issue::NoSuchCurve { .. } => "keypad_no_such_curve",
             Issue::IndexTooLong { .. } => "keypad_index_too_long",
             Issue::IndexAboveMax { .. } => "keypad_index_above_max",
             Issue::EnterWithoutCurve => "keypad_enter_without_curve",
@@ -150,7 +161,15 @@ impl std::fmt::Display for Issue {
                 f,
                 "digits {digits:?} not confirmed with Enter within {DIGIT_TIMEOUT} s; ignored"
             ),
-            Issue::DigitWithoutCurve => f.write_str("digit with no curve open; ignored"),
+            Issue::DigitWithoutCurve { digits } => write!(
+                f,
+                "digits {digits:?} with no curve open, followed by neither C (drop that curve) nor a start key (rescan it) within {DIGIT_TIMEOUT} s; ignored"
+            ),
+            Issue::NoSuchCurve { curve, key } => write!(
+                f,
+                "{curve} {key}: no curve {curve} was accepted, or it is dropped already; {}",
+                if *key == 'C' { "nothing dropped" } else { "a new curve is started, replacing none" }
+            ),
             Issue::IndexTooLong { digits } => write!(
                 f,
                 "node index longer than 6 digits ({digits}…); ignored, no node tagged"
@@ -205,6 +224,12 @@ pub enum KeyEvent {
     Ended {
         curve: CurveIndex,
     },
+    /// An accepted curve leaves the network: dropped (`N C`), or replaced by curve `by` (`N B
+    /// … E`), which has just ended.
+    Dropped {
+        curve: CurveIndex,
+        by: Option<CurveIndex>,
+    },
     Warning(Warning),
 }
 
@@ -223,6 +248,8 @@ struct Open {
     /// Repeats of the last tag not undone yet (Enters that re-tagged the node just tagged;
     /// `U` undoes them first, one per press).
     repeats: u64,
+    /// The accepted curve this one replaces when it ends.
+    replaces: Option<CurveIndex>,
 }
 
 /// The state machine. Feed it every KEY packet in order.
@@ -246,6 +273,14 @@ pub struct Keypad {
     overlong: bool,
     /// Largest node index accepted (`None`: [`MAX_NODE`]).
     max_node: Option<u32>,
+    /// Digits typed with no curve open (a curve's index, if `C` or a start key follows), and
+    /// the time of the last.
+    pending: String,
+    pending_t: f64,
+    /// Accepted curves dropped or replaced.
+    dropped: std::collections::BTreeSet<CurveIndex>,
+    /// The Enter being processed was said with the digits before it.
+    enter_said: bool,
     /// The device travelled far since the open curve's last tag (see
     /// [`set_travelled`](Keypad::set_travelled)).
     travelled: bool,
@@ -338,9 +373,16 @@ impl Keypad {
         let Some(open) = &self.open else { return };
         let curve = open.curve;
         if open.tags.len() >= 2 {
+            let replaces = open.replaces;
             self.accepted += 1;
             self.open = None;
             out.push(KeyEvent::Ended { curve });
+            if let Some(old) = replaces.filter(|&o| self.dropped.insert(o)) {
+                out.push(KeyEvent::Dropped {
+                    curve: old,
+                    by: Some(curve),
+                });
+            }
         } else {
             let n = open.tags.len();
             let node = open.tags.first().copied();
@@ -417,9 +459,55 @@ impl Keypad {
         }
     }
 
+    /// The curve index typed with no curve open, if `key` at `t` acts on it (`C` or a start
+    /// key, within [`DIGIT_TIMEOUT`] of the last digit). Other keys, and late ones, leave the
+    /// digits ignored (said); a digit in time continues them.
+    fn curve_command(&mut self, t: f64, key: u8, out: &mut Vec<KeyEvent>) -> Option<u64> {
+        if self.pending.is_empty() {
+            return None;
+        }
+        let fresh = t - self.pending_t <= DIGIT_TIMEOUT;
+        if key.is_ascii_digit() && fresh {
+            return None;
+        }
+        let digits = std::mem::take(&mut self.pending);
+        if fresh && matches!(key, b'C' | b'B' | b'I' | b'K' | b'G') {
+            return digits.parse().ok();
+        }
+        // An Enter after them is said with them (once), at its own time.
+        let at = if key == b'\n' || key == b'\r' {
+            self.enter_said = true;
+            t
+        } else {
+            self.pending_t
+        };
+        self.warn(out, at, None, Issue::DigitWithoutCurve { digits });
+        None
+    }
+
+    /// At the end of the input: digits typed with no curve open and never acted on are said.
+    pub fn flush(&mut self, out: &mut Vec<KeyEvent>) {
+        if !self.pending.is_empty() {
+            let digits = std::mem::take(&mut self.pending);
+            self.warn(
+                out,
+                self.pending_t,
+                None,
+                Issue::DigitWithoutCurve { digits },
+            );
+        }
+    }
+
+    /// Whether `n` names a curve that can be dropped or replaced (accepted, not dropped).
+    fn droppable(&self, n: u64) -> Option<CurveIndex> {
+        let n = usize::try_from(n).ok()?;
+        (n < self.accepted && !self.dropped.contains(&n)).then_some(n)
+    }
+
     /// Processes one key pressed at session time `t`, appending what happened to `out`.
     pub fn key(&mut self, t: f64, key: u8, out: &mut Vec<KeyEvent>) {
         let gap_before = std::mem::take(&mut self.gap_since_key);
+        let command = self.curve_command(t, key, out);
         self.stale_digits(t, key, out);
         if key.is_ascii_digit() && self.open.is_some() {
             if self.digits.is_empty() {
@@ -434,7 +522,11 @@ impl Keypad {
         match key {
             b'0'..=b'9' => {
                 if self.open.is_none() {
-                    self.warn(out, t, Some((key - b'0') as u32), Issue::DigitWithoutCurve);
+                    // A curve's index, if C or a start key follows.
+                    if self.pending.len() < 6 {
+                        self.pending.push(key as char);
+                    }
+                    self.pending_t = t;
                 } else if self.overlong {
                     // Said once for the index.
                 } else if self.digits.len() >= 6 {
@@ -455,7 +547,9 @@ impl Keypad {
                 self.gap_since_digit = false;
                 let digits = std::mem::take(&mut self.digits);
                 if self.open.is_none() {
-                    self.warn(out, t, digits.parse().ok(), Issue::EnterWithoutCurve);
+                    if !std::mem::take(&mut self.enter_said) {
+                        self.warn(out, t, digits.parse().ok(), Issue::EnterWithoutCurve);
+                    }
                     return;
                 }
                 if std::mem::take(&mut self.overlong) {
@@ -510,11 +604,23 @@ impl Keypad {
                     );
                     self.finish(t, "ended implicitly", out);
                 }
+                let replaces = command.and_then(|n| {
+                    let c = self.droppable(n);
+                    if c.is_none() {
+                        let issue = Issue::NoSuchCurve {
+                            curve: n,
+                            key: key as char,
+                        };
+                        self.warn(out, t, None, issue);
+                    }
+                    c
+                });
                 let curve = self.accepted;
                 self.open = Some(Open {
                     curve,
                     tags: Vec::new(),
                     repeats: 0,
+                    replaces,
                 });
                 out.push(KeyEvent::Started {
                     curve,
@@ -539,9 +645,19 @@ impl Keypad {
             }
             b'C' => {
                 self.drop_digits(t, key, out);
-                match self.open.take() {
-                    Some(o) => out.push(KeyEvent::Discarded { curve: o.curve }),
-                    None => self.warn(out, t, None, Issue::CancelWithoutCurve),
+                match (self.open.take(), command) {
+                    (Some(o), _) => out.push(KeyEvent::Discarded { curve: o.curve }),
+                    (None, Some(n)) => match self.droppable(n) {
+                        Some(curve) => {
+                            self.dropped.insert(curve);
+                            out.push(KeyEvent::Dropped { curve, by: None });
+                        }
+                        None => {
+                            let issue = Issue::NoSuchCurve { curve: n, key: 'C' };
+                            self.warn(out, t, None, issue);
+                        }
+                    },
+                    (None, None) => self.warn(out, t, None, Issue::CancelWithoutCurve),
                 }
             }
             b'E' => {
@@ -655,7 +771,7 @@ mod tests {
     #[test]
     fn every_violation_warns_with_curve_node_and_time() {
         let cases: &[(&str, Option<usize>, &str)] = &[
-            ("5", None, "digit with no curve open"),
+            ("5\n", None, "with no curve open"),
             ("\n", None, "Enter with no curve open"),
             ("B\n", Some(0), "no node index"),
             ("B1\nE", Some(0), "needs a start and an end"),
@@ -946,5 +1062,100 @@ mod tests {
         let ev = keys(false);
         assert_eq!(tagged(&ev), [1]);
         assert!(ev.contains(&KeyEvent::Discarded { curve: 0 }));
+    }
+
+    fn dropped(ev: &[KeyEvent]) -> Vec<(CurveIndex, Option<CurveIndex>)> {
+        ev.iter()
+            .filter_map(|e| match e {
+                KeyEvent::Dropped { curve, by } => Some((*curve, *by)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn codes(ev: &[KeyEvent]) -> Vec<&'static str> {
+        warnings(ev).iter().map(|w| w.issue.code()).collect()
+    }
+
+    /// Issue 49 point 4: with no curve open, a curve's number then `C` drops it; then a start
+    /// key starts the curve that replaces it, which takes the old one out when it ends. Indices
+    /// are never reused.
+    #[test]
+    fn issue_49_a_curve_dropped_or_rescanned_from_the_keypad() {
+        // Drop curve 0.
+        let ev = run("B1\n2\nEI2\n3\nE0C");
+        assert_eq!(ended(&ev), [0, 1]);
+        assert_eq!(dropped(&ev), [(0, None)]);
+        assert!(warnings(&ev).is_empty(), "{ev:?}");
+        // Rescan curve 1: it leaves when the new one (curve 2) ends, not before.
+        let ev = run("B1\n2\nEI2\n3\nE1I2\n3\nE");
+        assert_eq!(ended(&ev), [0, 1, 2]);
+        assert_eq!(dropped(&ev), [(1, Some(2))]);
+        let at = |e: &KeyEvent| ev.iter().position(|x| x == e).unwrap();
+        assert!(
+            at(&KeyEvent::Ended { curve: 2 })
+                < at(&KeyEvent::Dropped {
+                    curve: 1,
+                    by: Some(2)
+                })
+        );
+        assert!(warnings(&ev).is_empty(), "{ev:?}");
+        // Two-digit indices.
+        let keys: String = (0..11).map(|_| "B1\n2\nE").collect::<String>() + "10C";
+        assert_eq!(dropped(&run(&keys)), [(10, None)]);
+        // A rescan cancelled, or discarded, leaves the old curve in.
+        let ev = run("B1\n2\nE0B1\nC0B1\nE");
+        assert_eq!(dropped(&ev), []);
+        assert_eq!(ended(&ev), [0]);
+        // No such curve: not accepted yet, or dropped already; the start key still starts.
+        let ev = run("B1\n2\nE3C0C0C0B1\n2\nE");
+        assert_eq!(dropped(&ev), [(0, None)]);
+        assert_eq!(
+            codes(&ev),
+            [
+                "keypad_no_such_curve",
+                "keypad_no_such_curve",
+                "keypad_no_such_curve"
+            ]
+        );
+        assert_eq!(ended(&ev), [0, 1]);
+    }
+
+    /// Digits with no curve open that no `C` or start key follows in time are ignored, said
+    /// once with the digits; a drop needs its digits within the timeout.
+    #[test]
+    fn issue_49_digits_with_no_curve_open_act_only_in_time() {
+        let mut k = Keypad::new();
+        let mut ev = Vec::new();
+        for (t, key) in [
+            (0.0, b'B'),
+            (1.0, b'1'),
+            (1.1, b'\n'),
+            (2.0, b'2'),
+            (2.1, b'\n'),
+        ] {
+            k.key(t, key, &mut ev);
+        }
+        for (t, key) in [
+            (3.0, b'E'),
+            (4.0, b'0'),
+            (9.0, b'C'),
+            (10.0, b'4'),
+            (10.5, b'\n'),
+        ] {
+            k.key(t, key, &mut ev);
+        }
+        assert_eq!(dropped(&ev), []);
+        assert_eq!(
+            codes(&ev),
+            [
+                "keypad_digit_without_curve",
+                "keypad_cancel_without_curve",
+                "keypad_digit_without_curve",
+            ]
+        );
+        let w = warnings(&ev);
+        assert_eq!(w[0].t, 4.0);
+        assert!(w[0].to_string().contains("\"0\""), "{}", w[0]);
     }
 }

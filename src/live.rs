@@ -65,6 +65,8 @@ struct Mail {
     curves: BTreeMap<usize, Curve>,
     /// When each of them was posted (the E key packet, or the late change).
     posted: Vec<(usize, Instant)>,
+    /// Curves taken out of the network since (issue 49).
+    removed: std::collections::BTreeSet<usize>,
     snapshot: Snapshot,
     closed: bool,
 }
@@ -136,6 +138,18 @@ impl Live {
         self.shared.wake.notify_one();
     }
 
+    /// Takes curve `index` out of the network (dropped or replaced from the keypad): the next
+    /// update is made without it.
+    pub fn remove(&mut self, index: usize, snapshot: Snapshot) {
+        let mut m = lock(&self.shared.mail);
+        m.curves.remove(&index);
+        m.posted.retain(|p| p.0 != index);
+        m.removed.insert(index);
+        m.snapshot = snapshot;
+        drop(m);
+        self.shared.wake.notify_one();
+    }
+
     /// Closes the mailbox: the worker brings in the curves still pending (one more update at
     /// most) and stops; returns its last reconstruction and what the updates measured.
     pub fn finish(mut self) -> LiveOutcome {
@@ -173,12 +187,14 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
     loop {
         let (curves, posted, snapshot) = {
             let mut m = lock(&shared.mail);
-            while m.curves.is_empty() && !m.closed {
+            while m.curves.is_empty() && m.removed.is_empty() && !m.closed {
                 m = shared.wake.wait(m).unwrap_or_else(|p| p.into_inner());
             }
-            if m.curves.is_empty() {
+            if m.curves.is_empty() && m.removed.is_empty() {
                 break; // closed, nothing pending
             }
+            let removed = std::mem::take(&mut m.removed);
+            scan.curves.retain(|c| !removed.contains(&c.index));
             (
                 std::mem::take(&mut m.curves),
                 std::mem::take(&mut m.posted),
@@ -227,7 +243,10 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
         status_log.lines(&scan, &products, &lat, compute_ms);
         // A provisional update is settled at once while no curve waits (the operator sees the
         // quick one meanwhile), so the last update is always exact.
-        let waiting = || !lock(&shared.mail).curves.is_empty();
+        let waiting = || {
+            let m = lock(&shared.mail);
+            !m.curves.is_empty() || !m.removed.is_empty()
+        };
         let t0 = Instant::now();
         if !waiting()
             && pipeline.settle(

@@ -80,4 +80,18 @@ pub struct Scan {
     /// Sensor arrays only.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub array: Vec<ArrayEpoch>,
+    /// Curves the operator took out of the network from the keypad (`N C`, or `N B … E`
+    /// rescanning it; issue 49), in the order they left. They are no longer in `curves`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub dropped: Vec<DroppedCurve>,
+}
+
+/// A curve taken out of the network from the keypad.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DroppedCurve {
+    pub curve: usize,
+    /// The curve that replaced it (`None`: dropped).
+    pub by: Option<usize>,
+    /// Its nodes, as they were tagged.
+    pub nodes: Vec<u32>,
 }

@@ -490,6 +490,17 @@ impl Flow {
         for e in self.decoder.feed(bytes) {
             self.stats.observe(&e);
             for update in self.acq.event(&e) {
+                if let (true, Update::CurveDropped(i) | Update::CurveReplaced { dropped: i, .. }) =
+                    (post, update)
+                {
+                    if let Some(live) = &mut self.live {
+                        live.remove(i, snapshot(&self.acq, &self.stats));
+                    }
+                }
+                let update = match update {
+                    Update::CurveReplaced { ended, .. } => Update::CurveEnded(ended),
+                    u => u,
+                };
                 if let (true, Update::CurveEnded(i) | Update::CurveUpdated(i)) = (post, update) {
                     post_curve(&mut self.live, &self.acq, i, &self.stats);
                 }

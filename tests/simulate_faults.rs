@@ -208,3 +208,43 @@ fn issue_49_sfs_simulate_fault_plants_one_and_says_where() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--fault"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 49 point 4: `N C` after the last curve drops curve N: the scan is the same but for
+/// it, and a replay's network leaves it out (`curves_used` one less, `scan.json` says which).
+#[test]
+fn issue_49_a_curve_dropped_from_the_keypad_leaves_the_network() {
+    let s = scene::builtin("cone").unwrap();
+    let kind = DeviceKind::Morphorider;
+    let twin = simulate::run(&s, kind, Profile::Default, 1);
+    let more = simulate::Mistakes {
+        drop_after: Some(2),
+        ..Default::default()
+    };
+    let dropped = simulate::run_with(&s, kind, Profile::Default, 1, &more);
+    let (a, b) = (acquire(&twin.bytes), acquire(&dropped.bytes));
+    let kept: Vec<_> = a.curves.iter().filter(|c| c.index != 2).cloned().collect();
+    assert!(b.curves == kept, "the scan is the twin's without curve 2");
+    assert_eq!(b.dropped.len(), 1);
+    assert_eq!((b.dropped[0].curve, b.dropped[0].by), (2, None));
+    assert_eq!(b.dropped[0].nodes, a.curves[2].nodes());
+    // Through the daemon: the network is made of the six others.
+    let dir = std::env::temp_dir().join(format!("sfs-drop-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let capture = dir.join("cone-drop.bin");
+    std::fs::write(&capture, &dropped.bytes).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "warn", "replay"])
+        .arg(&capture)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .expect("runs sfs");
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(dir.join("out").join(f)).unwrap()).unwrap()
+    };
+    let report = read("report.json");
+    assert_eq!(report["network"]["curves_used"], 6, "{}", report["network"]);
+    assert_eq!(read("scan.json")["dropped"][0]["curve"], 2);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -212,6 +212,10 @@ pub enum Update {
     CurveEnded(usize),
     /// Curve `index` changed after it ended (a late SEGMENT_LENGTH).
     CurveUpdated(usize),
+    /// Curve `index` was taken out of the network from the keypad (`N C`).
+    CurveDropped(usize),
+    /// Curve `ended` was accepted, and replaced curve `dropped` (`N B … E`).
+    CurveReplaced { ended: usize, dropped: usize },
 }
 
 /// The acquisition state. See the module documentation.
@@ -771,6 +775,28 @@ impl Acquisition {
                         update = Some(Update::CurveEnded(curve));
                     }
                 }
+                KeyEvent::Dropped { curve, by } => {
+                    if let Some(k) = self.scan.curves.iter().position(|c| c.index == curve) {
+                        let c = self.scan.curves.remove(k);
+                        let nodes = c.nodes();
+                        tracing::info!(
+                            curve,
+                            ?by,
+                            ?nodes,
+                            "curve {curve} taken out of the network"
+                        );
+                        self.scan
+                            .dropped
+                            .push(crate::scan::DroppedCurve { curve, by, nodes });
+                        update = Some(match (by, update) {
+                            (Some(_), Some(Update::CurveEnded(ended))) => Update::CurveReplaced {
+                                ended,
+                                dropped: curve,
+                            },
+                            _ => Update::CurveDropped(curve),
+                        });
+                    }
+                }
                 KeyEvent::Warning(w) => self.note(w.into()),
             }
         }
@@ -824,6 +850,9 @@ impl Acquisition {
     /// Ends acquisition: an open curve is reported and dropped (it was never ended).
     pub fn finish(mut self) -> Scan {
         self.release_held();
+        let mut events = Vec::new();
+        self.keypad.flush(&mut events);
+        self.key_events(events);
         if let Some(o) = self.open.take() {
             let nodes: Vec<u32> = o.tags.iter().map(|t| t.0).collect();
             self.warn(AcquisitionWarning::NeverEnded {
@@ -833,7 +862,8 @@ impl Acquisition {
             });
             self.scan.counts.curves_discarded += 1;
         }
-        let curves = self.scan.curves.len();
+        // Curves scanned, dropped ones too (their indices are not reused).
+        let curves = self.keypad.next_curve();
         let missing: Vec<(usize, CurveKind)> = self
             .cfg
             .kinds

@@ -257,6 +257,7 @@ fn run_full(
         ));
     }
     m.untagged.clone_from(&more.untagged);
+    m.drop_after = more.drop_after;
     if let Some(plan) = plan {
         plan.act(m);
     }

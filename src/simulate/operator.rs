@@ -77,6 +77,9 @@ pub struct Mistakes {
     /// `(curve, tag, m)`: type the index at the node, but press Enter only after rolling this
     /// far on along the next segment (a late Enter, issue 49; never at a curve's last tag).
     pub late_enter: Option<(usize, usize, f64)>,
+    /// After the last curve (and its last sample), type this curve's index and `C`: it is
+    /// dropped (issue 49).
+    pub drop_after: Option<usize>,
 }
 
 impl Default for OperatorParams {
@@ -640,6 +643,15 @@ pub fn perform(
         }
         prev_end = Some(p.frame(p.length()));
         tl.script.curves.push(truth);
+    }
+    if let Some(c) = op.mistakes.drop_after {
+        // Typed after the last sample: no sample and no random draw more, so the capture is
+        // the one without the drop but for these keys at its end.
+        let keys = c.to_string().into_bytes().into_iter().chain([b'C']);
+        for (k, key) in keys.enumerate() {
+            let t = tl.t + op.pause_before_typing + k as f64 * op.key_interval;
+            tl.script.keys.push((t, key));
+        }
     }
     let mut script = tl.script;
     differentiate(&mut script.states);
