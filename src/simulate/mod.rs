@@ -258,6 +258,7 @@ fn run_full(
     }
     m.untagged.clone_from(&more.untagged);
     m.drop_after = more.drop_after;
+    m.rescan = more.rescan;
     if let Some(plan) = plan {
         plan.act(m);
     }

@@ -80,6 +80,9 @@ pub struct Mistakes {
     /// After the last curve (and its last sample), type this curve's index and `C`: it is
     /// dropped (issue 49).
     pub drop_after: Option<usize>,
+    /// After the last curve, carry the device to this curve's start, type its index and its
+    /// start key, and scan it again, making no mistake: it replaces the first scan (issue 49).
+    pub rescan: Option<usize>,
 }
 
 impl Default for OperatorParams {
@@ -492,7 +495,18 @@ pub fn perform(
         pending_dt: None,
     };
     let mut prev_end: Option<UnitQuaternion<f64>> = None;
-    for (ci, spec) in curves.iter().enumerate() {
+    // The curves in scan order, then the rescan (its index typed first, no mistake made).
+    let clean = OperatorParams {
+        mistakes: Mistakes::default(),
+        ..op.clone()
+    };
+    let rescan = op.mistakes.rescan.filter(|&c| c < curves.len());
+    let order = (0..curves.len())
+        .map(|c| (c, false))
+        .chain(rescan.map(|c| (c, true)));
+    for (ci, again) in order {
+        let spec = &curves[ci];
+        let op = if again { &clean } else { op };
         let p = Param::new(spec);
         // Put down turned about the normal (if the operator does so), turned in place later.
         let turn = if op.turn_in_place_deg > 0.0 {
@@ -551,6 +565,12 @@ pub fn perform(
             }
             if let Some(turn) = &mut tl.turn {
                 turn.start = f64::INFINITY; // put down turned again
+            }
+        }
+        if again {
+            for d in ci.to_string().bytes() {
+                tl.key(d);
+                tl.stand(&p, None, 0.0, op.key_interval, 0.0);
             }
         }
         tl.key(start_key);

@@ -178,6 +178,11 @@ pub fn plan(kind: Planted, scene: &Scene, seed: u64, more: &Mistakes) -> Result<
 }
 
 impl Plan {
+    /// The curve the fault is on (scan order).
+    pub fn curve(&self) -> usize {
+        self.curve
+    }
+
     /// What the operator does differently (before the scan is acted out).
     pub fn act(&self, m: &mut Mistakes) {
         match self.kind {
