@@ -132,6 +132,18 @@ pub enum AcquisitionWarning {
         segment: usize,
         from: u32,
     },
+    /// Morphorider: the device rolled while a node's index was typed (the operator stands to
+    /// type it): Enter pressed late, or the index typed early. The tag is placed where the
+    /// device stood in that time (issue 49).
+    LateEnter {
+        curve: usize,
+        node: u32,
+        t: f64,
+        /// How far the wheel went from the first digit to the Enter, m.
+        rolled_m: f64,
+        /// How far the tag moved back from the Enter (negative: on), m.
+        moved_m: f64,
+    },
     /// A curve reached the configured maximum number of samples and was ended there.
     CurveTooLong {
         curve: usize,
@@ -168,6 +180,7 @@ impl AcquisitionWarning {
             NoSuchSegment { .. } => "no_such_segment",
             NoSamples { .. } => "curve_without_samples",
             WheelBack { .. } => "wheel_back",
+            LateEnter { .. } => "late_enter",
             CurveTooLong { .. } => "curve_too_long",
             NeverEnded { .. } => "curve_never_ended",
             KindOfMissingCurve { .. } => "kind_of_missing_curve",
@@ -183,6 +196,7 @@ impl AcquisitionWarning {
             | NoSuchSegment { curve, .. }
             | NoSamples { curve, .. }
             | WheelBack { curve, .. }
+            | LateEnter { curve, .. }
             | CurveTooLong { curve, .. }
             | NeverEnded { curve, .. }
             | KindOfMissingCurve { curve, .. } => Some(*curve),
@@ -256,6 +270,19 @@ impl std::fmt::Display for AcquisitionWarning {
             } => write!(
                 f,
                 "curve {curve}, node {node}, t = {t:.3} s: the wheel went back {back_m:.3} m over segment {segment} (from node {from}); backwards scanning?"
+            ),
+            LateEnter {
+                curve,
+                node,
+                t,
+                rolled_m,
+                moved_m,
+            } => write!(
+                f,
+                "curve {curve}, node {node}, t = {t:.3} s: the device rolled {:.0} mm while the node's index was typed (Enter pressed late, or the index typed early): the tag is placed where it stood, {:.0} mm {} the Enter; rescan the curve if it is wrong (its number, its start key, … E)",
+                rolled_m * 1e3,
+                moved_m.abs() * 1e3,
+                if *moved_m >= 0.0 { "before" } else { "after" }
             ),
             CurveTooLong {
                 curve,

@@ -164,7 +164,7 @@ impl Acquisition {
                 None => super::phone::phone_distances(&mut curve, self.cfg.nominal_speed),
             }
         } else if n > 0 {
-            self.wheel_distances(&mut curve, &wheel);
+            self.wheel_distances(&mut curve, &wheel, &o.typing);
         }
         self.count(&curve);
         curve
@@ -392,13 +392,37 @@ impl Acquisition {
     /// Morphorider: the distances of a curve's samples and tags along the wheel (`wheel`, the
     /// session distance at each sample) from its first tag; warns where the wheel went back
     /// between two tags.
-    fn wheel_distances(&mut self, curve: &mut Curve, wheel: &[f64]) {
-        let start = interp(&curve.samples.t, wheel, curve.tags[0].t);
+    fn wheel_distances(&mut self, curve: &mut Curve, wheel: &[f64], typing: &[(f64, f64)]) {
+        // Where each tag is on the wheel: at its Enter, unless the device rolled while its
+        // index was typed (see `stood_while_typing`).
+        let mut at: Vec<f64> = curve
+            .tags
+            .iter()
+            .map(|tag| interp(&curve.samples.t, wheel, tag.t))
+            .collect();
+        for (k, tag) in curve.tags.iter().enumerate() {
+            let Some(&(first, _)) = typing.iter().find(|ty| ty.1 == tag.t) else {
+                continue;
+            };
+            let Some((rolled, stood)) = stood_while_typing(&curve.samples.t, wheel, first, tag.t)
+            else {
+                continue;
+            };
+            self.warn(AcquisitionWarning::LateEnter {
+                curve: curve.index,
+                node: tag.node,
+                t: tag.t,
+                rolled_m: rolled,
+                moved_m: at[k] - stood,
+            });
+            at[k] = stood;
+        }
+        let start = at[0];
         for (d, w) in curve.samples.d.iter_mut().zip(wheel) {
             *d = w - start;
         }
-        for tag in &mut curve.tags {
-            tag.d = interp(&curve.samples.t, wheel, tag.t) - start;
+        for (tag, w) in curve.tags.iter_mut().zip(&at) {
+            tag.d = w - start;
         }
         for (k, pair) in curve.tags.windows(2).enumerate() {
             if pair[1].d < pair[0].d {
@@ -442,6 +466,48 @@ impl Acquisition {
             );
         }
     }
+}
+
+/// The device may roll this far while an index is typed (the hand's wobble, a tilt), m.
+pub const TYPING_ROLL_M: f64 = 0.015;
+/// The device stood where the wheel stayed within this, m.
+const STAND_M: f64 = 0.002;
+/// ... for this long at least, s.
+const TYPING_STAND_S: f64 = 0.2;
+
+/// Morphorider: the operator stands while typing a node's index. Where the wheel `w` (at
+/// times `t`) went more than [`TYPING_ROLL_M`] between the first digit (`first`) and the
+/// Enter (`enter`), the index was typed at one place and entered at another: returns how far
+/// it rolled and where the device stood longest meanwhile (the wheel reading held the most
+/// samples within [`STAND_M`]), when it stood there for [`TYPING_STAND_S`] at least (a key
+/// press; rolling at 5 cm/s, 2 mm take 40 ms).
+fn stood_while_typing(t: &[f64], w: &[f64], first: f64, enter: f64) -> Option<(f64, f64)> {
+    let rolled = (interp(t, w, enter) - interp(t, w, first)).abs();
+    if rolled <= TYPING_ROLL_M {
+        return None;
+    }
+    let (a, b) = (
+        t.partition_point(|&x| x < first),
+        t.partition_point(|&x| x <= enter),
+    );
+    let inside = w.get(a..b.min(w.len()))?;
+    if inside.len() < 3 {
+        return None;
+    }
+    let mut sorted = inside.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    // The widest run of readings within STAND_M of each other (two pointers).
+    let (mut best, mut at, mut j) = (0, 0, 0);
+    for i in 0..sorted.len() {
+        while sorted[i] - sorted[j] > STAND_M {
+            j += 1;
+        }
+        if i + 1 - j > best {
+            (best, at) = (i + 1 - j, j);
+        }
+    }
+    let stood_s = best as f64 * (enter - first) / inside.len() as f64;
+    (stood_s >= TYPING_STAND_S).then(|| (rolled, sorted[at + best / 2]))
 }
 
 /// Morphorider: bridges the heading across each run of `MAG_DISTURBED` samples of `s`
@@ -523,4 +589,28 @@ pub(super) fn stationary_mask(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod late_enter_tests {
+    use super::*;
+
+    /// A wheel that stands at 0.10 m for 0.3 s of typing, then rolls 40 mm at 5 cm/s before
+    /// the Enter: named, placed at 0.10 m. Standing throughout (a wobble of 0.3 mm): not named.
+    /// Rolling throughout (no stand of 0.2 s): not placed.
+    #[test]
+    fn stood_while_typing_finds_where_the_device_stood() {
+        let t: Vec<f64> = (0..=110).map(|i| i as f64 * 0.01).collect();
+        let late: Vec<f64> = t
+            .iter()
+            .map(|&x| 0.10 + if x < 0.3 { 0.0 } else { 0.05 * (x - 0.3) })
+            .collect();
+        let (rolled, stood) = stood_while_typing(&t, &late, 0.0, 1.1).unwrap();
+        assert!((rolled - 0.04).abs() < 1e-9, "{rolled}");
+        assert!((stood - 0.10).abs() < 1e-9, "{stood}");
+        let still: Vec<f64> = t.iter().map(|&x| 0.1 + 0.0003 * (9.0 * x).sin()).collect();
+        assert_eq!(stood_while_typing(&t, &still, 0.0, 1.1), None);
+        let rolling: Vec<f64> = t.iter().map(|&x| 0.05 * x).collect();
+        assert_eq!(stood_while_typing(&t, &rolling, 0.0, 1.1), None);
+    }
 }
