@@ -1,0 +1,49 @@
+//! Issue 49, point 4: a curve rescanned from the keypad (`N B … E`) gives the same outputs
+//! live, resumed after a kill in the middle of the rescan, and replayed: the keys are in the
+//! capture.
+
+mod common;
+use common::*;
+use sfs::simulate::{self, planted::Planted, scene, Mistakes, Profile};
+use std::io::Write;
+use std::time::Duration;
+
+#[test]
+fn issue_49_a_rescan_resumed_after_a_kill_gives_the_replays_network() {
+    let dir = tmpdir("rescan-resume");
+    let s = scene::builtin("cone").unwrap();
+    let kind = device_protocol::DeviceKind::Morphorider;
+    let plan = simulate::planted::plan(Planted::WrongNode, &s, 2, &Mistakes::default()).unwrap();
+    let more = Mistakes {
+        rescan: Some(plan.curve()),
+        ..Default::default()
+    };
+    let sim = simulate::run_planted_with(&s, kind, Profile::Default, 2, &more, Planted::WrongNode)
+        .unwrap();
+    let bytes = sim.bytes;
+    // The rescan is the last eighth of the capture or so: killed in its middle.
+    let (first, rest) = bytes.split_at(bytes.len() * 15 / 16);
+    let session = dir.join("session");
+    let run = |args: &[&str]| run_stdin(args, &session);
+    let mut child = run(&["--session"]);
+    let mut stdin = child.stdin.take().unwrap();
+    stdin.write_all(first).unwrap();
+    stdin.flush().unwrap();
+    wait_for("the first part captured", Duration::from_secs(20), || {
+        file_len(&session.join("capture.bin")) == first.len() as u64
+    });
+    std::thread::sleep(Duration::from_millis(1200));
+    let _ = child.kill();
+    let _ = child.wait();
+    drop(stdin);
+    let mut child = run(&["--resume"]);
+    child.stdin.take().unwrap().write_all(rest).unwrap();
+    assert!(child.wait().unwrap().success());
+    assert_eq!(std::fs::read(session.join("capture.bin")).unwrap(), bytes);
+    replay_to(&session.join("capture.bin"), &dir.join("replayed"));
+    assert_same_files(&session, &dir.join("replayed"), &["network.glb"], "resumed");
+    let scan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(session.join("scan.json")).unwrap()).unwrap();
+    assert_eq!(scan["dropped"][0]["curve"], plan.curve());
+    assert_eq!(read_report(&session)["network"]["curves_used"], 7);
+}
