@@ -61,6 +61,88 @@ pub struct Report {
     /// The phone page's link: connections, refusals, sample rate and jitter, latency.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub phone: Option<crate::source::phone::PhoneReport>,
+    /// Where the scan looks wrong (issue 49).
+    pub quality: Quality,
+}
+
+/// Where the scan looks wrong, and why (issue 49).
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Quality {
+    /// Each tag or curve that looks wrong, from the sensors (a late Enter) or from the
+    /// network's loops (a tag they refuse), with what it rests on. Every suspect is among the
+    /// warnings too; this is them in one shape, with the keys that rescan the curve.
+    pub suspects: Vec<Suspect>,
+}
+
+/// A tag or curve that looks wrong.
+#[derive(Debug, Clone, Serialize)]
+pub struct Suspect {
+    pub curve: usize,
+    /// Position of the tag in the curve's tags (`None`: the curve as a whole).
+    pub tag: Option<usize>,
+    /// The node as typed there (for a wrong node, not the one the device stood at).
+    pub node: Option<u32>,
+    /// `late-enter` (the device rolled while the index was typed) or `wrong-node` (the loops
+    /// refuse the tag: its index, or its place).
+    pub kind: &'static str,
+    /// The warning's text.
+    pub reason: String,
+    /// What it rests on (the warning's figures).
+    pub evidence: serde_json::Value,
+    /// What was done: `placed` (the tag put where the device stood), `detached` (the tag
+    /// left out, its curve kept), `kept` (nothing: rescan it).
+    pub repair: &'static str,
+}
+
+impl Quality {
+    /// The suspects among `warnings`, on `curves` (to find a tag from its time).
+    pub fn of(warnings: &[&Warning], curves: &[Curve]) -> Quality {
+        use crate::warning::AcquisitionWarning;
+        use sfs_geometry::network::NetworkWarning;
+        let suspects = warnings
+            .iter()
+            .filter_map(|w| match w {
+                Warning::Acquisition(AcquisitionWarning::LateEnter {
+                    curve,
+                    node,
+                    t,
+                    rolled_m,
+                    moved_m,
+                }) => Some(Suspect {
+                    curve: *curve,
+                    tag: curves
+                        .iter()
+                        .find(|c| c.index == *curve)
+                        .and_then(|c| c.tags.iter().position(|g| g.t == *t)),
+                    node: Some(*node),
+                    kind: "late-enter",
+                    reason: w.to_string(),
+                    evidence: serde_json::json!({"t": t, "rolled_m": rolled_m, "moved_m": moved_m}),
+                    repair: "placed",
+                }),
+                Warning::Network(NetworkWarning::TagDetached(d)) => Some(Suspect {
+                    curve: d.curve,
+                    tag: Some(d.tag),
+                    node: Some(d.node),
+                    kind: "wrong-node",
+                    reason: w.to_string(),
+                    evidence: serde_json::json!({"offset_m": d.offset_m, "share": d.share}),
+                    repair: "detached",
+                }),
+                Warning::Network(NetworkWarning::TagRefused(r)) => Some(Suspect {
+                    curve: r.curve,
+                    tag: Some(r.tag),
+                    node: Some(r.node),
+                    kind: "wrong-node",
+                    reason: w.to_string(),
+                    evidence: serde_json::json!({"offset_m": r.offset_m, "misfit_pct": r.misfit_pct}),
+                    repair: "kept",
+                }),
+                _ => None,
+            })
+            .collect();
+        Quality { suspects }
+    }
 }
 
 /// A curve in `report.json`.
@@ -208,6 +290,13 @@ impl Report {
             live: None,
             monitor: None,
             phone: None,
+            quality: Quality::of(
+                &p.warnings
+                    .iter()
+                    .chain(&products.warnings)
+                    .collect::<Vec<_>>(),
+                p.curves,
+            ),
         }
     }
 

@@ -367,3 +367,52 @@ fn issue_49_a_late_enter_is_named_and_placed_where_the_device_stood() {
         assert!(l <= 1.2 * t + 0.02, "seed {seed}: {l} against {t}");
     }
 }
+
+/// `report.json` after replaying `sim` through the daemon.
+fn replayed_report(name: &str, sim: &Simulation) -> serde_json::Value {
+    let dir = std::env::temp_dir().join(format!("sfs-quality-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("c.bin"), &sim.bytes).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "warn", "replay", "c.bin", "--out", "out"])
+        .current_dir(&dir)
+        .output()
+        .expect("runs sfs");
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    let report = serde_json::from_slice(&std::fs::read(dir.join("out/report.json")).unwrap());
+    let _ = std::fs::remove_dir_all(&dir);
+    report.unwrap()
+}
+
+/// Issue 49 point 2: `report.json` `quality.suspects[]` names a planted late Enter where the
+/// truth put it, and a planted wrong node's tag the loops refuse; the twin has none.
+#[test]
+fn issue_49_report_quality_suspects_name_the_planted_faults() {
+    let s = scene::builtin("cone").unwrap();
+    let kind = DeviceKind::Morphorider;
+    let twin = simulate::run(&s, kind, Profile::Default, 1);
+    let suspects = |r: &serde_json::Value| r["quality"]["suspects"].as_array().unwrap().clone();
+    assert!(suspects(&replayed_report("twin", &twin)).is_empty());
+    let late = simulate::run_planted(&s, kind, Profile::Default, 1, Planted::LateEnter).unwrap();
+    let f = &late.truth.faults[0];
+    let got = suspects(&replayed_report("late", &late));
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert_eq!(
+        (
+            &got[0]["kind"],
+            &got[0]["curve"],
+            &got[0]["tag"],
+            &got[0]["node"]
+        ),
+        (
+            &"late-enter".into(),
+            &f.curve.into(),
+            &f.tag.unwrap().into(),
+            &f.node.unwrap().into()
+        )
+    );
+    assert_eq!(got[0]["repair"], "placed");
+    let wrong = simulate::run_planted(&s, kind, Profile::Default, 1, Planted::WrongNode).unwrap();
+    let got = suspects(&replayed_report("wrong", &wrong));
+    assert!(got.iter().any(|x| x["kind"] == "wrong-node"), "{got:?}");
+}
