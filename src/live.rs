@@ -71,6 +71,13 @@ struct Mail {
     closed: bool,
 }
 
+impl Mail {
+    /// Whether an update is due: curves to bring in, or to take out.
+    fn pending(&self) -> bool {
+        !self.curves.is_empty() || !self.removed.is_empty()
+    }
+}
+
 struct Shared {
     mail: Mutex<Mail>,
     wake: Condvar,
@@ -187,10 +194,10 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
     loop {
         let (curves, posted, snapshot) = {
             let mut m = lock(&shared.mail);
-            while m.curves.is_empty() && m.removed.is_empty() && !m.closed {
+            while !m.pending() && !m.closed {
                 m = shared.wake.wait(m).unwrap_or_else(|p| p.into_inner());
             }
-            if m.curves.is_empty() && m.removed.is_empty() {
+            if !m.pending() {
                 break; // closed, nothing pending
             }
             let removed = std::mem::take(&mut m.removed);
@@ -243,10 +250,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
         status_log.lines(&scan, &products, &lat, compute_ms);
         // A provisional update is settled at once while no curve waits (the operator sees the
         // quick one meanwhile), so the last update is always exact.
-        let waiting = || {
-            let m = lock(&shared.mail);
-            !m.curves.is_empty() || !m.removed.is_empty()
-        };
+        let waiting = || lock(&shared.mail).pending();
         let t0 = Instant::now();
         if !waiting()
             && pipeline.settle(

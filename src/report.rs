@@ -96,11 +96,11 @@ pub struct Suspect {
 
 impl Quality {
     /// The suspects among `warnings`, on `curves` (to find a tag from its time).
-    pub fn of(warnings: &[&Warning], curves: &[Curve]) -> Quality {
+    pub fn of<'a>(warnings: impl IntoIterator<Item = &'a Warning>, curves: &[Curve]) -> Quality {
         use crate::warning::AcquisitionWarning;
         use sfs_geometry::network::NetworkWarning;
         let suspects = warnings
-            .iter()
+            .into_iter()
             .filter_map(|w| match w {
                 Warning::Acquisition(AcquisitionWarning::LateEnter {
                     curve,
@@ -290,13 +290,7 @@ impl Report {
             live: None,
             monitor: None,
             phone: None,
-            quality: Quality::of(
-                &p.warnings
-                    .iter()
-                    .chain(&products.warnings)
-                    .collect::<Vec<_>>(),
-                p.curves,
-            ),
+            quality: Quality::of(p.warnings.iter().chain(&products.warnings), p.curves),
         }
     }
 

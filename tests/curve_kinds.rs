@@ -214,7 +214,6 @@ fn issue_18_curves_read_back_with_or_without_kind() {
 /// eight corners.
 #[test]
 fn issue_18_kinds_survive_undo_cancel_and_resume() {
-    use std::io::Write;
     let dir = tmpdir("kinds-resume");
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let scene = sfs::simulate::scene::load(&root.join("config/scenes/box.toml")).unwrap();
@@ -242,24 +241,8 @@ fn issue_18_kinds_survive_undo_cancel_and_resume() {
     assert_eq!(kinds_written(&dir.join("replayed")), truth);
     // Live, killed half way through, resumed.
     let session = dir.join("session");
-    let run = |args: &[&str]| run_stdin(args, &session);
     let (first, rest) = sim.bytes.split_at(sim.bytes.len() / 2);
-    let mut child = run(&["--session"]);
-    let mut stdin = child.stdin.take().unwrap();
-    stdin.write_all(first).unwrap();
-    stdin.flush().unwrap();
-    wait_for(
-        "the first half captured",
-        std::time::Duration::from_secs(20),
-        || file_len(&session.join("capture.bin")) == first.len() as u64,
-    );
-    std::thread::sleep(std::time::Duration::from_millis(1200));
-    let _ = child.kill();
-    let _ = child.wait();
-    drop(stdin);
-    let mut child = run(&["--resume"]);
-    child.stdin.take().unwrap().write_all(rest).unwrap();
-    assert!(child.wait().unwrap().success());
+    killed_then_resumed(&session, first, rest);
     assert_eq!(kinds_written(&session), truth);
     // The surface is cut along the creases (a vertex per face), with the box's corners.
     let glb =

@@ -5,8 +5,6 @@
 mod common;
 use common::*;
 use sfs::simulate::{self, planted::Planted, scene, Mistakes, Profile};
-use std::io::Write;
-use std::time::Duration;
 
 #[test]
 fn issue_49_a_rescan_resumed_after_a_kill_gives_the_replays_network() {
@@ -24,21 +22,7 @@ fn issue_49_a_rescan_resumed_after_a_kill_gives_the_replays_network() {
     // The rescan is the last eighth of the capture or so: killed in its middle.
     let (first, rest) = bytes.split_at(bytes.len() * 15 / 16);
     let session = dir.join("session");
-    let run = |args: &[&str]| run_stdin(args, &session);
-    let mut child = run(&["--session"]);
-    let mut stdin = child.stdin.take().unwrap();
-    stdin.write_all(first).unwrap();
-    stdin.flush().unwrap();
-    wait_for("the first part captured", Duration::from_secs(20), || {
-        file_len(&session.join("capture.bin")) == first.len() as u64
-    });
-    std::thread::sleep(Duration::from_millis(1200));
-    let _ = child.kill();
-    let _ = child.wait();
-    drop(stdin);
-    let mut child = run(&["--resume"]);
-    child.stdin.take().unwrap().write_all(rest).unwrap();
-    assert!(child.wait().unwrap().success());
+    killed_then_resumed(&session, first, rest);
     assert_eq!(std::fs::read(session.join("capture.bin")).unwrap(), bytes);
     replay_to(&session.join("capture.bin"), &dir.join("replayed"));
     assert_same_files(&session, &dir.join("replayed"), &["network.glb"], "resumed");

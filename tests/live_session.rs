@@ -118,22 +118,7 @@ fn issue7_sigkill_then_resume_gives_the_same_network() {
     let (bytes, _) = simulated("cone", &dir);
     let (first, rest) = bytes.split_at(bytes.len() / 2);
     let session = dir.join("session");
-    let run = |args: &[&str]| run_stdin(args, &session);
-    let mut child = run(&["--session"]);
-    let mut stdin = child.stdin.take().unwrap();
-    stdin.write_all(first).unwrap();
-    stdin.flush().unwrap();
-    wait_for("the first half captured", Duration::from_secs(20), || {
-        file_len(&session.join("capture.bin")) == first.len() as u64
-    });
-    // Past the capture's fsync interval (1 s), then no goodbye at all.
-    std::thread::sleep(Duration::from_millis(1200));
-    signal(child.id(), "-KILL");
-    let _ = child.wait();
-    drop(stdin);
-    let mut child = run(&["--resume"]);
-    child.stdin.take().unwrap().write_all(rest).unwrap();
-    assert!(child.wait().unwrap().success());
+    killed_then_resumed(&session, first, rest);
     assert_eq!(std::fs::read(session.join("capture.bin")).unwrap(), bytes);
     // The uninterrupted session, offline.
     let st = sfs()

@@ -3,6 +3,8 @@
 //! truth's `faults` says where. Checked on the decoded bytes and on what acquisition makes of
 //! them, against the twin.
 
+mod common;
+use common::{eval, read_report, replay_to, tmpdir};
 use device_protocol::{Decoder, DeviceKind, Event, Packet};
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
 use sfs::scan::Scan;
@@ -20,14 +22,7 @@ fn packets(bytes: &[u8]) -> Vec<Packet> {
 }
 
 fn acquire(bytes: &[u8]) -> Scan {
-    let mut dec = Decoder::new();
-    let mut acq = Acquisition::new(AcquisitionConfig::default());
-    for chunk in bytes.chunks(4096) {
-        for e in dec.feed(chunk) {
-            acq.event(&e);
-        }
-    }
-    acq.finish()
+    Acquisition::scan_bytes(bytes, AcquisitionConfig::default())
 }
 
 fn twin_and(device: DeviceKind, seed: u64, kind: Planted) -> (Simulation, Simulation) {
@@ -236,64 +231,40 @@ fn issue_49_a_curve_dropped_from_the_keypad_leaves_the_network() {
     assert_eq!((b.dropped[0].curve, b.dropped[0].by), (2, None));
     assert_eq!(b.dropped[0].nodes, a.curves[2].nodes());
     // Through the daemon: the network is made of the six others.
-    let dir = std::env::temp_dir().join(format!("sfs-drop-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let capture = dir.join("cone-drop.bin");
-    std::fs::write(&capture, &dropped.bytes).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
-        .args(["--log", "warn", "replay"])
-        .arg(&capture)
-        .arg("--out")
-        .arg(dir.join("out"))
-        .output()
-        .expect("runs sfs");
-    assert_eq!(out.status.code(), Some(0), "{out:?}");
-    let read = |f: &str| -> serde_json::Value {
-        serde_json::from_slice(&std::fs::read(dir.join("out").join(f)).unwrap()).unwrap()
-    };
-    let report = read("report.json");
-    assert_eq!(report["network"]["curves_used"], 6, "{}", report["network"]);
-    assert_eq!(read("scan.json")["dropped"][0]["curve"], 2);
-    let _ = std::fs::remove_dir_all(&dir);
+    let r = replayed("drop", &dropped);
+    assert_eq!(
+        r.report["network"]["curves_used"], 6,
+        "{}",
+        r.report["network"]
+    );
+    assert_eq!(r.scan["dropped"][0]["curve"], 2);
 }
 
-/// Replays `bytes` through the daemon and scores its network against `truth` (`sfs replay`,
-/// `sfs eval`): the curves' mean error, % of the diagonal.
-fn replayed_error(name: &str, sim: &Simulation) -> f64 {
-    let dir = std::env::temp_dir().join(format!("sfs-rescan-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(dir.join("c.bin"), &sim.bytes).unwrap();
-    std::fs::write(
-        dir.join("c.truth.json"),
-        serde_json::to_vec(&sim.truth).unwrap(),
-    )
-    .unwrap();
-    let sfs = |args: &[&str]| {
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
-            .args(["--log", "warn"])
-            .args(args)
-            .current_dir(&dir)
-            .output()
-            .expect("runs sfs");
-        assert_eq!(out.status.code(), Some(0), "{args:?}: {out:?}");
-        out.stdout
+/// What the daemon made of a simulated capture (`sfs replay`), and its score (`sfs eval`).
+struct Replayed {
+    report: serde_json::Value,
+    scan: serde_json::Value,
+    /// The curves' mean error against the capture's truth, % of the diagonal.
+    error_pct: f64,
+}
+
+/// `sim` replayed through the daemon in a directory of its own (`name`, unique among the
+/// tests running at once).
+fn replayed(name: &str, sim: &Simulation) -> Replayed {
+    let dir = tmpdir(&format!("faults-{name}"));
+    let (capture, truth, out) = (dir.join("c.bin"), dir.join("c.truth.json"), dir.join("out"));
+    std::fs::write(&capture, &sim.bytes).unwrap();
+    std::fs::write(&truth, serde_json::to_vec(&sim.truth).unwrap()).unwrap();
+    replay_to(&capture, &out);
+    let e = eval(&truth, &out.join("network.glb"));
+    let scan = serde_json::from_slice(&std::fs::read(out.join("scan.json")).unwrap()).unwrap();
+    let r = Replayed {
+        report: read_report(&out),
+        scan,
+        error_pct: e["curves"]["mean_pct"].as_f64().unwrap(),
     };
-    sfs(&["replay", "c.bin", "--out", "out"]);
-    let eval = sfs(&[
-        "eval",
-        "--truth",
-        "c.truth.json",
-        "--glb",
-        "out/network.glb",
-    ]);
-    let v: serde_json::Value = serde_json::from_slice(&eval).unwrap();
-    let scan: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.join("out/scan.json")).unwrap()).unwrap();
-    if name.contains("rescanned") {
-        assert_eq!(scan["dropped"].as_array().map(Vec::len), Some(1), "{name}");
-    }
     let _ = std::fs::remove_dir_all(&dir);
-    v["curves"]["mean_pct"].as_f64().unwrap()
+    r
 }
 
 /// Issue 49 point 4: a capture with a wrong node planted, the faulted curve rescanned from the
@@ -316,15 +287,22 @@ fn issue_49_a_wrong_node_rescanned_returns_to_the_twin() {
         let rescanned =
             simulate::run_planted_with(&s, kind, Profile::Default, seed, &more, Planted::WrongNode)
                 .unwrap();
+        let rescanned = replayed("rescan-rescanned", &rescanned);
+        assert_eq!(rescanned.scan["dropped"].as_array().map(Vec::len), Some(1));
         let (t, f, r) = (
-            replayed_error("twin", &twin),
-            replayed_error("faulted", &faulted),
-            replayed_error("rescanned", &rescanned),
+            replayed("rescan-twin", &twin).error_pct,
+            replayed("rescan-faulted", &faulted).error_pct,
+            rescanned.error_pct,
         );
         // The same rescan of the unfaulted capture: acting the rescan out draws the noise anew
         // (more samples), so this, not the capture without it, is the faulted one's twin.
         let twin_rescanned = simulate::run_with(&s, kind, Profile::Default, seed, &more);
-        let p = replayed_error("twin-rescanned", &twin_rescanned);
+        let twin_rescanned = replayed("rescan-twin-rescanned", &twin_rescanned);
+        assert_eq!(
+            twin_rescanned.scan["dropped"].as_array().map(Vec::len),
+            Some(1)
+        );
+        let p = twin_rescanned.error_pct;
         eprintln!(
             "issue 49 point 4, seed {seed}: twin {t:.4} %, wrong node {f:.4} %, rescanned {r:.4} % (the twin rescanned {p:.4} %)"
         );
@@ -362,26 +340,13 @@ fn issue_49_a_late_enter_is_named_and_placed_where_the_device_stood() {
             [(f.curve, f.node.unwrap())],
             "seed {seed}"
         );
-        let (t, l) = (replayed_error("twin", &twin), replayed_error("late", &late));
+        let (t, l) = (
+            replayed("late-twin", &twin).error_pct,
+            replayed("late-late", &late).error_pct,
+        );
         eprintln!("issue 49 point 2, seed {seed}: twin {t:.4} %, late Enter repaired {l:.4} %");
         assert!(l <= 1.2 * t + 0.02, "seed {seed}: {l} against {t}");
     }
-}
-
-/// `report.json` after replaying `sim` through the daemon.
-fn replayed_report(name: &str, sim: &Simulation) -> serde_json::Value {
-    let dir = std::env::temp_dir().join(format!("sfs-quality-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(dir.join("c.bin"), &sim.bytes).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
-        .args(["--log", "warn", "replay", "c.bin", "--out", "out"])
-        .current_dir(&dir)
-        .output()
-        .expect("runs sfs");
-    assert_eq!(out.status.code(), Some(0), "{out:?}");
-    let report = serde_json::from_slice(&std::fs::read(dir.join("out/report.json")).unwrap());
-    let _ = std::fs::remove_dir_all(&dir);
-    report.unwrap()
 }
 
 /// Issue 49 point 2: `report.json` `quality.suspects[]` names a planted late Enter where the
@@ -392,10 +357,10 @@ fn issue_49_report_quality_suspects_name_the_planted_faults() {
     let kind = DeviceKind::Morphorider;
     let twin = simulate::run(&s, kind, Profile::Default, 1);
     let suspects = |r: &serde_json::Value| r["quality"]["suspects"].as_array().unwrap().clone();
-    assert!(suspects(&replayed_report("twin", &twin)).is_empty());
+    assert!(suspects(&replayed("quality-twin", &twin).report).is_empty());
     let late = simulate::run_planted(&s, kind, Profile::Default, 1, Planted::LateEnter).unwrap();
     let f = &late.truth.faults[0];
-    let got = suspects(&replayed_report("late", &late));
+    let got = suspects(&replayed("quality-late", &late).report);
     assert_eq!(got.len(), 1, "{got:?}");
     assert_eq!(
         (
@@ -413,6 +378,6 @@ fn issue_49_report_quality_suspects_name_the_planted_faults() {
     );
     assert_eq!(got[0]["repair"], "placed");
     let wrong = simulate::run_planted(&s, kind, Profile::Default, 1, Planted::WrongNode).unwrap();
-    let got = suspects(&replayed_report("wrong", &wrong));
+    let got = suspects(&replayed("quality-wrong", &wrong).report);
     assert!(got.iter().any(|x| x["kind"] == "wrong-node"), "{got:?}");
 }

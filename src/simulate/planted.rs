@@ -8,7 +8,7 @@
 //! all of the render's) is drawn anew: its twin is the same scan, not the same bytes.
 //! The truth says where: `faults[]`, each with `kind`, `curve` (scan order, the program's curve
 //! index), `tag` (the position in that curve's tags), `node` and `details`, as
-//! `../shared/validation/faults/` does.
+//! the validation set's planted faults do.
 //!
 //! ```
 //! use sfs::simulate::{self, planted::Planted, scene, Profile};

@@ -311,6 +311,29 @@ pub fn run_stdin(args: &[&str], session: &std::path::Path) -> std::process::Chil
         .unwrap()
 }
 
+/// `sfs run --stdin --session SESSION` fed `first`, killed (SIGKILL) once it has captured
+/// it and synced (past the capture's 1 s fsync interval), then `--resume` fed `rest`, which
+/// must end with success.
+pub fn killed_then_resumed(session: &std::path::Path, first: &[u8], rest: &[u8]) {
+    use std::io::Write;
+    let mut child = run_stdin(&["--session"], session);
+    let mut stdin = child.stdin.take().unwrap();
+    stdin.write_all(first).unwrap();
+    stdin.flush().unwrap();
+    wait_for(
+        "the first part captured",
+        std::time::Duration::from_secs(20),
+        || file_len(&session.join("capture.bin")) == first.len() as u64,
+    );
+    std::thread::sleep(std::time::Duration::from_millis(1200));
+    let _ = child.kill();
+    let _ = child.wait();
+    drop(stdin);
+    let mut child = run_stdin(&["--resume"], session);
+    child.stdin.take().unwrap().write_all(rest).unwrap();
+    assert!(child.wait().unwrap().success());
+}
+
 /// Mean curve error of a field-profile capture of a shipped scene, % of the diagonal: simulated
 /// without the faults `without`, acquired and reconstructed with the defaults, scored with
 /// the paper's metric against the simulator's truth.
