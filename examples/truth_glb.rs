@@ -15,6 +15,7 @@ fn main() {
             nodes: c.nodes.clone(),
             points: c.points.iter().map(|p| Vector3::from(*p)).collect(),
             normals: c.normals.iter().map(|p| Vector3::from(*p)).collect(),
+            sigma_m: Vec::new(),
         })
         .collect();
     let nodes = t

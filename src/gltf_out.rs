@@ -4,7 +4,8 @@
 //! - A node named `network` whose mesh has one primitive per curve in mode LINE_STRIP
 //!   (POSITION with exact min/max, NORMAL = unit surface normal at the sample; primitive extras
 //!   `{"curve": index, "kind": "boundary" | "interior" | "crease" | "guide", "boundary": bool,
-//!   "nodes": [node sequence]}`, `boundary` kept for readers before curve kinds); the node's
+//!   "nodes": [node sequence]}`, `boundary` kept for readers before curve kinds; the custom
+//!   attribute `_SIGMA_M`, float, each point's uncertainty in metres); the node's
 //!   extras hold
 //!   the node positions `{"nodes": {"<index>": [x, y, z]}}` in the glb's frame.
 //! - When a surface exists, a node named `surface`: a triangle mesh (POSITION, NORMAL, u32
@@ -18,7 +19,8 @@
 //! use sfs::gltf_out::{network_glb, NetworkCurve};
 //! use sfs_geometry::curve::CurveKind;
 //! let c = NetworkCurve { index: 0, kind: CurveKind::Interior, nodes: vec![0, 1],
-//!     points: vec![Vector3::zeros(), Vector3::x()], normals: vec![Vector3::z(); 2] };
+//!     points: vec![Vector3::zeros(), Vector3::x()], normals: vec![Vector3::z(); 2],
+//!     sigma_m: vec![0.001; 2] };
 //! let glb = network_glb(&[c], &Default::default(), None).unwrap();
 //! assert_eq!(&glb[..4], b"glTF");
 //! ```
@@ -39,6 +41,9 @@ pub struct NetworkCurve {
     pub points: Vec<Vector3<f64>>,
     /// Unit surface normals at the points.
     pub normals: Vec<Vector3<f64>>,
+    /// Each point's uncertainty, m (written as the attribute `_SIGMA_M` when there is one
+    /// per point).
+    pub sigma_m: Vec<f64>,
 }
 
 pub use sfs_geometry::surface::SurfaceMesh;
@@ -48,6 +53,8 @@ pub use sfs_geometry::surface::SurfaceMesh;
 pub enum GltfError {
     #[error("curve {curve}: sample {index} is not finite")]
     NonFinitePoint { curve: usize, index: usize },
+    #[error("curve {curve}: the uncertainty at sample {index} is negative or not finite")]
+    NonFiniteSigma { curve: usize, index: usize },
     #[error("curve {curve}: the normal at sample {index} is zero or not finite")]
     BadNormal { curve: usize, index: usize },
     #[error("curve {curve}: {points} points and {normals} normals")]
@@ -71,6 +78,9 @@ pub enum GltfError {
 }
 
 /// World (z up) → glTF (y up).
+/// The curves' custom attribute: each point's uncertainty, m.
+pub const SIGMA_ATTRIBUTE: &str = "_SIGMA_M";
+
 #[inline]
 pub fn to_gltf(v: &Vector3<f64>) -> [f32; 3] {
     [v.x as f32, v.z as f32, -v.y as f32]
@@ -144,6 +154,28 @@ impl Builder {
             type_: Checked::Valid(json::accessor::Type::Vec3),
             min,
             max,
+            name: None,
+            normalized: false,
+            sparse: None,
+        })
+    }
+
+    /// Floats, one per vertex (a custom attribute).
+    fn scalars(&mut self, data: &[f32]) -> json::Index<json::Accessor> {
+        let bytes: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let view = self.view(&bytes, json::buffer::Target::ArrayBuffer);
+        self.root.push(json::Accessor {
+            buffer_view: Some(view),
+            byte_offset: None,
+            count: USize64::from(data.len()),
+            component_type: Checked::Valid(json::accessor::GenericComponentType(
+                json::accessor::ComponentType::F32,
+            )),
+            extensions: None,
+            extras: None,
+            type_: Checked::Valid(json::accessor::Type::Scalar),
+            min: None,
+            max: None,
             name: None,
             normalized: false,
             sparse: None,
@@ -270,6 +302,23 @@ impl Builder {
         let mut attributes = BTreeMap::new();
         attributes.insert(Checked::Valid(json::mesh::Semantic::Positions), pa);
         attributes.insert(Checked::Valid(json::mesh::Semantic::Normals), na);
+        if c.sigma_m.len() == c.points.len() {
+            let mut sigma = Vec::with_capacity(c.sigma_m.len());
+            for (i, s) in c.sigma_m.iter().enumerate() {
+                if !(s.is_finite() && *s >= 0.0 && *s < 1e30) {
+                    return Err(GltfError::NonFiniteSigma {
+                        curve: c.index,
+                        index: i,
+                    });
+                }
+                sigma.push(*s as f32);
+            }
+            let sa = self.scalars(&sigma);
+            attributes.insert(
+                Checked::Valid(json::mesh::Semantic::Extras(SIGMA_ATTRIBUTE[1..].into())),
+                sa,
+            );
+        }
         Ok(Some(json::mesh::Primitive {
             attributes,
             extensions: None,
@@ -404,6 +453,7 @@ pub fn network_curves(p: &Positions) -> Vec<NetworkCurve> {
             nodes: c.nodes.iter().map(|n| n.1).collect(),
             points: c.points.clone(),
             normals: c.normals.clone(),
+            sigma_m: c.sigma_m.clone(),
         })
         .collect()
 }
@@ -468,6 +518,11 @@ pub fn read_glb(bytes: &[u8]) -> Result<ReadNetwork, ReadError> {
                 .read_normals()
                 .map(|it| it.map(from_gltf).collect())
                 .unwrap_or_default();
+            let sigma_m: Vec<f64> = prim
+                .get(&gltf::Semantic::Extras(SIGMA_ATTRIBUTE[1..].into()))
+                .and_then(|a| gltf::accessor::Iter::<f32>::new(a, |_| blob))
+                .map(|it| it.map(f64::from).collect())
+                .unwrap_or_default();
             match (name, prim.mode()) {
                 ("network", gltf::mesh::Mode::LineStrip) => {
                     let extras: serde_json::Value = prim
@@ -498,6 +553,7 @@ pub fn read_glb(bytes: &[u8]) -> Result<ReadNetwork, ReadError> {
                             .unwrap_or_default(),
                         points: pos,
                         normals: nrm,
+                        sigma_m,
                     });
                 }
                 ("surface", gltf::mesh::Mode::Triangles) => {
@@ -530,6 +586,7 @@ mod tests {
             nodes: vec![4, 5],
             points: vec![Vector3::new(0.1, 0.2, 0.3), Vector3::new(0.4, -0.5, 0.6)],
             normals: vec![Vector3::z() * 2.0, Vector3::x()],
+            sigma_m: vec![0.0015, 0.0042],
         };
         let mut nodes = BTreeMap::new();
         nodes.insert(4, c.points[0]);
@@ -555,6 +612,10 @@ mod tests {
             "normals are unit"
         );
         assert!((r.nodes[&5] - c.points[1]).norm() < 1e-6);
+        assert_eq!(rc.sigma_m.len(), 2);
+        for (a, b) in rc.sigma_m.iter().zip(&c.sigma_m) {
+            assert!((a - b).abs() < 1e-9, "σ {a} for {b}");
+        }
         assert_eq!(r.surface.unwrap().triangles, vec![[0, 1, 2]]);
 
         let mut bad = c.clone();
@@ -562,6 +623,12 @@ mod tests {
         assert_eq!(
             network_glb(&[bad], &nodes, None),
             Err(GltfError::NonFinitePoint { curve: 3, index: 1 })
+        );
+        let mut bad = c.clone();
+        bad.sigma_m[0] = f64::INFINITY;
+        assert_eq!(
+            network_glb(&[bad], &nodes, None),
+            Err(GltfError::NonFiniteSigma { curve: 3, index: 0 })
         );
         let mut bad = c.clone();
         bad.normals[0] = Vector3::zeros();

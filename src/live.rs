@@ -48,6 +48,8 @@ pub struct Snapshot {
     pub counts: Counts,
     /// Acquisition warnings so far.
     pub warnings: Vec<crate::warning::Warning>,
+    /// The device the HELLO announced (its noise calibrates the uncertainty).
+    pub device: Option<device_protocol::DeviceKind>,
 }
 
 /// What the worker leaves when it is closed.
@@ -215,9 +217,10 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
             }
         }
         let t0 = Instant::now();
+        let network = crate::pipeline::for_device(&settings.network, snapshot.device);
         // Phase one: the network, published at once (the operator sees the curve in place);
         // phase two: its surface and network.glb (issue 35).
-        let mut products = pipeline.reconstruct(&scan.curves, &settings.network);
+        let mut products = pipeline.reconstruct(&scan.curves, &network);
         if let Some(v) = &settings.view {
             v.curves(&products, report.updates + 1, &posted);
         }
@@ -256,7 +259,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
             && pipeline.settle(
                 &scan.curves,
                 &mut products,
-                &settings.network,
+                &network,
                 settings.surface.as_ref(),
                 waiting,
             )

@@ -270,6 +270,23 @@ pub fn exact(surface: &SurfaceParams) -> SurfaceParams {
 
 /// The reconstruction settings with the whole network regressed: the network a run from
 /// scratch gives (the final outputs of a session, the live worker's settled updates).
+/// `network` with the noise of `device` (the Morphorider's when unknown), what the nodes'
+/// uncertainty is calibrated with (`sfs_geometry::network::marginals::NoisePrior`).
+pub fn for_device(
+    network: &NetworkParams,
+    device: Option<device_protocol::DeviceKind>,
+) -> NetworkParams {
+    use sfs_geometry::network::marginals::NoisePrior;
+    NetworkParams {
+        noise: match device {
+            Some(device_protocol::DeviceKind::Phone) => NoisePrior::PHONE,
+            _ => NoisePrior::MORPHORIDER,
+        }
+        .overridden(),
+        ..*network
+    }
+}
+
 pub fn exact_network(network: &NetworkParams) -> NetworkParams {
     NetworkParams {
         local_window: 0,

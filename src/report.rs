@@ -48,6 +48,10 @@ pub struct Report {
     pub warnings_left_out: u64,
     /// Reconstructed node positions in the glb's frame (y up), by node index.
     pub nodes: std::collections::BTreeMap<String, [f32; 3]>,
+    /// Each node's uncertainty, m (same keys as `nodes`): the RMS 3-D distance from the truth
+    /// expected once the rigid motion is removed, as `sfs eval` removes it
+    /// (`sfs_geometry::network::marginals`).
+    pub nodes_sigma_m: std::collections::BTreeMap<String, f64>,
     /// Wall time per reconstruction stage, ms.
     pub timings_ms: Option<sfs_geometry::network::Timings>,
     /// What the reconstruction did (curves used, samples, components, node normal agreement).
@@ -284,6 +288,12 @@ impl Report {
             warnings,
             warnings_by_code,
             nodes: products.nodes.clone(),
+            nodes_sigma_m: products
+                .network
+                .iter()
+                .flat_map(|n| &n.uncertainty.nodes)
+                .map(|(k, s)| (k.to_string(), *s))
+                .collect(),
             timings_ms: network.map(|n| n.timings_ms.clone()),
             network: network.cloned(),
             surface: products.surface.clone(),

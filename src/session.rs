@@ -698,6 +698,7 @@ impl Flow {
             m.report
         });
         let live = self.live.map(|l| l.finish());
+        let device = acq.device();
         let scan = acq.finish();
         let scan_path = out_dir.join(SCAN_FILE);
         crate::atomic::write_json(&scan_path, &scan, false).map_err(OutputError::at(&scan_path))?;
@@ -710,7 +711,10 @@ impl Flow {
             other => (
                 Pipeline::with_joins(settings.joins.clone()).run(
                     &scan.curves,
-                    &crate::pipeline::exact_network(&settings.network),
+                    &crate::pipeline::exact_network(&crate::pipeline::for_device(
+                        &settings.network,
+                        device,
+                    )),
                     settings
                         .surface
                         .as_ref()
@@ -868,6 +872,7 @@ fn snapshot(acq: &Acquisition, stats: &LinkStats) -> crate::live::Snapshot {
         link: stats.clone(),
         counts: scan.counts.clone(),
         warnings: scan.warnings.clone(),
+        device: acq.device(),
     }
 }
 

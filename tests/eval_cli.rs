@@ -41,6 +41,7 @@ fn curves_of(
                 .map(|p| f(c.index, Vector3::from(*p)))
                 .collect::<Vec<_>>(),
             normals: c.normals.iter().map(|n| Vector3::from(*n)).collect(),
+            sigma_m: Vec::new(),
         })
         .collect();
     let nodes = t

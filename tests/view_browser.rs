@@ -281,6 +281,76 @@ async fn issue_34_the_page_marks_the_joined_nodes() {
     browser.close().await;
 }
 
+/// Issue 49, point 1: the curves coloured by their points' uncertainty (the glb's `_SIGMA_M`),
+/// with a legend in mm whose top is at or above the largest node σ of `report.json`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(sfs_chromium),
+    ignore = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
+)]
+async fn issue_49_the_view_colours_the_curves_by_their_uncertainty() {
+    available();
+    let dir = tmpdir("view-browser-sigma");
+    let out = dir.join("out");
+    let (port, _served) = serve_replay_on_a_free_port(
+        &root().join("replay-logs/cone-morphorider.bin"),
+        &out,
+        None,
+        &[],
+    );
+    let report = ended_report(&out, Duration::from_secs(60));
+    let top_node_mm = report["nodes_sigma_m"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|v| v.as_f64().unwrap() * 1e3)
+        .fold(0.0, f64::max);
+    assert!(top_node_mm > 0.0, "{}", report["nodes_sigma_m"]);
+    let browser = Browser::start(&dir.join("profile")).await;
+    browser.goto(&format!("http://127.0.0.1:{port}/")).await;
+    browser
+        .watch(Duration::from_secs(30), |s| {
+            s["updates"].as_u64() >= Some(1)
+        })
+        .await;
+    let legend_hidden = "return document.getElementById('sigma-legend').hidden";
+    assert_eq!(
+        browser.execute(legend_hidden, serde_json::json!([])).await,
+        true
+    );
+    let toggle = browser.find("#show-sigma").await;
+    browser.click(&toggle).await;
+    let seen = browser
+        .watch(Duration::from_secs(10), |s| {
+            s["sigmaScaleMm"].as_f64() > Some(0.0)
+        })
+        .await;
+    let state = seen.last().unwrap();
+    assert_eq!(state["errors"], serde_json::json!([]), "console errors");
+    let curves = report["curves"].as_array().unwrap().len() as u64;
+    assert_eq!(state["sigmaCurves"].as_u64(), Some(curves));
+    let top = state["sigmaScaleMm"].as_f64().unwrap();
+    assert!(
+        top >= top_node_mm && top <= 10.0 * top_node_mm,
+        "{top} mm for {top_node_mm} mm"
+    );
+    assert_eq!(
+        browser.execute(legend_hidden, serde_json::json!([])).await,
+        false
+    );
+    browser
+        .screenshot(&root().join("target/view/sigma.png"))
+        .await;
+    browser.click(&toggle).await;
+    let seen = browser
+        .watch(Duration::from_secs(10), |s| {
+            s["sigmaScaleMm"].as_f64() == Some(0.0)
+        })
+        .await;
+    assert_eq!(seen.last().unwrap()["sigmaCurves"].as_u64(), Some(0));
+    browser.close().await;
+}
+
 /// Issue 48, point 2: the view opened on the machine that runs sfs shows the phone page's QR
 /// code, its address with the token and the certificate's fingerprint (fetched from
 /// `/status`, never from the `status` events, which carry no token).

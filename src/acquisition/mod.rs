@@ -337,6 +337,11 @@ impl Acquisition {
     }
 
     /// The scan so far (accepted curves only).
+    /// The device the last HELLO announced.
+    pub fn device(&self) -> Option<DeviceKind> {
+        self.kind
+    }
+
     pub fn scan(&self) -> &Scan {
         &self.scan
     }

@@ -565,12 +565,19 @@ impl View {
                     .iter()
                     .map(|p| crate::gltf_out::to_gltf(p).map(|x| (x * 1e5).round() / 1e5))
                     .collect();
+                // Each point's uncertainty, mm to the hundredth (issue 49).
+                let sigma_mm: Vec<f64> = c
+                    .sigma_m
+                    .iter()
+                    .map(|s| (s * 1e5).round() / 100.0)
+                    .collect();
                 serde_json::json!({
                     "curve": c.index,
                     "kind": c.kind.name(),
                     "boundary": c.kind == sfs_geometry::curve::CurveKind::Boundary,
                     "nodes": c.nodes.iter().map(|n| n.1).collect::<Vec<_>>(),
                     "points": points,
+                    "sigma_mm": sigma_mm,
                 })
             })
             .collect();

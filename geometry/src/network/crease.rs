@@ -406,6 +406,7 @@ mod tests {
             across: Vec::new(),
             nodes: vec![(0, nodes.0), (m, nodes.1)],
             d: Vec::new(),
+            sigma_m: Vec::new(),
         }
     }
 
@@ -449,6 +450,7 @@ mod tests {
                     curves,
                     nodes: Default::default(),
                     components: 1,
+                    misfit: Default::default(),
                 };
                 let unknown = other_faces(&mut p);
                 assert!(unknown.is_empty(), "{unknown:?}");
@@ -474,6 +476,7 @@ mod tests {
             )],
             nodes: Default::default(),
             components: 1,
+            misfit: Default::default(),
         };
         assert_eq!(other_faces(&mut p), [CreaseUnknown::Side { curve: 7 }]);
         assert!(p.curves[0].across.is_empty());

@@ -14,6 +14,7 @@
 pub mod closure;
 pub mod crease;
 pub mod join;
+pub mod marginals;
 pub mod poisson;
 pub mod prefilter;
 pub mod regression;
@@ -42,6 +43,8 @@ pub struct NetworkParams {
     /// run's. The result is then provisional ([`NetworkReport::provisional`]): close to the
     /// whole network's regression, not equal to it. Default 0: the whole network every run.
     pub local_window: usize,
+    /// The device's noise where the loops cannot tell it ([`marginals`]).
+    pub noise: marginals::NoisePrior,
 }
 
 /// What a reconstruction did, for `report.json`.
@@ -67,6 +70,9 @@ pub struct NetworkReport {
     pub closure: Vec<closure::CurveMisfit>,
     /// The network's closure misfit ([`closure::ClosureReport::misfit_m`]), m.
     pub closure_misfit_m: Option<f64>,
+    /// The noise the nodes' uncertainty rests on: the loops' against the device's prior
+    /// ([`marginals::Noise`]).
+    pub noise: marginals::Noise,
     /// Nodes tagged on one curve joined to another curve that passes them, and crossings
     /// nobody tagged joined under fresh nodes (issue 34; [`Reconstructor::run_joined`]).
     pub joined: Vec<join::JoinReport>,
@@ -87,6 +93,8 @@ pub struct Timings {
     pub prefilter: f64,
     pub regression: f64,
     pub poisson: f64,
+    /// The uncertainty of the nodes and points ([`marginals`]).
+    pub uncertainty: f64,
     /// The joins' passes and tests (issue 34), beyond the first reconstruction.
     pub join: f64,
 }
@@ -222,6 +230,8 @@ pub(crate) struct Slide {
 #[derive(Debug, Clone)]
 pub struct Network {
     pub positions: Positions,
+    /// How far each node and point may be from the truth ([`marginals`]).
+    pub uncertainty: marginals::Uncertainty,
     pub report: NetworkReport,
     pub warnings: Vec<NetworkWarning>,
 }
@@ -232,6 +242,7 @@ pub struct Network {
 #[derive(Debug, Default)]
 pub struct Reconstructor {
     poisson: PoissonSolver,
+    marginals: marginals::MarginalsSolver,
     regression: RegressionSolver,
     prefiltered: HashMap<usize, (CurveKey, Result<UniformCurve, prefilter::PrefilterError>)>,
     regressed: HashMap<usize, Vec<UnitQuaternion<f64>>>,
@@ -459,6 +470,25 @@ impl Reconstructor {
                 .map(NetworkWarning::CreaseUnknown),
         );
         let t3 = Instant::now();
+        let uncertainty = match self.marginals.run(&uniform, &positions, &p.noise) {
+            Ok(mut u) => {
+                for (c, s) in positions
+                    .curves
+                    .iter_mut()
+                    .zip(std::mem::take(&mut u.curves))
+                {
+                    c.sigma_m = s;
+                }
+                u
+            }
+            Err(e) => {
+                // The node Laplacian is the Poisson one's Schur complement: it factors when
+                // that one did. Should it not, the positions stand without their σ.
+                tracing::warn!("the uncertainty of the network could not be computed: {e}");
+                marginals::Uncertainty::default()
+            }
+        };
+        let t4 = Instant::now();
         if positions.components > 1 {
             warnings.push(NetworkWarning::InParts {
                 components: positions.components,
@@ -476,10 +506,12 @@ impl Reconstructor {
             regression,
             closure_misfit_m: closure.misfit_m,
             closure: closure.curves,
+            noise: uncertainty.noise,
             timings_ms: Timings {
                 prefilter: (t1 - t0).as_secs_f64() * 1e3,
                 regression: (t2 - t1).as_secs_f64() * 1e3,
                 poisson: (t3 - t2).as_secs_f64() * 1e3,
+                uncertainty: (t4 - t3).as_secs_f64() * 1e3,
                 ..Default::default()
             },
             // The joins are run_joined's.
@@ -494,6 +526,7 @@ impl Reconstructor {
         Ok((
             Network {
                 positions,
+                uncertainty,
                 report,
                 warnings,
             },

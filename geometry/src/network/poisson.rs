@@ -27,6 +27,8 @@ pub struct CurvePositions {
     /// The curve's own distance at every sample (the scan's `d`: the wheel's, or the phone's
     /// from its speed), m; empty where the curve was not resampled from a scan.
     pub d: Vec<f64>,
+    /// Each point's uncertainty, m ([`super::marginals`]); empty until it is computed.
+    pub sigma_m: Vec<f64>,
 }
 
 impl CurvePositions {
@@ -43,6 +45,23 @@ pub struct Positions {
     pub nodes: BTreeMap<u32, Vector3<f64>>,
     /// Connected components (each placed with its own gauge).
     pub components: usize,
+    /// What the least squares left unexplained: the loops' misfit.
+    pub misfit: Misfit,
+}
+
+/// The Poisson least squares' residual: `chi2 = Σ_e w_e |x_b − x_a − h_e t_e|²` over every
+/// edge (`w_e = 1/h_e²`, so each term is the squared tangent residual, dimensionless), and
+/// the loops that can leave one (the network's cycle rank, edges − unknowns + components).
+/// A network without loops fits exactly: `chi2 = 0`, `loops = 0`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Misfit {
+    pub chi2: f64,
+    /// `chi2`'s terms summed per segment (between consecutive tags) of each curve (in the
+    /// order of the curves solved).
+    pub chi2_segments: Vec<Vec<f64>>,
+    pub loops: usize,
+    /// Mean step of the edges, m (the residual's scale: [`super::marginals`]).
+    pub mean_h: f64,
 }
 
 /// Keeps the symbolic factorisation between solves.
@@ -118,6 +137,8 @@ impl PoissonSolver {
             .map(|c| c.q.iter().map(|q| q * Vector3::x()).collect())
             .collect();
         let mut edges = Vec::new();
+        // (curve position, sample) of each edge's start.
+        let mut edge_at = Vec::new();
         for (ci, c) in curves.iter().enumerate() {
             for j in 0..c.q.len().saturating_sub(1) {
                 let h = c.edge_h(j);
@@ -135,6 +156,7 @@ impl PoissonSolver {
                     w: 1.0 / (h * h),
                     v: t * h,
                 });
+                edge_at.push((ci, j));
             }
         }
         // Components (union-find) and a gauge per component.
@@ -176,6 +198,16 @@ impl PoissonSolver {
         f.solve(&mut rhs);
         let mut x: Vec<Vector3<f64>> = rhs.iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
         let sigma = slide(&f, &mut x, curves, &var_of, &tangents, slides);
+        let misfit = misfit(
+            curves,
+            &edges,
+            &edge_at,
+            &x,
+            &tangents,
+            slides,
+            &sigma,
+            gauges.len(),
+        );
         let out_curves = curves
             .iter()
             .enumerate()
@@ -188,6 +220,7 @@ impl PoissonSolver {
                 across: Vec::new(),
                 nodes: c.nodes.clone(),
                 d: c.d.clone(),
+                sigma_m: Vec::new(),
             })
             .collect();
         Ok((
@@ -195,9 +228,64 @@ impl PoissonSolver {
                 curves: out_curves,
                 nodes: node_var.iter().map(|(&nd, &v)| (nd, x[v])).collect(),
                 components: gauges.len(),
+                misfit,
             },
             sigma,
         ))
+    }
+}
+
+/// The residual of the solution `x` (after the slides: an edge at a sliding tag reads
+/// `x_b − x_a − h t ± σ T`).
+#[allow(clippy::too_many_arguments)]
+fn misfit(
+    curves: &[UniformCurve],
+    edges: &[Edge],
+    edge_at: &[(usize, usize)],
+    x: &[Vector3<f64>],
+    tangents: &[Vec<Vector3<f64>>],
+    slides: &[(usize, usize)],
+    sigma: &[f64],
+    components: usize,
+) -> Misfit {
+    let slid: std::collections::HashMap<(usize, usize), f64> =
+        slides.iter().zip(sigma).map(|(&at, &s)| (at, s)).collect();
+    let mut chi2 = 0.0;
+    let mut chi2_segments: Vec<Vec<f64>> = curves
+        .iter()
+        .map(|c| vec![0.0; c.nodes.len().saturating_sub(1)])
+        .collect();
+    let mut used = 0usize;
+    let mut h_sum = 0.0;
+    for (e, &(ci, j)) in edges.iter().zip(edge_at) {
+        if e.a == e.b {
+            continue;
+        }
+        used += 1;
+        h_sum += e.w.sqrt().recip();
+        let mut r = x[e.b] - x[e.a] - e.v;
+        // Into a sliding tag (sign −1) and out of one (sign +1).
+        if let Some(s) = slid.get(&(ci, j + 1)) {
+            r -= tangents[ci][j + 1] * *s;
+        }
+        if let Some(s) = slid.get(&(ci, j)) {
+            r += tangents[ci][j] * *s;
+        }
+        chi2 += e.w * r.norm_squared();
+        let seg = curves[ci]
+            .nodes
+            .iter()
+            .rposition(|&(i, _)| i <= j)
+            .unwrap_or(0);
+        if let Some(x) = chi2_segments[ci].get_mut(seg) {
+            *x += e.w * r.norm_squared();
+        }
+    }
+    Misfit {
+        chi2,
+        chi2_segments,
+        loops: (used + components).saturating_sub(x.len()),
+        mean_h: if used == 0 { 0.0 } else { h_sum / used as f64 },
     }
 }
 

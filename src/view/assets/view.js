@@ -21,6 +21,8 @@ const state = {
   // Per curve brought in by a `curves` event (the network before its surface, issue 35): from
   // its E packet to those curves drawn here, ms, and the part from the event's arrival.
   curveLatencies: [], curvesShown: 0,
+  // Curves coloured by their points' uncertainty (issue 49): the legend's top, mm (0: off).
+  sigmaScaleMm: 0, sigmaCurves: 0,
 };
 window.sfsView = state;
 function pageError(text) {
@@ -199,6 +201,7 @@ const MATERIALS = {
   crease: new THREE.LineBasicMaterial({ color: COLOURS.crease }),
   guide: new THREE.LineBasicMaterial({ color: COLOURS.guide }),
   latest: new THREE.LineBasicMaterial({ color: COLOURS.latest }),
+  sigma: new THREE.LineBasicMaterial({ vertexColors: true }),
   node: new THREE.PointsMaterial({ color: COLOURS.node, size: 6, sizeAttenuation: false }),
   preview: new THREE.LineDashedMaterial({ color: COLOURS.preview, dashSize: 0.01, gapSize: 0.006 }),
   surface: new THREE.MeshStandardMaterial({
@@ -218,6 +221,8 @@ const shared = new Set(Object.values(MATERIALS));
   const warm = new THREE.Group();
   warm.add(new THREE.Mesh(g, MATERIALS.surface), new THREE.Points(g, MATERIALS.node));
   for (const k of ['boundary', 'interior', 'crease', 'guide', 'latest', 'preview']) warm.add(new THREE.Line(g, MATERIALS[k]));
+  g.setAttribute('color', new THREE.Float32BufferAttribute([1, 1, 1, 1, 1, 1, 1, 1, 1], 3));
+  warm.add(new THREE.Line(g, MATERIALS.sigma));
   scene.add(warm);
   renderer.compile(scene, camera);
   scene.remove(warm);
@@ -233,6 +238,54 @@ function clear(group) {
   }
 }
 
+// The uncertainty's colour scale: blue (certain) through yellow to red (the scale's top).
+const SIGMA_STOPS = [new THREE.Color(0x2c7bb6), new THREE.Color(0xffffbf), new THREE.Color(0xd7191c)];
+function sigmaColour(x) {
+  const t = Math.min(1, Math.max(0, x)) * 2;
+  const k = Math.min(1, Math.floor(t));
+  return SIGMA_STOPS[k].clone().lerp(SIGMA_STOPS[k + 1], t - k);
+}
+// The legend's span: the drawn σ's, rounded out to a step of 1, 2 or 5 × 10^k mm (about a
+// tenth of the span), so that the colours tell the curves apart.
+function sigmaSpan(lo, hi) {
+  const raw = Math.max(hi - lo, hi * 0.05, 1e-3) / 10;
+  const p = Math.pow(10, Math.floor(Math.log10(raw)));
+  const step = [1, 2, 5, 10].map((m) => m * p).find((s) => s >= raw);
+  return [Math.floor(lo / step) * step, Math.ceil(hi / step) * step];
+}
+// Colours every curve by its points' σ (the glb's `_SIGMA_M`, the curves event's `sigma_mm`)
+// when asked, and shows the legend; otherwise each curve its kind's colour.
+function colourBySigma() {
+  const on = document.getElementById('show-sigma').checked;
+  let lo = Infinity, hi = 0;
+  for (const line of network.children) {
+    const s = line.userData.sigmaMm;
+    if (line.isLine && s) for (const v of s) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
+  }
+  const [bottom, top] = hi > 0 ? sigmaSpan(lo, hi) : [0, 0];
+  state.sigmaScaleMm = on ? top : 0;
+  state.sigmaCurves = 0;
+  for (const line of network.children) {
+    if (!line.isLine) continue;
+    const s = line.userData.sigmaMm;
+    if (on && s && top > 0 && s.length === line.geometry.getAttribute('position').count) {
+      const colours = new Float32Array(s.length * 3);
+      s.forEach((v, i) => sigmaColour((v - bottom) / (top - bottom)).toArray(colours, 3 * i));
+      line.geometry.setAttribute('color', new THREE.BufferAttribute(colours, 3));
+      line.material = MATERIALS.sigma;
+      state.sigmaCurves += 1;
+    } else {
+      line.material = line.userData.material;
+    }
+  }
+  const legend = document.getElementById('sigma-legend');
+  legend.hidden = !(on && top > 0);
+  const mm = (v) => String(Number(v.toPrecision(3)));
+  document.getElementById('sigma-bottom').textContent = mm(bottom);
+  document.getElementById('sigma-mid').textContent = mm((bottom + top) / 2);
+  document.getElementById('sigma-top').textContent = mm(top) + ' mm';
+}
+
 // Replaces the drawn curves and nodes: `lines` [{geometry, curve, kind, nodes}], `positions`
 // {node: [x, y, z]} (the glb's frame); frames the first network in view.
 function drawNetwork(lines, positions) {
@@ -245,7 +298,10 @@ function drawNetwork(lines, positions) {
     curves.push({ index: l.curve, kind, boundary: kind === 'boundary', nodes: l.nodes || [] });
     const material = l.curve === state.lastCurve ? MATERIALS.latest : MATERIALS[kind];
     const line = new THREE.Line(l.geometry, material);
-    line.userData = { curve: l.curve, kind, boundary: kind === 'boundary' };
+    // σ per point, mm: the curves event's, or the glb's custom attribute (metres).
+    const attr = l.geometry.getAttribute('_sigma_m');
+    const sigmaMm = l.sigma_mm || (attr ? Array.from(attr.array, (v) => v * 1000) : null);
+    line.userData = { curve: l.curve, kind, boundary: kind === 'boundary', material, sigmaMm };
     network.add(line);
     l.geometry.computeBoundingBox();
     box.union(l.geometry.boundingBox);
@@ -264,6 +320,7 @@ function drawNetwork(lines, positions) {
     network.add(new THREE.Points(geo, MATERIALS.node));
   }
   labels.visible = document.getElementById('show-labels').checked;
+  colourBySigma();
   state.curves = curves;
   state.nodes = nodes;
   state.nodePositions = positions || {};
@@ -489,6 +546,7 @@ function showPreview(p) {
 
 document.getElementById('show-surface').addEventListener('change', (e) => { if (surface) surface.visible = e.target.checked; });
 document.getElementById('show-labels').addEventListener('change', (e) => { labels.visible = e.target.checked; });
+document.getElementById('show-sigma').addEventListener('change', () => { colourBySigma(); redraw(); });
 
 // Kept current by the server's events; the whole network fetched at once and again at every
 // `network` event and every reconnection.

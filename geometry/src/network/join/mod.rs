@@ -45,6 +45,7 @@
 //!         d: (0..=100).map(|k| k as f64 / 100.0).collect(),
 //!         points,
 //!         nodes,
+//!         sigma_m: Vec::new(),
 //!     }
 //! };
 //! let a = line(0, Vector3::new(0.0, 0.5, 0.0), Vector3::new(1.0, 0.5, 0.0), vec![(0, 0), (50, 9), (100, 1)]);
@@ -52,7 +53,7 @@
 //! let nodes = [(0, a.points[0]), (9, a.points[50]), (1, a.points[100]), (2, b.points[0]), (3, b.points[100])]
 //!     .into_iter()
 //!     .collect();
-//! let net = Positions { curves: vec![a, b], nodes, components: 2 };
+//! let net = Positions { curves: vec![a, b], nodes, components: 2, misfit: Default::default() };
 //! let joins = find_joins(&net, &JoinParams::default());
 //! assert_eq!(joins.len(), 1);
 //! assert_eq!((joins[0].node, joins[0].curve), (9, 1));
