@@ -328,6 +328,9 @@ impl Update<'_> {
             products,
         );
         live_report.live = Some(report.clone());
+        if let Some(v) = &settings.view {
+            v.quality(&live_report.quality);
+        }
         let path = settings.out_dir.join(REPORT_FILE);
         if let Err(e) = live_report.write(&path) {
             tracing::error!("live update: cannot write {}: {e}", path.display());

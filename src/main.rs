@@ -725,6 +725,10 @@ fn print_summary(o: &Outcome) {
             m.alarms_raised
         );
     }
+    if o.report.monitor.is_none() {
+        let q = &o.report.quality;
+        say!("scan: {} ({})", q.verdict.name(), q.verdict_reason);
+    }
     if let Some(c) = &o.capture_path {
         say!("capture: {}", c.display());
     }

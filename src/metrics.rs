@@ -41,6 +41,11 @@ pub struct SessionMetrics {
     pub warnings: Counter,
     /// Live reconstructions that wrote `network.glb`.
     pub updates: Counter,
+    /// The latest reconstruction's verdict (issue 49): 0 good, 1 suspect, 2 inconsistent,
+    /// −1 nothing reconstructed yet.
+    pub scan_verdict: Gauge,
+    /// Suspects named (a tag or curve that looks wrong), each once.
+    pub suspects: Counter,
     /// From the `E` key packet to `network.glb` in place, seconds: the latest p50 and p95.
     pub latency_p50: GaugeF64,
     pub latency_p95: GaugeF64,
@@ -64,6 +69,8 @@ impl SessionMetrics {
             curves_discarded: Counter::default(),
             warnings: Counter::default(),
             updates: Counter::default(),
+            scan_verdict: Gauge::default(),
+            suspects: Counter::default(),
             latency_p50: GaugeF64::default(),
             latency_p95: GaugeF64::default(),
             last_link: Mutex::new(LinkStats::default()),
@@ -118,6 +125,17 @@ impl SessionMetrics {
             "updates",
             "Live reconstructions that wrote network.glb",
             m.updates.clone(),
+        );
+        m.scan_verdict.set(-1);
+        registry.register(
+            "scan_verdict",
+            "The scan's verdict: 0 good, 1 suspect, 2 inconsistent, -1 nothing reconstructed yet",
+            m.scan_verdict.clone(),
+        );
+        registry.register(
+            "suspects",
+            "Tags or curves named as looking wrong (late Enter, wrong node), each once",
+            m.suspects.clone(),
         );
         registry.register_with_unit(
             "latency_p50",

@@ -72,11 +72,62 @@ pub struct Report {
 /// Where the scan looks wrong, and why (issue 49).
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Quality {
+    /// The scan as a whole ([`Verdict`]).
+    pub verdict: Verdict,
+    /// Why, in a sentence.
+    pub verdict_reason: String,
+    /// The nodes' expected error: the RMS of `nodes_sigma_m`, m (`None` without a network).
+    pub expected_error_m: Option<f64>,
+    /// The same in % of the network's bounding-box diagonal (the paper's unit).
+    pub expected_error_pct: Option<f64>,
     /// Each tag or curve that looks wrong, from the sensors (a late Enter) or from the
     /// network's loops (a tag they refuse), with what it rests on. Every suspect is among the
     /// warnings too; this is them in one shape, with the keys that rescan the curve.
     pub suspects: Vec<Suspect>,
 }
+
+/// The scan as a whole: `good` (nothing looks wrong), `suspect` (a tag or a curve looks
+/// wrong: [`Quality::suspects`] says which, and how to rescan it) or `inconsistent` (the
+/// network's loops misfit far beyond the device's noise: the nodes may be off by more than
+/// [`INCONSISTENT_PCT`] of the scan's size; rescan what the suspects and the closure misfit
+/// name, or the scan is not to be trusted). `none` before anything is reconstructed.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Verdict {
+    #[default]
+    None,
+    Good,
+    Suspect,
+    Inconsistent,
+}
+
+impl Verdict {
+    pub fn name(self) -> &'static str {
+        match self {
+            Verdict::None => "none",
+            Verdict::Good => "good",
+            Verdict::Suspect => "suspect",
+            Verdict::Inconsistent => "inconsistent",
+        }
+    }
+
+    /// The Prometheus gauge's value: 0 good, 1 suspect, 2 inconsistent, −1 none.
+    pub fn level(self) -> i64 {
+        match self {
+            Verdict::None => -1,
+            Verdict::Good => 0,
+            Verdict::Suspect => 1,
+            Verdict::Inconsistent => 2,
+        }
+    }
+}
+
+/// The nodes' expected error (RMS σ, calibrated per device) above which a scan is
+/// `inconsistent`, % of the network's diagonal. Measured (BENCHMARKS.md "Trust"): unfaulted
+/// captures of the validation set and of our simulator reach 0.82 %, except one whose
+/// reconstruction is 3.6 % off (3.6 % expected); every capture with a wrong node left in is
+/// expected at 2.2 % or more.
+pub const INCONSISTENT_PCT: f64 = 1.5;
 
 /// A tag or curve that looks wrong.
 #[derive(Debug, Clone, Serialize)]
@@ -96,6 +147,9 @@ pub struct Suspect {
     /// What was done: `placed` (the tag put where the device stood), `detached` (the tag
     /// left out, its curve kept), `kept` (nothing: rescan it).
     pub repair: &'static str,
+    /// The keys that rescan the curve in place (issue 49, point 4): its number, its kind's
+    /// start key, the curve again, `E` (e.g. `3 B … E`).
+    pub rescan: String,
 }
 
 impl Quality {
@@ -103,7 +157,7 @@ impl Quality {
     pub fn of<'a>(warnings: impl IntoIterator<Item = &'a Warning>, curves: &[Curve]) -> Quality {
         use crate::warning::AcquisitionWarning;
         use sfs_geometry::network::NetworkWarning;
-        let suspects = warnings
+        let mut suspects: Vec<Suspect> = warnings
             .into_iter()
             .filter_map(|w| match w {
                 Warning::Acquisition(AcquisitionWarning::LateEnter {
@@ -123,6 +177,7 @@ impl Quality {
                     reason: w.to_string(),
                     evidence: serde_json::json!({"t": t, "rolled_m": rolled_m, "moved_m": moved_m}),
                     repair: "placed",
+                    rescan: String::new(),
                 }),
                 Warning::Network(NetworkWarning::TagDetached(d)) => Some(Suspect {
                     curve: d.curve,
@@ -132,6 +187,7 @@ impl Quality {
                     reason: w.to_string(),
                     evidence: serde_json::json!({"offset_m": d.offset_m, "share": d.share}),
                     repair: "detached",
+                    rescan: String::new(),
                 }),
                 Warning::Network(NetworkWarning::TagRefused(r)) => Some(Suspect {
                     curve: r.curve,
@@ -141,11 +197,89 @@ impl Quality {
                     reason: w.to_string(),
                     evidence: serde_json::json!({"offset_m": r.offset_m, "misfit_pct": r.misfit_pct}),
                     repair: "kept",
+                    rescan: String::new(),
                 }),
                 _ => None,
             })
             .collect();
-        Quality { suspects }
+        for s in &mut suspects {
+            let key = curves
+                .iter()
+                .find(|c| c.index == s.curve)
+                .map_or(b'I', |c| c.kind.key());
+            s.rescan = format!("{} {} … E", s.curve, key as char);
+        }
+        Quality {
+            suspects,
+            ..Quality::default()
+        }
+    }
+
+    /// Judges the scan: its suspects and `network`'s expected error ([`Verdict`]).
+    pub fn judge(&mut self, network: Option<&sfs_geometry::network::Network>) {
+        let Some(n) = network else {
+            self.verdict = Verdict::None;
+            self.verdict_reason = "nothing reconstructed yet".into();
+            return;
+        };
+        let sigma = n.uncertainty.noise.sigma_rms_m;
+        let diagonal = diagonal(&n.positions);
+        let pct = (diagonal > 0.0).then(|| sigma / diagonal * 100.0);
+        self.expected_error_m = Some(sigma);
+        self.expected_error_pct = pct;
+        let expected = match pct {
+            Some(p) => format!("{:.1} mm RMS ({p:.2} % of the scan's size)", sigma * 1e3),
+            None => format!("{:.1} mm RMS", sigma * 1e3),
+        };
+        (self.verdict, self.verdict_reason) = if pct.is_some_and(|p| p > INCONSISTENT_PCT) {
+            (
+                Verdict::Inconsistent,
+                format!(
+                    "the network's loops do not close as the device's noise would: node uncertainty {expected}{}",
+                    if self.suspects.is_empty() {
+                        String::new()
+                    } else {
+                        format!("; {} suspect(s) named", self.suspects.len())
+                    }
+                ),
+            )
+        } else if !self.suspects.is_empty() {
+            (
+                Verdict::Suspect,
+                format!(
+                    "{} suspect(s): {}; node uncertainty {expected}",
+                    self.suspects.len(),
+                    self.suspects
+                        .iter()
+                        .map(|s| format!(
+                            "curve {} ({}, rescan with {})",
+                            s.curve, s.kind, s.rescan
+                        ))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            )
+        } else {
+            (
+                Verdict::Good,
+                format!("nothing looks wrong; node uncertainty {expected}"),
+            )
+        };
+    }
+}
+
+/// The bounding-box diagonal of every curve point, m.
+fn diagonal(p: &sfs_geometry::network::poisson::Positions) -> f64 {
+    let mut lo = nalgebra::Vector3::repeat(f64::INFINITY);
+    let mut hi = nalgebra::Vector3::repeat(f64::NEG_INFINITY);
+    for q in p.curves.iter().flat_map(|c| &c.points) {
+        lo = lo.inf(q);
+        hi = hi.sup(q);
+    }
+    if lo.x.is_finite() {
+        (hi - lo).norm()
+    } else {
+        0.0
     }
 }
 
@@ -300,7 +434,11 @@ impl Report {
             live: None,
             monitor: None,
             phone: None,
-            quality: Quality::of(p.warnings.iter().chain(&products.warnings), p.curves),
+            quality: {
+                let mut q = Quality::of(p.warnings.iter().chain(&products.warnings), p.curves);
+                q.judge(products.network.as_ref());
+                q
+            },
         }
     }
 

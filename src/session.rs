@@ -753,6 +753,7 @@ impl Flow {
         if let Some(v) = &self.view {
             v.warnings(scan.warnings.iter().chain(&products.warnings));
             v.reconstruction_warnings(&[]);
+            v.quality(&report.quality);
             if fresh {
                 let live = report.live.clone().unwrap_or_default();
                 v.network(&products, &live, scan.curves.len(), &[]);

@@ -351,6 +351,92 @@ async fn issue_49_the_view_colours_the_curves_by_their_uncertainty() {
     browser.close().await;
 }
 
+/// Issue 49, points 2 and 3: a late Enter planted in the cone: the page's bar says the scan
+/// is `suspect` and its Suspects list the curve with the keys that rescan it, as
+/// `report.json`'s `quality` does; `/status` carries the quality, `/metrics` the verdict's
+/// gauge and the suspects' counter.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(sfs_chromium),
+    ignore = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
+)]
+async fn issue_49_the_page_shows_the_verdict_and_the_suspects() {
+    use sfs::simulate::{self, planted::Planted, scene, Profile};
+    available();
+    let dir = tmpdir("view-browser-verdict");
+    let s = scene::builtin("cone").unwrap();
+    let sim = simulate::run_planted(
+        &s,
+        device_protocol::DeviceKind::Morphorider,
+        Profile::Default,
+        1,
+        Planted::LateEnter,
+    )
+    .unwrap();
+    let capture = dir.join("cone-late-enter.bin");
+    std::fs::write(&capture, &sim.bytes).unwrap();
+    let out = dir.join("out");
+    let (port, _served) = serve_replay_on_a_free_port(&capture, &out, None, &[]);
+    let report = ended_report(&out, Duration::from_secs(60));
+    let q = &report["quality"];
+    assert_eq!(q["verdict"], "suspect", "{q}");
+    let suspects = q["suspects"].as_array().unwrap();
+    let status: serde_json::Value = reqwest::get(format!("http://127.0.0.1:{port}/status"))
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(status["quality"]["verdict"], "suspect");
+    assert_eq!(status["quality"]["suspects"], q["suspects"]);
+    let metrics = reqwest::get(format!("http://127.0.0.1:{port}/metrics"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(metrics.contains("sfs_scan_verdict 1"), "{metrics}");
+    assert!(
+        metrics.contains(&format!("sfs_suspects_total {}", suspects.len())),
+        "{metrics}"
+    );
+    let browser = Browser::start(&dir.join("profile")).await;
+    browser.goto(&format!("http://127.0.0.1:{port}/")).await;
+    let seen = browser
+        .watch(Duration::from_secs(30), |s| s["verdict"] == "suspect")
+        .await;
+    let state = seen.last().unwrap();
+    assert_eq!(state["errors"], serde_json::json!([]), "console errors");
+    let drawn = state["suspects"].as_array().unwrap();
+    assert_eq!(drawn.len(), suspects.len());
+    for (a, b) in drawn.iter().zip(suspects) {
+        assert_eq!(
+            (&a["curve"], &a["kind"], &a["rescan"]),
+            (&b["curve"], &b["kind"], &b["rescan"])
+        );
+    }
+    let listed = browser
+        .execute(
+            "return document.getElementById('suspects').textContent",
+            serde_json::json!([]),
+        )
+        .await;
+    let listed = listed.as_str().unwrap();
+    let rescan = suspects[0]["rescan"].as_str().unwrap();
+    assert!(
+        listed.contains(&format!("rescan with {rescan}")),
+        "{listed}"
+    );
+    let pill = browser
+        .execute(
+            "return document.getElementById('verdict').textContent",
+            serde_json::json!([]),
+        )
+        .await;
+    assert!(pill.as_str().unwrap().starts_with("scan suspect"), "{pill}");
+    browser.close().await;
+}
+
 /// Issue 48, point 2: the view opened on the machine that runs sfs shows the phone page's QR
 /// code, its address with the token and the certificate's fingerprint (fetched from
 /// `/status`, never from the `status` events, which carry no token).

@@ -127,6 +127,9 @@ pub struct Status {
     /// code is at `/phone-qr.svg` for the same clients. Never in the `status` events.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub phone_url: Option<String>,
+    /// The latest reconstruction's verdict, expected error and suspects (`report.json`
+    /// `quality`; issue 49).
+    pub quality: Option<crate::report::Quality>,
 }
 
 /// The phone page as every client of the view sees it.
@@ -392,6 +395,8 @@ struct Shared {
     events: tokio::sync::broadcast::Sender<Event>,
     /// Texts of the warnings already sent.
     warned: Mutex<HashSet<String>>,
+    /// Suspects already counted (curve, tag, kind).
+    suspected: Mutex<HashSet<(usize, Option<usize>, &'static str)>>,
     preview: Mutex<Option<Arc<str>>>,
     preview_generation: AtomicU64,
     /// Node positions of the latest network, world frame (where a preview starts).
@@ -420,6 +425,7 @@ impl View {
                 glb: Mutex::new(None),
                 events,
                 warned: Mutex::new(HashSet::new()),
+                suspected: Mutex::new(HashSet::new()),
                 preview: Mutex::new(None),
                 preview_generation: AtomicU64::new(0),
                 nodes: Mutex::new(Default::default()),
@@ -672,6 +678,22 @@ impl View {
     }
 
     /// The session ended.
+    /// The latest reconstruction's quality: in the status, the verdict's gauge, and each
+    /// suspect named for the first time counted.
+    pub fn quality(&self, q: &crate::report::Quality) {
+        let m = &self.shared.metrics;
+        m.scan_verdict.set(q.verdict.level());
+        let fresh = {
+            let mut seen = lock(&self.shared.suspected);
+            q.suspects
+                .iter()
+                .filter(|s| seen.insert((s.curve, s.tag, s.kind)))
+                .count()
+        };
+        m.suspects.inc_by(fresh as u64);
+        self.update(|s| s.quality = Some(q.clone()));
+    }
+
     pub fn ended(&self) {
         self.update(|s| {
             s.state = "ended";

@@ -136,6 +136,24 @@ pub struct Noise {
     pub ratio: Option<f64>,
     /// The network's independent loops.
     pub loops: usize,
+    /// The segment whose loops misfit most beside the others ([`Peak`]); `None` without
+    /// loops.
+    pub peak: Option<Peak>,
+    /// RMS of the nodes' σ, m.
+    pub sigma_rms_m: f64,
+}
+
+/// The segment whose residual stands out most from the network's: its residual variance
+/// over the typical segment's (the redundancy-weighted median), each over its redundancy.
+/// About 1 for noise alike everywhere; a wrong tag or a slip puts tens on its segments.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct Peak {
+    /// Scan index of the curve.
+    pub curve: usize,
+    /// The segment's first tag, its position in the curve's tags.
+    pub tag: usize,
+    pub ratio: f64,
 }
 
 /// Where a point lies on a chain: `r_a`, `r_b` its resistances to the two ends. Returns the
@@ -312,6 +330,7 @@ impl MarginalsSolver {
         out.noise.tau2_loops = own.map(|o| o * mean_h);
         out.noise.ratio = own.map(|o| o / s2_prior.max(f64::MIN_POSITIVE));
         out.noise.tau2 = prior.loop_share * s2_net * mean_h;
+        out.noise.peak = peak(&segments, &red, &chi2_of, curves);
         // u_j[s] = √v_s (K g_s)_j: Σ_ij = u_i · u_j per axis.
         let whiten: Vec<f64> = segments
             .iter()
@@ -360,6 +379,7 @@ impl MarginalsSolver {
             let var = rigid.cov(i, i, sigma(i, i)).trace().max(0.0);
             out.nodes.insert(id, var.sqrt());
         }
+        out.noise.sigma_rms_m = rms(out.nodes.values().copied());
         // The points between two tags: the bridge between their nodes.
         for (sg, s2) in segments.iter().zip(&s2_seg) {
             let c = &curves[sg.curve];
@@ -390,6 +410,47 @@ impl MarginalsSolver {
 /// Weight of the network's variance in each segment's, in loops: a segment closing little
 /// of a loop has mostly the network's.
 const SEGMENT_PRIOR_LOOPS: f64 = 1.0;
+
+/// Segments closing less of a loop than this are not compared ([`Peak`]): their residual
+/// says little.
+const PEAK_MIN_REDUNDANCY: f64 = 0.1;
+
+/// The segment whose residual variance (over its redundancy) stands out most from the
+/// redundancy-weighted median of all segments'.
+fn peak(
+    segments: &[Segment],
+    red: &[f64],
+    chi2_of: &dyn Fn(&Segment) -> f64,
+    curves: &[UniformCurve],
+) -> Option<Peak> {
+    let mut v: Vec<(f64, f64, usize)> = segments
+        .iter()
+        .zip(red)
+        .enumerate()
+        .filter(|(_, (sg, red))| sg.r > 0.0 && **red >= PEAK_MIN_REDUNDANCY)
+        .map(|(si, (sg, red))| (chi2_of(sg) / 3.0 / red, *red, si))
+        .collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = v.iter().map(|x| x.1).sum();
+    let mut acc = 0.0;
+    let median = v
+        .iter()
+        .find(|x| {
+            acc += x.1;
+            acc >= total / 2.0
+        })
+        .map_or(0.0, |x| x.0);
+    let &(top, _, si) = v.last()?;
+    let sg = &segments[si];
+    Some(Peak {
+        curve: curves[sg.curve].index,
+        tag: sg.k,
+        ratio: if median > 0.0 { top / median } else { 0.0 },
+    })
+}
 
 /// Every curve's segments (between consecutive tags), in order.
 fn segments(curves: &[UniformCurve], index: &BTreeMap<u32, usize>) -> Vec<Segment> {

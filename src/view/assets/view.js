@@ -23,6 +23,8 @@ const state = {
   curveLatencies: [], curvesShown: 0,
   // Curves coloured by their points' uncertainty (issue 49): the legend's top, mm (0: off).
   sigmaScaleMm: 0, sigmaCurves: 0,
+  // The latest reconstruction's verdict and suspects (issue 49).
+  verdict: null, suspects: [],
 };
 window.sfsView = state;
 function pageError(text) {
@@ -475,6 +477,7 @@ function showStatus(s) {
     const flags = d.status_flags.length ? ' · ' + d.status_flags.join(', ') : '';
     text('device', `${d.kind} #${d.id} · ${d.rate_hz} Hz${batt}${flags}`, (d.battery_mv != null && d.battery_mv < 3400) || d.status_flags.length > 0);
   }
+  showQuality(s.quality);
   showClosure(s.closure || []);
   showJoins(s.joins || { joined: [], proposed: [], refused: [] });
   const rec = document.getElementById('reconstruction');
@@ -501,6 +504,28 @@ function showStatus(s) {
     const c = s.live.curves_latency_ms;
     text('latency', `curves ${c.p50.toFixed(0)} / ${c.p95.toFixed(0)} ms · update ${s.live.latency_ms.p50.toFixed(0)} / ${s.live.latency_ms.p95.toFixed(0)} ms`);
   }
+}
+
+// The verdict in the bar and each suspect with the keys that rescan its curve (issue 49).
+function showQuality(q) {
+  const pill = document.getElementById('verdict');
+  if (!q || q.verdict === 'none') { pill.hidden = true; return; }
+  pill.hidden = false;
+  const pct = q.expected_error_pct != null ? ` · ±${(q.expected_error_m * 1000).toFixed(1)} mm` : '';
+  pill.textContent = `scan ${q.verdict}${pct}`;
+  pill.className = 'pill verdict-' + q.verdict;
+  pill.title = q.verdict_reason;
+  state.verdict = q.verdict;
+  state.suspects = q.suspects.map((x) => ({ curve: x.curve, tag: x.tag, node: x.node, kind: x.kind, rescan: x.rescan }));
+  const list = document.getElementById('suspects');
+  const why = { 'late-enter': 'Enter pressed while rolling', 'wrong-node': 'its loops refuse the node typed' };
+  list.replaceChildren(...(q.suspects.length ? q.suspects.map((x) => {
+    const li = document.createElement('li');
+    const at = x.node != null ? ` at node ${x.node}` : '';
+    li.textContent = `curve ${x.curve} looks wrong${at} (${why[x.kind] || x.kind}): rescan with ${x.rescan}`;
+    li.title = x.reason;
+    return li;
+  }) : [Object.assign(document.createElement('li'), { textContent: 'none' })]));
 }
 
 function addWarning(w) {

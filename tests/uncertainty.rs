@@ -1,0 +1,174 @@
+//! Issue 49, point 1: every node and every curve point has an uncertainty, and it is
+//! calibrated: on simulated captures of seeds the calibration never saw (it was fitted on
+//! seeds 1–4; BENCHMARKS.md "Trust" has the whole table), the nodes' true errors (the paper's
+//! registration, `sfs eval`) against their σ.
+
+use device_protocol::DeviceKind;
+use sfs::acquisition::{Acquisition, AcquisitionConfig};
+use sfs::simulate::{self, scene, Profile};
+use sfs_geometry::network::{NetworkParams, Reconstructor};
+
+/// Each node's (true error, σ), m, of a simulated capture reconstructed with the device's
+/// noise; and the curves' points' σ at their tags against their nodes'.
+fn errors_and_sigmas(
+    name: &str,
+    device: DeviceKind,
+    profile: Profile,
+    seed: u64,
+) -> Vec<(f64, f64)> {
+    let s = scene::builtin(name).expect("shipped scene");
+    let sim = simulate::run(&s, device, profile, seed);
+    let scan = Acquisition::scan_bytes(&sim.bytes, AcquisitionConfig::default());
+    let params = sfs::pipeline::for_device(&NetworkParams::default(), Some(device));
+    let net = Reconstructor::new()
+        .run(&scan.curves, &params)
+        .expect("the capture reconstructs");
+    let u = &net.uncertainty;
+    // The points at the tags carry their node's σ; every point has one, finite.
+    for c in &net.positions.curves {
+        assert_eq!(c.sigma_m.len(), c.points.len(), "curve {}", c.index);
+        assert!(
+            c.sigma_m.iter().all(|s| s.is_finite() && *s > 0.0),
+            "curve {}",
+            c.index
+        );
+        for &(i, node) in &c.nodes {
+            let (a, b) = (c.sigma_m[i], u.nodes[&node]);
+            assert!(
+                (a - b).abs() <= 1e-9 * b.max(1e-3),
+                "curve {}, node {node}: {a} {b}",
+                c.index
+            );
+        }
+    }
+    let e = sfs::eval::evaluate(&sim.truth, &sfs::gltf_out::as_read_network(&net.positions))
+        .expect("evaluates");
+    e.node_errors_m
+        .iter()
+        .map(|(k, err)| (*err, u.nodes[k]))
+        .collect()
+}
+
+#[test]
+fn issue_49_node_uncertainty_is_calibrated_on_unseen_seeds() {
+    for device in [DeviceKind::Morphorider, DeviceKind::Phone] {
+        let mut pairs = Vec::new();
+        for name in ["bowl", "cone", "relief"] {
+            for profile in [Profile::Default, Profile::Field] {
+                pairs.extend(errors_and_sigmas(name, device, profile, 5));
+            }
+        }
+        let rms = |v: &mut dyn Iterator<Item = f64>| {
+            let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
+            (s / n as f64).sqrt()
+        };
+        let ratio = rms(&mut pairs.iter().map(|p| p.0)) / rms(&mut pairs.iter().map(|p| p.1));
+        let within =
+            |k: f64| pairs.iter().filter(|(e, s)| *e <= k * s).count() as f64 / pairs.len() as f64;
+        eprintln!(
+            "{device:?}: {} nodes, RMS error / RMS σ {ratio:.2}, within σ {:.2}, within 2σ {:.2}",
+            pairs.len(),
+            within(1.0),
+            within(2.0)
+        );
+        // The issue's targets are [0.7, 1.4] and 90 % over many captures (BENCHMARKS.md); six
+        // captures draw few loops' worth of noise, so the margin here is wider.
+        assert!((0.55..1.8).contains(&ratio), "{device:?}: ratio {ratio:.2}");
+        assert!(
+            within(2.0) >= 0.85,
+            "{device:?}: {:.2} within 2σ",
+            within(2.0)
+        );
+        assert!(
+            within(1.0) >= 0.4,
+            "{device:?}: {:.2} within σ",
+            within(1.0)
+        );
+    }
+}
+
+/// `sfs replay` of a simulated capture: its `report.json` and its summary (standard output).
+fn replayed(tag: &str, sim: &simulate::Simulation) -> (serde_json::Value, String) {
+    let dir = std::env::temp_dir().join(format!("sfs-verdict-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let capture = dir.join("capture.bin");
+    std::fs::write(&capture, &sim.bytes).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .arg("replay")
+        .arg(&capture)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("out/report.json")).unwrap()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    (report, String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// Issue 49, point 3: the verdict on the whole scan, in `report.json` and the summary line.
+/// The cone scanned cleanly is `good`; with a wrong node typed that the loops refuse but
+/// cannot place (its nodes expected several % of its size off) `inconsistent`, the tag named;
+/// with a late Enter `suspect`, the curve named with the keys that rescan it.
+#[test]
+fn issue_49_the_verdict_on_the_whole_scan() {
+    use sfs::simulate::planted::Planted;
+    let s = scene::builtin("cone").unwrap();
+    let m = DeviceKind::Morphorider;
+    let (twin, out) = replayed("twin", &simulate::run(&s, m, Profile::Default, 2));
+    let q = &twin["quality"];
+    assert_eq!(q["verdict"], "good", "{q}");
+    assert!(out.contains("scan: good ("), "{out}");
+    let pct = q["expected_error_pct"].as_f64().unwrap();
+    assert!(pct > 0.0 && pct < sfs::report::INCONSISTENT_PCT, "{q}");
+    let rms = twin["nodes_sigma_m"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|v| v.as_f64().unwrap().powi(2))
+        .sum::<f64>()
+        / twin["nodes_sigma_m"].as_object().unwrap().len() as f64;
+    assert!((q["expected_error_m"].as_f64().unwrap() - rms.sqrt()).abs() < 1e-12);
+
+    let wrong = simulate::run_planted(&s, m, Profile::Default, 2, Planted::WrongNode).unwrap();
+    let fault = &wrong.truth.faults[0];
+    let (report, out) = replayed("wrong", &wrong);
+    let q = &report["quality"];
+    assert_eq!(q["verdict"], "inconsistent", "{q}");
+    assert!(out.contains("scan: inconsistent ("), "{out}");
+    assert!(
+        q["suspects"].as_array().unwrap().iter().any(|x| {
+            x["curve"].as_u64() == Some(fault.curve as u64)
+                && x["tag"].as_u64() == fault.tag.map(|t| t as u64)
+        }),
+        "{q} for {fault:?}"
+    );
+
+    let late = simulate::run_planted(&s, m, Profile::Default, 1, Planted::LateEnter).unwrap();
+    let fault = &late.truth.faults[0];
+    let (report, out) = replayed("late", &late);
+    let q = &report["quality"];
+    assert_eq!(q["verdict"], "suspect", "{q}");
+    let kind_key = match report["curves"][fault.curve]["kind"].as_str().unwrap() {
+        "boundary" => "B",
+        "interior" => "I",
+        "crease" => "K",
+        _ => "G",
+    };
+    let named = &q["suspects"][0];
+    assert_eq!(named["curve"].as_u64(), Some(fault.curve as u64), "{q}");
+    assert_eq!(
+        named["rescan"],
+        format!("{} {kind_key} … E", fault.curve),
+        "{q}"
+    );
+    assert!(
+        out.contains(&format!("rescan with {} {kind_key} … E", fault.curve)),
+        "{out}"
+    );
+}
