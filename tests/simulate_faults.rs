@@ -269,7 +269,8 @@ fn replayed(name: &str, sim: &Simulation) -> Replayed {
 
 /// Issue 49 point 4: a capture with a wrong node planted, the faulted curve rescanned from the
 /// keypad (`N B … E`): the error returns to within 1.1× its twin's (the same capture, rescan
-/// and all, without the fault).
+/// and all, without the fault). Without the rescan the fault costs, unless the loops detached
+/// the wrong tag themselves (point 2's repair).
 #[test]
 fn issue_49_a_wrong_node_rescanned_returns_to_the_twin() {
     let s = scene::builtin("cone").unwrap();
@@ -289,11 +290,19 @@ fn issue_49_a_wrong_node_rescanned_returns_to_the_twin() {
                 .unwrap();
         let rescanned = replayed("rescan-rescanned", &rescanned);
         assert_eq!(rescanned.scan["dropped"].as_array().map(Vec::len), Some(1));
+        let faulted = replayed("rescan-faulted", &faulted);
         let (t, f, r) = (
             replayed("rescan-twin", &twin).error_pct,
-            replayed("rescan-faulted", &faulted).error_pct,
+            faulted.error_pct,
             rescanned.error_pct,
         );
+        // The wrong tag detached by the loops (a curve pulled a third of the cone's size to
+        // meet the node typed, issue 49's second sign) repairs it without the rescan.
+        let detached = faulted.report["quality"]["suspects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|x| x["curve"].as_u64() == Some(plan.curve() as u64) && x["repair"] == "detached");
         // The same rescan of the unfaulted capture: acting the rescan out draws the noise anew
         // (more samples), so this, not the capture without it, is the faulted one's twin.
         let twin_rescanned = simulate::run_with(&s, kind, Profile::Default, seed, &more);
@@ -306,7 +315,10 @@ fn issue_49_a_wrong_node_rescanned_returns_to_the_twin() {
         eprintln!(
             "issue 49 point 4, seed {seed}: twin {t:.4} %, wrong node {f:.4} %, rescanned {r:.4} % (the twin rescanned {p:.4} %)"
         );
-        assert!(f > 5.0 * t, "seed {seed}: the fault costs {f} against {t}");
+        assert!(
+            f > 5.0 * t || (detached && f <= 1.2 * t + 0.02),
+            "seed {seed}: the fault costs {f} against {t} (detached: {detached})"
+        );
         assert!(r <= 1.1 * p, "seed {seed}: rescanned {r} against {p}");
     }
 }
