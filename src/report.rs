@@ -137,8 +137,9 @@ pub struct Suspect {
     pub tag: Option<usize>,
     /// The node as typed there (for a wrong node, not the one the device stood at).
     pub node: Option<u32>,
-    /// `late-enter` (the device rolled while the index was typed) or `wrong-node` (the loops
-    /// refuse the tag: its index, or its place).
+    /// `late-enter` (the device rolled while the index was typed), `wrong-node` (the loops
+    /// refuse the tag: its index, or its place) or `slip` (the loops would lengthen the
+    /// segment from `tag` to the next: the wheel slipped, a phone's length is short).
     pub kind: &'static str,
     /// The warning's text.
     pub reason: String,
@@ -187,6 +188,21 @@ impl Quality {
                     reason: w.to_string(),
                     evidence: serde_json::json!({"offset_m": d.offset_m, "share": d.share}),
                     repair: "detached",
+                    rescan: String::new(),
+                }),
+                Warning::Network(NetworkWarning::SlipSuspected(s)) => Some(Suspect {
+                    curve: s.curve,
+                    tag: Some(s.tag),
+                    node: None,
+                    kind: "slip",
+                    reason: w.to_string(),
+                    evidence: serde_json::json!({
+                        "nodes": [s.nodes.0, s.nodes.1],
+                        "short_fraction": s.short_fraction,
+                        "chord_m": s.chord_m,
+                        "share": s.share,
+                    }),
+                    repair: "kept",
                     rescan: String::new(),
                 }),
                 Warning::Network(NetworkWarning::TagRefused(r)) => Some(Suspect {

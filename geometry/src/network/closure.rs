@@ -94,6 +94,51 @@ impl std::fmt::Display for Detached {
     }
 }
 
+/// A segment whose loops close if it is longer than measured: a wheel that slipped over it
+/// (its distance read short), or a phone's segment length short (issue 49).
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct Slip {
+    /// Scan index of the curve.
+    pub curve: usize,
+    /// Position of the segment's first tag in the curve's tags (the segment runs to the next).
+    pub tag: usize,
+    /// Its nodes, first to last.
+    pub nodes: (u32, u32),
+    /// How much of its true length the measurement missed, by the loops: `κ / (1 + κ)` for
+    /// the segment `1 + κ` times as long as measured.
+    pub short_fraction: f64,
+    /// Its length as measured (the chord of its frames), m.
+    pub chord_m: f64,
+    /// Share of the network's misfit energy it explains.
+    pub share: f64,
+}
+
+impl std::fmt::Display for Slip {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "curve {}, segment from node {} to node {} (tags {} to {}): the network's loops close if it is {:.0} % longer than measured ({:.0} mm; {:.0} % of the network's misfit): the wheel probably slipped (a phone: its segment length short); rescan the curve",
+            self.curve,
+            self.nodes.0,
+            self.nodes.1,
+            self.tag + 1,
+            self.tag + 2,
+            100.0 * self.short_fraction / (1.0 - self.short_fraction).max(1e-9),
+            self.chord_m * self.short_fraction / (1.0 - self.short_fraction).max(1e-9) * 1e3,
+            self.share * 100.0
+        )
+    }
+}
+
+/// A slip is named when lengthening its segment explains at least this share of what freeing
+/// the best tag would (a tag frees three directions, a length one: close to it, the simpler
+/// explanation wins)…
+pub const SLIP_VS_TAG: f64 = 0.8;
+/// …and its segment reads between these fractions of its true length short (a wheel slipping
+/// over a stretch reads a few % to tens of % short).
+pub const SLIP_SHORT: (f64, f64) = (0.03, 0.5);
+
 struct Segment {
     curve: usize,
     /// Tag positions (in the curve's tag list) at both ends.
@@ -113,9 +158,21 @@ struct Candidate {
     offset: f64,
 }
 
+/// A segment's energy drop when its length is free: `(index into the segments, drop, κ)`.
+#[derive(Debug, Clone, Copy)]
+struct Stretch {
+    seg: usize,
+    drop: f64,
+    kappa: f64,
+}
+
 /// The network's misfit energy, its loops' degrees of freedom, every tag's drop, and every
 /// segment's residual.
 struct Drops {
+    /// Every segment's drop with its length free ([`Slip`]).
+    stretches: Vec<Stretch>,
+    /// Per segment: curve (position), first tag, nodes (unknowns), chord length.
+    segs: Vec<(usize, usize, f64)>,
     energy: f64,
     dof: f64,
     /// Mean stiffness of the segments, 1/m² (to read an energy as a length).
@@ -139,6 +196,45 @@ impl Drops {
     /// to meet the node: no drift of the device does that; a wrong index does.
     fn far(&self, c: &Candidate) -> bool {
         c.offset > FAR * self.size
+    }
+
+    /// The slip the loops name, if any ([`Slip`]): the stretch that explains most, when it
+    /// stands out as a refused tag would, close to the best tag's explanation
+    /// ([`SLIP_VS_TAG`]), no other stretch explaining as much ([`LOCATED`]), and short by a
+    /// plausible fraction ([`SLIP_SHORT`]).
+    fn slip(&self, curves: &[UniformCurve]) -> Option<Slip> {
+        let best = self
+            .stretches
+            .iter()
+            .max_by(|a, b| a.drop.total_cmp(&b.drop))?;
+        let per_dof = (self.energy - best.drop).max(0.0) / self.dof;
+        let refuses = best.drop > SHARE * self.energy && best.drop > RATIO * per_dof;
+        let best_tag = self.tags.iter().map(|c| c.drop).fold(0.0, f64::max);
+        let located = !self
+            .stretches
+            .iter()
+            .any(|o| o.seg != best.seg && o.drop >= LOCATED * best.drop);
+        let short = best.kappa / (1.0 + best.kappa);
+        if !(refuses
+            && located
+            && best.drop >= SLIP_VS_TAG * best_tag
+            && (SLIP_SHORT.0..=SLIP_SHORT.1).contains(&short))
+        {
+            return None;
+        }
+        let (ci, tag, chord) = self.segs[best.seg];
+        let c = &curves[ci];
+        Some(Slip {
+            curve: c.index,
+            tag,
+            nodes: (
+                c.nodes[tag].1,
+                c.nodes.get(tag + 1).map_or(c.nodes[tag].1, |x| x.1),
+            ),
+            short_fraction: short,
+            chord_m: chord,
+            share: best.drop / self.energy,
+        })
     }
 
     /// Whether `c` passes the test (see the module docs).
@@ -268,6 +364,36 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
             offset: g.norm() / sigma,
         });
     }
+    // Each segment with its length free: e_s(κ) = x_b − x_a − (1 + κ) d_s; the drop is
+    // (c d·e)² / σ, σ = c |d|² − uᵀ L⁻¹ u with u = ± c d at its nodes (the Schur complement
+    // of κ), κ = c d·e / σ.
+    let mut stretches = Vec::new();
+    for (si, s) in segs.iter().enumerate() {
+        let dd = s.d.norm_squared();
+        if s.a == s.b || dd <= 0.0 {
+            continue;
+        }
+        let mut y = vec![[0.0; 3]; n];
+        let u = s.d * s.c;
+        y[s.b] = [u.x, u.y, u.z];
+        y[s.a] = [-u.x, -u.y, -u.z];
+        f.solve(&mut y);
+        let uy: f64 = (0..3).map(|k| s.c * s.d[k] * (y[s.b][k] - y[s.a][k])).sum();
+        let sigma = s.c * dd - uy;
+        if sigma.is_nan() || sigma <= 1e-9 * s.c * dd {
+            continue; // its length is not checked by any loop
+        }
+        let g = s.c * s.d.dot(&resid(s));
+        stretches.push(Stretch {
+            seg: si,
+            drop: g * g / sigma,
+            kappa: g / sigma,
+        });
+    }
+    let seg_info = segs
+        .iter()
+        .map(|s| (s.curve, s.tags.0, s.d.norm()))
+        .collect();
     let segments = segs
         .iter()
         .map(|s| {
@@ -282,6 +408,8 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
         hi = hi.sup(p);
     }
     Some(Drops {
+        stretches,
+        segs: seg_info,
         size: (hi - lo).norm(),
         energy,
         mean_c,
@@ -344,6 +472,8 @@ pub struct ClosureReport {
     /// Tags the loops refuse but with no other sign of a wrong index (kept: the misfit may
     /// be the data's, e.g. a heading disturbed along the whole curve).
     pub refused: Vec<Refused>,
+    /// A segment the loops would lengthen ([`Slip`]), once the tags are detached.
+    pub slips: Vec<Slip>,
     /// How each curve closes the network's loops once the tags are detached (empty when the
     /// network has no loop), in the order of the curves.
     pub curves: Vec<CurveMisfit>,
@@ -546,6 +676,7 @@ pub fn detach_outlier_tags(
         });
     };
     if let Some(d) = last {
+        out.slips.extend(d.slip(curves));
         out.curves = curve_misfits(curves, &d, &out.detached);
         out.misfit_m = Some((d.energy / d.dof / d.mean_c).max(0.0).sqrt());
     }
@@ -738,6 +869,47 @@ mod tests {
                 (2, 2, 5)
             );
             assert!(r.refused.is_empty(), "seed {seed}: {r:?}");
+        }
+    }
+
+    /// Issue 49: a segment measured 12 % short (a wheel slipping over it) is named as a slip,
+    /// with its curve, its first tag and the fraction missed; the same grid without it names
+    /// none.
+    #[test]
+    fn issue_49_a_segment_measured_short_is_named_a_slip() {
+        for seed in 1..=5 {
+            let mut g = grid(4, 0.5, seed);
+            assert!(detach_outlier_tags(&mut g.clone(), |_, _| false)
+                .slips
+                .is_empty());
+            // Curve 5 (along y at x = 1): its second segment (tags 1 → 2) read 12 % short.
+            let c = &mut g[5];
+            let (i0, i1) = (c.nodes[1].0, c.nodes[2].0);
+            let h = c.h[1] * 0.88;
+            c.h[1] = h;
+            let base = c.d[i0];
+            for j in i0..=i1 {
+                c.d[j] = base + (j - i0) as f64 * h;
+            }
+            let shift = c.d[i1] - (base + (i1 - i0) as f64 * c.h[1] / 0.88);
+            for j in i1 + 1..c.d.len() {
+                c.d[j] += shift;
+            }
+            let r = detach_outlier_tags(&mut g, |_, _| false);
+            assert_eq!(r.slips.len(), 1, "seed {seed}: {r:?}");
+            let s = &r.slips[0];
+            assert_eq!(
+                (s.curve, s.tag, s.nodes),
+                (5, 1, (5, 9)),
+                "seed {seed}: {s:?}"
+            );
+            assert!((s.short_fraction - 0.12).abs() < 0.02, "seed {seed}: {s:?}");
+            assert!(r.detached.is_empty(), "seed {seed}: {r:?}");
+            assert!(
+                s.to_string()
+                    .contains("curve 5, segment from node 5 to node 9"),
+                "{s}"
+            );
         }
     }
 

@@ -111,6 +111,8 @@ pub enum NetworkWarning {
     TagDetached(closure::Detached),
     /// A tag the network's loops refuse with nothing else suggesting a wrong index: kept.
     TagRefused(closure::Refused),
+    /// A segment the network's loops would lengthen: a slip (issue 49).
+    SlipSuspected(closure::Slip),
     /// The Poisson system could not be solved.
     PoissonFailed(crate::sparse_llt::SolveError),
     /// The network falls apart into parts with no node in common.
@@ -131,6 +133,7 @@ impl NetworkWarning {
             NetworkWarning::NothingUsable => "nothing_reconstructed",
             NetworkWarning::TagDetached(_) => "tag_detached",
             NetworkWarning::TagRefused(_) => "tag_refused",
+            NetworkWarning::SlipSuspected(_) => "slip_suspected",
             NetworkWarning::PoissonFailed(_) => "poisson_failed",
             NetworkWarning::InParts { .. } => "network_in_parts",
             NetworkWarning::CreaseUnknown(_) => "crease_other_face_unknown",
@@ -145,6 +148,7 @@ impl NetworkWarning {
             NetworkWarning::LeftOut(e) => Some(e.curve()),
             NetworkWarning::TagDetached(d) => Some(d.curve),
             NetworkWarning::TagRefused(r) => Some(r.curve),
+            NetworkWarning::SlipSuspected(s) => Some(s.curve),
             NetworkWarning::CreaseUnknown(c) => Some(c.curve()),
             NetworkWarning::JoinRefused(r) => Some(r.curve),
             _ => None,
@@ -171,6 +175,7 @@ impl std::fmt::Display for NetworkWarning {
             }
             NetworkWarning::TagDetached(d) => d.fmt(f),
             NetworkWarning::TagRefused(r) => r.fmt(f),
+            NetworkWarning::SlipSuspected(s) => s.fmt(f),
             NetworkWarning::PoissonFailed(e) => write!(f, "Poisson reconstruction failed: {e}"),
             NetworkWarning::InParts { components } => write!(
                 f,
@@ -678,6 +683,13 @@ fn closure_check(
             .iter()
             .cloned()
             .map(NetworkWarning::TagRefused),
+    );
+    warnings.extend(
+        closure
+            .slips
+            .iter()
+            .cloned()
+            .map(NetworkWarning::SlipSuspected),
     );
     closure
 }

@@ -518,7 +518,7 @@ function showQuality(q) {
   state.verdict = q.verdict;
   state.suspects = q.suspects.map((x) => ({ curve: x.curve, tag: x.tag, node: x.node, kind: x.kind, rescan: x.rescan }));
   const list = document.getElementById('suspects');
-  const why = { 'late-enter': 'Enter pressed while rolling', 'wrong-node': 'its loops refuse the node typed' };
+  const why = { 'late-enter': 'Enter pressed while rolling', 'wrong-node': 'its loops refuse the node typed', slip: 'a stretch measured short: the wheel slipped' };
   list.replaceChildren(...(q.suspects.length ? q.suspects.map((x) => {
     const li = document.createElement('li');
     const at = x.node != null ? ` at node ${x.node}` : '';
