@@ -120,13 +120,41 @@ impl Builder {
         })
     }
 
+    /// An accessor of `count` elements of `type_` (`component` each) over `bytes`, in a view
+    /// of its own.
+    fn accessor(
+        &mut self,
+        bytes: &[u8],
+        target: json::buffer::Target,
+        count: usize,
+        component: json::accessor::ComponentType,
+        type_: json::accessor::Type,
+        bounds: Option<(json::Value, json::Value)>,
+    ) -> json::Index<json::Accessor> {
+        let view = self.view(bytes, target);
+        let (min, max) = bounds.map_or((None, None), |(lo, hi)| (Some(lo), Some(hi)));
+        self.root.push(json::Accessor {
+            buffer_view: Some(view),
+            byte_offset: None,
+            count: USize64::from(count),
+            component_type: Checked::Valid(json::accessor::GenericComponentType(component)),
+            extensions: None,
+            extras: None,
+            type_: Checked::Valid(type_),
+            min,
+            max,
+            name: None,
+            normalized: false,
+            sparse: None,
+        })
+    }
+
     fn vec3(&mut self, data: &[[f32; 3]], bounds: bool) -> json::Index<json::Accessor> {
         let bytes: Vec<u8> = data
             .iter()
             .flat_map(|v| v.iter().flat_map(|x| x.to_le_bytes()))
             .collect();
-        let view = self.view(&bytes, json::buffer::Target::ArrayBuffer);
-        let (min, max) = if bounds {
+        let bounds = bounds.then(|| {
             let mut lo = [f32::MAX; 3];
             let mut hi = [f32::MIN; 3];
             for v in data {
@@ -136,50 +164,31 @@ impl Builder {
                 }
             }
             (
-                Some(json::Value::from(lo.to_vec())),
-                Some(json::Value::from(hi.to_vec())),
+                json::Value::from(lo.to_vec()),
+                json::Value::from(hi.to_vec()),
             )
-        } else {
-            (None, None)
-        };
-        self.root.push(json::Accessor {
-            buffer_view: Some(view),
-            byte_offset: None,
-            count: USize64::from(data.len()),
-            component_type: Checked::Valid(json::accessor::GenericComponentType(
-                json::accessor::ComponentType::F32,
-            )),
-            extensions: None,
-            extras: None,
-            type_: Checked::Valid(json::accessor::Type::Vec3),
-            min,
-            max,
-            name: None,
-            normalized: false,
-            sparse: None,
-        })
+        });
+        self.accessor(
+            &bytes,
+            json::buffer::Target::ArrayBuffer,
+            data.len(),
+            json::accessor::ComponentType::F32,
+            json::accessor::Type::Vec3,
+            bounds,
+        )
     }
 
     /// Floats, one per vertex (a custom attribute).
     fn scalars(&mut self, data: &[f32]) -> json::Index<json::Accessor> {
         let bytes: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
-        let view = self.view(&bytes, json::buffer::Target::ArrayBuffer);
-        self.root.push(json::Accessor {
-            buffer_view: Some(view),
-            byte_offset: None,
-            count: USize64::from(data.len()),
-            component_type: Checked::Valid(json::accessor::GenericComponentType(
-                json::accessor::ComponentType::F32,
-            )),
-            extensions: None,
-            extras: None,
-            type_: Checked::Valid(json::accessor::Type::Scalar),
-            min: None,
-            max: None,
-            name: None,
-            normalized: false,
-            sparse: None,
-        })
+        self.accessor(
+            &bytes,
+            json::buffer::Target::ArrayBuffer,
+            data.len(),
+            json::accessor::ComponentType::F32,
+            json::accessor::Type::Scalar,
+            None,
+        )
     }
 
     fn indices(&mut self, tris: &[[u32; 3]]) -> json::Index<json::Accessor> {
@@ -187,23 +196,14 @@ impl Builder {
             .iter()
             .flat_map(|t| t.iter().flat_map(|x| x.to_le_bytes()))
             .collect();
-        let view = self.view(&bytes, json::buffer::Target::ElementArrayBuffer);
-        self.root.push(json::Accessor {
-            buffer_view: Some(view),
-            byte_offset: None,
-            count: USize64::from(tris.len() * 3),
-            component_type: Checked::Valid(json::accessor::GenericComponentType(
-                json::accessor::ComponentType::U32,
-            )),
-            extensions: None,
-            extras: None,
-            type_: Checked::Valid(json::accessor::Type::Scalar),
-            min: None,
-            max: None,
-            name: None,
-            normalized: false,
-            sparse: None,
-        })
+        self.accessor(
+            &bytes,
+            json::buffer::Target::ElementArrayBuffer,
+            tris.len() * 3,
+            json::accessor::ComponentType::U32,
+            json::accessor::Type::Scalar,
+            None,
+        )
     }
 }
 

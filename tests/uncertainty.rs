@@ -3,6 +3,8 @@
 //! seeds 1–4; BENCHMARKS.md "Trust" has the whole table), the nodes' true errors (the paper's
 //! registration, `sfs eval`) against their σ.
 
+mod common;
+
 use device_protocol::DeviceKind;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
 use sfs::simulate::{self, scene, Profile};
@@ -89,11 +91,10 @@ fn issue_49_node_uncertainty_is_calibrated_on_unseen_seeds() {
 
 /// `sfs replay` of a simulated capture: its `report.json` and its summary (standard output).
 fn replayed(tag: &str, sim: &simulate::Simulation) -> (serde_json::Value, String) {
-    let dir = std::env::temp_dir().join(format!("sfs-verdict-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::tmpdir(&format!("verdict-{tag}"));
     let capture = dir.join("capture.bin");
     std::fs::write(&capture, &sim.bytes).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sfs"))
+    let out = common::sfs()
         .arg("replay")
         .arg(&capture)
         .arg("--out")
@@ -105,8 +106,7 @@ fn replayed(tag: &str, sim: &simulate::Simulation) -> (serde_json::Value, String
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.join("out/report.json")).unwrap()).unwrap();
+    let report = common::read_report(&dir.join("out"));
     let _ = std::fs::remove_dir_all(&dir);
     (report, String::from_utf8_lossy(&out.stdout).into_owned())
 }
