@@ -11,7 +11,7 @@
 //! (`.ci/run` installs both and sets it).
 
 mod common;
-use common::view::{ended_report, serve_replay_on_a_free_port};
+use common::view::{ended_report, serve_ended, serve_replay_on_a_free_port};
 use common::webdriver::{available, Browser};
 use common::*;
 use std::path::PathBuf;
@@ -252,11 +252,7 @@ async fn issue_34_the_page_marks_the_joined_nodes() {
         1,
         &m,
     );
-    let capture = dir.join("cone-untagged.bin");
-    std::fs::write(&capture, &sim.bytes).unwrap();
-    let out = dir.join("out");
-    let (port, _served) = serve_replay_on_a_free_port(&capture, &out, None, &[]);
-    let report = ended_report(&out, Duration::from_secs(60));
+    let (port, _served, report) = serve_ended(&dir, "cone-untagged", &sim.bytes);
     let joined = report["network"]["joined"].as_array().unwrap().len();
     let proposed = report["network"]["proposed"].as_array().unwrap().len();
     assert!(joined > 0, "{}", report["network"]["joined"]);
@@ -373,11 +369,7 @@ async fn issue_49_the_page_shows_the_verdict_and_the_suspects() {
         Planted::LateEnter,
     )
     .unwrap();
-    let capture = dir.join("cone-late-enter.bin");
-    std::fs::write(&capture, &sim.bytes).unwrap();
-    let out = dir.join("out");
-    let (port, _served) = serve_replay_on_a_free_port(&capture, &out, None, &[]);
-    let report = ended_report(&out, Duration::from_secs(60));
+    let (port, _served, report) = serve_ended(&dir, "cone-late-enter", &sim.bytes);
     let q = &report["quality"];
     assert_eq!(q["verdict"], "suspect", "{q}");
     let suspects = q["suspects"].as_array().unwrap();

@@ -119,3 +119,15 @@ pub fn ended_report(out: &Path, limit: Duration) -> serde_json::Value {
         std::thread::sleep(Duration::from_millis(50));
     }
 }
+
+/// `bytes` written to `DIR/NAME.bin`, replayed and served on a free port until the replay
+/// has ended: the port, the daemon and its `report.json`.
+#[allow(dead_code)]
+pub fn serve_ended(dir: &Path, name: &str, bytes: &[u8]) -> (u16, Served, serde_json::Value) {
+    let capture = dir.join(format!("{name}.bin"));
+    std::fs::write(&capture, bytes).unwrap();
+    let out = dir.join("out");
+    let (port, served) = serve_replay_on_a_free_port(&capture, &out, None, &[]);
+    let report = ended_report(&out, Duration::from_secs(60));
+    (port, served, report)
+}
