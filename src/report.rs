@@ -239,7 +239,8 @@ impl Quality {
             return;
         };
         let sigma = n.uncertainty.noise.sigma_rms_m;
-        let diagonal = diagonal(&n.positions);
+        let diagonal =
+            sfs_geometry::bbox_diagonal(n.positions.curves.iter().flat_map(|c| &c.points));
         let pct = (diagonal > 0.0).then(|| sigma / diagonal * 100.0);
         self.expected_error_m = Some(sigma);
         self.expected_error_pct = pct;
@@ -281,21 +282,6 @@ impl Quality {
                 format!("nothing looks wrong; node uncertainty {expected}"),
             )
         };
-    }
-}
-
-/// The bounding-box diagonal of every curve point, m.
-fn diagonal(p: &sfs_geometry::network::poisson::Positions) -> f64 {
-    let mut lo = nalgebra::Vector3::repeat(f64::INFINITY);
-    let mut hi = nalgebra::Vector3::repeat(f64::NEG_INFINITY);
-    for q in p.curves.iter().flat_map(|c| &c.points) {
-        lo = lo.inf(q);
-        hi = hi.sup(q);
-    }
-    if lo.x.is_finite() {
-        (hi - lo).norm()
-    } else {
-        0.0
     }
 }
 

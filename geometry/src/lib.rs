@@ -27,6 +27,16 @@ pub mod sparse_llt;
 pub mod surface;
 pub mod union_find;
 
+/// The diagonal of the axis-aligned bounding box of `points`, m (0 for none).
+pub fn bbox_diagonal<'a>(points: impl IntoIterator<Item = &'a nalgebra::Vector3<f64>>) -> f64 {
+    let mut it = points.into_iter();
+    let Some(first) = it.next() else {
+        return 0.0;
+    };
+    let (lo, hi) = it.fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
+    (hi - lo).norm()
+}
+
 /// Serialises a list as the texts (`Display`) of its items: warnings and problems keep their
 /// words in the application's JSON.
 #[cfg(feature = "serde")]

@@ -171,8 +171,8 @@ struct Stretch {
 struct Drops {
     /// Every segment's drop with its length free ([`Slip`]).
     stretches: Vec<Stretch>,
-    /// Per segment: curve (position), first tag, nodes (unknowns), chord length.
-    segs: Vec<(usize, usize, f64)>,
+    /// The segments the drops are of (the stretches index them).
+    segs: Vec<Segment>,
     energy: f64,
     dof: f64,
     /// Mean stiffness of the segments, 1/m² (to read an energy as a length).
@@ -222,8 +222,8 @@ impl Drops {
         {
             return None;
         }
-        let (ci, tag, chord) = self.segs[best.seg];
-        let c = &curves[ci];
+        let s = &self.segs[best.seg];
+        let (tag, c) = (s.tags.0, &curves[s.curve]);
         Some(Slip {
             curve: c.index,
             tag,
@@ -232,7 +232,7 @@ impl Drops {
                 c.nodes.get(tag + 1).map_or(c.nodes[tag].1, |x| x.1),
             ),
             short_fraction: short,
-            chord_m: chord,
+            chord_m: s.d.norm(),
             share: best.drop / self.energy,
         })
     }
@@ -390,10 +390,6 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
             kappa: g / sigma,
         });
     }
-    let seg_info = segs
-        .iter()
-        .map(|s| (s.curve, s.tags.0, s.d.norm()))
-        .collect();
     let segments = segs
         .iter()
         .map(|s| {
@@ -401,16 +397,10 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
             (s.curve, e, s.c * e * e)
         })
         .collect();
-    let mut lo = Vector3::repeat(f64::INFINITY);
-    let mut hi = Vector3::repeat(f64::NEG_INFINITY);
-    for p in &x {
-        lo = lo.inf(p);
-        hi = hi.sup(p);
-    }
     Some(Drops {
         stretches,
-        segs: seg_info,
-        size: (hi - lo).norm(),
+        segs,
+        size: crate::bbox_diagonal(&x),
         energy,
         mean_c,
         dof: (3 * loops).saturating_sub(3).max(1) as f64,

@@ -114,10 +114,6 @@ impl NoisePrior {
 pub struct Uncertainty {
     /// σ of each node (RMS 3-D distance to the truth after the rigid motion), m.
     pub nodes: BTreeMap<u32, f64>,
-    /// σ of every point of every curve, in the order of [`Positions::curves`], m (moved
-    /// into each curve's [`sigma_m`](super::poisson::CurvePositions::sigma_m) by the
-    /// reconstruction).
-    pub curves: Vec<Vec<f64>>,
     pub noise: Noise,
 }
 
@@ -204,11 +200,13 @@ impl MarginalsSolver {
     }
 
     /// The uncertainty of `positions`, reconstructed from `curves` (the same curves, in the
-    /// same order: [`super::poisson::PoissonSolver::solve`]'s input).
+    /// same order: [`super::poisson::PoissonSolver::solve`]'s input): the nodes' returned,
+    /// every point's put in its curve's [`sigma_m`](super::poisson::CurvePositions::sigma_m)
+    /// (left as it was when the node Laplacian cannot be factorised).
     pub fn run(
         &mut self,
         curves: &[UniformCurve],
-        positions: &Positions,
+        positions: &mut Positions,
         prior: &NoisePrior,
     ) -> Result<Uncertainty, SolveError> {
         let mean_h = positions.misfit.mean_h.max(1e-12);
@@ -223,10 +221,11 @@ impl MarginalsSolver {
                 loops: positions.misfit.loops,
                 ..Default::default()
             },
-            curves: curves.iter().map(|c| vec![0.0; c.q.len()]).collect(),
             ..Default::default()
         };
+        let mut points: Vec<Vec<f64>> = curves.iter().map(|c| vec![0.0; c.q.len()]).collect();
         if n == 0 {
+            place(positions, points);
             return Ok(out);
         }
         // The node Laplacian (conductance 1/R per segment) with a gauge per part.
@@ -395,7 +394,7 @@ impl MarginalsSolver {
             for j in sg.i0..=sg.i1 {
                 let (al, be, bridge) = chain_bridge(r_a, sg.r - r_a);
                 let var = al * al * caa + be * be * cbb + 2.0 * al * be * cab + 3.0 * s2 * bridge;
-                if let Some(x) = out.curves[sg.curve].get_mut(j) {
+                if let Some(x) = points[sg.curve].get_mut(j) {
                     *x = var.max(0.0).sqrt();
                 }
                 if j < sg.i1 {
@@ -403,7 +402,15 @@ impl MarginalsSolver {
                 }
             }
         }
+        place(positions, points);
         Ok(out)
+    }
+}
+
+/// Each curve's points' σ into its [`sigma_m`](super::poisson::CurvePositions::sigma_m).
+fn place(positions: &mut Positions, points: Vec<Vec<f64>>) {
+    for (c, s) in positions.curves.iter_mut().zip(points) {
+        c.sigma_m = s;
     }
 }
 
@@ -707,7 +714,8 @@ mod tests {
             let (curves, truth) = grid(0.02, &mut rng);
             let p = poisson.solve(&curves).unwrap();
             assert_eq!(p.misfit.loops, 9, "{:?}", p.misfit);
-            let u = solver.run(&curves, &p, &prior).unwrap();
+            let mut p = p;
+            let u = solver.run(&curves, &mut p, &prior).unwrap();
             // Corner nodes carry one segment of each of their 2 curves, the others more:
             // the same weights as the model's (half of each segment's length).
             let weight = |k: u32| {

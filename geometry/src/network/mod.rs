@@ -475,17 +475,8 @@ impl Reconstructor {
                 .map(NetworkWarning::CreaseUnknown),
         );
         let t3 = Instant::now();
-        let uncertainty = match self.marginals.run(&uniform, &positions, &p.noise) {
-            Ok(mut u) => {
-                for (c, s) in positions
-                    .curves
-                    .iter_mut()
-                    .zip(std::mem::take(&mut u.curves))
-                {
-                    c.sigma_m = s;
-                }
-                u
-            }
+        let uncertainty = match self.marginals.run(&uniform, &mut positions, &p.noise) {
+            Ok(u) => u,
             Err(e) => {
                 // The node Laplacian is the Poisson one's Schur complement: it factors when
                 // that one did. Should it not, the positions stand without their σ.

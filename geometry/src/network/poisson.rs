@@ -257,7 +257,15 @@ fn misfit(
         .collect();
     let mut used = 0usize;
     let mut h_sum = 0.0;
+    // The segment of each edge: the edges come curve by curve, in order along each.
+    let (mut curve, mut seg) = (usize::MAX, 0);
     for (e, &(ci, j)) in edges.iter().zip(edge_at) {
+        if ci != curve {
+            (curve, seg) = (ci, 0);
+        }
+        while curves[ci].nodes.get(seg + 1).is_some_and(|&(i, _)| i <= j) {
+            seg += 1;
+        }
         if e.a == e.b {
             continue;
         }
@@ -272,11 +280,6 @@ fn misfit(
             r += tangents[ci][j] * *s;
         }
         chi2 += e.w * r.norm_squared();
-        let seg = curves[ci]
-            .nodes
-            .iter()
-            .rposition(|&(i, _)| i <= j)
-            .unwrap_or(0);
         if let Some(x) = chi2_segments[ci].get_mut(seg) {
             *x += e.w * r.norm_squared();
         }

@@ -125,9 +125,7 @@ mod tests {
     }
 
     fn diagonal(s: &Surfaced) -> f64 {
-        let lo = s.positions.iter().fold(s.positions[0], |a, p| a.inf(p));
-        let hi = s.positions.iter().fold(s.positions[0], |a, p| a.sup(p));
-        (hi - lo).norm()
+        crate::bbox_diagonal(&s.positions)
     }
 
     /// The largest distance between the two surfaces' vertices, relative to the diagonal (the
