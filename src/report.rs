@@ -137,7 +137,7 @@ pub struct Suspect {
     pub tag: Option<usize>,
     /// The node as typed there (for a wrong node, not the one the device stood at).
     pub node: Option<u32>,
-    /// `late-enter` (the device rolled while the index was typed), `wrong-node` (the loops
+    /// `late-enter` (the device went on while the index was typed), `wrong-node` (the loops
     /// refuse the tag: its index, or its place) or `slip` (the loops would lengthen the
     /// segment from `tag` to the next: the wheel slipped, a phone's length is short).
     pub kind: &'static str,
@@ -154,7 +154,8 @@ pub struct Suspect {
 }
 
 impl Quality {
-    /// The suspects among `warnings`, on `curves` (to find a tag from its time).
+    /// The suspects among `warnings` that name one of `curves` (the scan's, those the operator
+    /// dropped or rescanned gone; a tag found from its time).
     pub fn of<'a>(warnings: impl IntoIterator<Item = &'a Warning>, curves: &[Curve]) -> Quality {
         use crate::warning::AcquisitionWarning;
         use sfs_geometry::network::NetworkWarning;
@@ -218,6 +219,9 @@ impl Quality {
                 _ => None,
             })
             .collect();
+        // A curve rescanned or dropped from the keypad has left `curves`: what was wrong with
+        // it is gone with it (its warnings stay in the report).
+        suspects.retain(|s| curves.iter().any(|c| c.index == s.curve));
         for s in &mut suspects {
             let key = curves
                 .iter()

@@ -139,7 +139,8 @@ pub enum AcquisitionWarning {
         curve: usize,
         node: u32,
         t: f64,
-        /// How far the wheel went from the first digit to the Enter, m.
+        /// How far the device went from the first digit to the Enter, m: the wheel's reading
+        /// (Morphorider), the accelerometer's set-off and speed (phone).
         rolled_m: f64,
         /// How far the tag moved back from the Enter (negative: on), m.
         moved_m: f64,
@@ -279,7 +280,7 @@ impl std::fmt::Display for AcquisitionWarning {
                 moved_m,
             } => write!(
                 f,
-                "curve {curve}, node {node}, t = {t:.3} s: the device rolled {:.0} mm while the node's index was typed (Enter pressed late, or the index typed early): the tag is placed where it stood, {:.0} mm {} the Enter; rescan the curve if it is wrong (its number, its start key, … E)",
+                "curve {curve}, node {node}, t = {t:.3} s: the device went {:.0} mm while the node's index was typed (Enter pressed late, or the index typed early): the tag is placed where it stood, {:.0} mm {} the Enter; rescan the curve if it is wrong (its number, its start key, … E)",
                 rolled_m * 1e3,
                 moved_m.abs() * 1e3,
                 if *moved_m >= 0.0 { "before" } else { "after" }

@@ -131,11 +131,11 @@ impl Acquisition {
         let field_ref = self.field.reference();
         let bias = self.ahrs.bias();
         let mut rb = self.read_back(&mut o, plan, field_ref, bias);
-        let speed_shape = if plan.phone {
+        let motion = if plan.phone {
             self.phone_motion(&mut rb, &o, plan.smoothing, field_ref, bias)
         } else {
             self.rider_motion(&mut rb, &o, plan.skid_check, field_ref);
-            None
+            Default::default()
         };
         let ReadBack {
             s: mut samples,
@@ -159,9 +159,10 @@ impl Acquisition {
                     .copied()
                     .or_else(|| from_cfg.and_then(|v| v.get(k).copied()));
             }
-            match &speed_shape {
-                Some(v) => super::phone::distances_by_speed(&mut curve, v, self.cfg.nominal_speed),
-                None => super::phone::phone_distances(&mut curve, self.cfg.nominal_speed),
+            let nominal = self.cfg.nominal_speed;
+            match &motion.speed {
+                Some(v) => super::phone::distances_by_speed(&mut curve, v, nominal, &motion.late),
+                None => super::phone::phone_distances(&mut curve, nominal),
             }
         } else if n > 0 {
             self.wheel_distances(&mut curve, &wheel, &o.typing);

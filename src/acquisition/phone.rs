@@ -3,7 +3,7 @@
 //! the stands, and the distances (scaled per segment to its measured length or to the nominal
 //! speed).
 
-use super::open_curve::{stationary_mask, OpenCurve, ReadBack};
+use super::open_curve::{stationary_mask, OpenCurve, ReadBack, TYPING_ROLL_M};
 use super::{interp, quat_array, quat_of, speed, Acquisition};
 use crate::orientation::disturbance::{disturbed_windows, norm_dip};
 use crate::orientation::flags;
@@ -11,12 +11,34 @@ use crate::orientation::rest;
 use crate::orientation::smoother;
 use crate::orientation::triad::triad;
 use crate::scan::{Curve, Samples};
+use crate::warning::AcquisitionWarning;
 use nalgebra::{UnitQuaternion, Vector3};
+
+/// What [`Acquisition::phone_motion`] found of a phone curve's motion.
+#[derive(Debug, Default)]
+pub(super) struct PhoneMotion {
+    /// The speed's shape at each sample ([`speed::speed_shape`]), where the accelerometer gives
+    /// it.
+    pub(super) speed: Option<Vec<f64>>,
+    /// The tags entered late, in order.
+    pub(super) late: Vec<LateTag>,
+}
+
+/// A tag whose index was typed at the node and entered once the device had gone on: it went
+/// `distance` (m) from `from` (its set-off) to `to` (its stop, or the Enter).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct LateTag {
+    /// The tag's place in its curve.
+    pub(super) tag: usize,
+    pub(super) from: f64,
+    pub(super) to: f64,
+    pub(super) distance: f64,
+}
 
 impl Acquisition {
     /// Phone: flags where the operator stands (the smoother's orientations replacing the
     /// causal filter's first, on curves it smooths); returns the speed's shape between the
-    /// stands where the accelerometer gives it ([`speed`]).
+    /// stands where the accelerometer gives it ([`speed`]), and the tags entered late.
     pub(super) fn phone_motion(
         &mut self,
         rb: &mut ReadBack,
@@ -24,9 +46,10 @@ impl Acquisition {
         smoothing: bool,
         field_ref: Option<(f64, f64)>,
         bias: Vector3<f64>,
-    ) -> Option<Vec<f64>> {
+    ) -> PhoneMotion {
         let w = self.cfg.stationary_window;
         let mut speed_shape = None;
+        let mut late = Vec::new();
         let s = &mut rb.s;
         let mut still = if smoothing {
             let [gyros, accs, mags] = &rb.imu;
@@ -81,6 +104,24 @@ impl Acquisition {
                     .zip(&s.q)
                     .map(|(l, q)| l.dot(&(quat_of(q) * Vector3::x())))
                     .collect();
+                // An index typed at the node and entered once the device had gone on (a late
+                // Enter): named, and the tag put where the device set off.
+                late = late_set_offs(&s.t, &along, &o.tags, &o.typing);
+                for l in &late {
+                    let (i0, i1) = (
+                        s.t.partition_point(|&x| x < l.from),
+                        s.t.partition_point(|&x| x <= l.to),
+                    );
+                    still[i0..i1].iter_mut().for_each(|m| *m = false);
+                    let (node, t, _) = o.tags[l.tag];
+                    self.warn(AcquisitionWarning::LateEnter {
+                        curve: o.index,
+                        node,
+                        t,
+                        rolled_m: l.distance,
+                        moved_m: l.distance,
+                    });
+                }
                 let stretches = stretches(&o.tags, &o.typing);
                 let fallback: Vec<f64> = still.iter().map(|&x| if x { 0.0 } else { 1.0 }).collect();
                 speed_shape = Some(speed::speed_shape(&s.t, &along, &stretches, &fallback));
@@ -91,7 +132,10 @@ impl Acquisition {
                 *f |= flags::STATIONARY;
             }
         }
-        speed_shape
+        PhoneMotion {
+            speed: speed_shape,
+            late,
+        }
     }
 
     /// Phone: replaces the causal orientations of a finished curve (`s.q`) by the smoother's
@@ -152,6 +196,46 @@ impl Acquisition {
         out.bias
     }
 }
+
+/// Phone: the tags of a curve whose index was typed at the node but entered after the device
+/// set off ([`speed::set_off_before`]) and went more than [`TYPING_ROLL_M`]. `t`, `along` the
+/// samples' times and acceleration along the travel direction (m/s²); `tags` `(node, Enter
+/// time, _)`, `typing` the `(first digit, Enter)` of every tag typed. A curve's last tag is
+/// not looked at (no stretch after it).
+fn late_set_offs(
+    t: &[f64],
+    along: &[f64],
+    tags: &[(u32, f64, bool)],
+    typing: &[(f64, f64)],
+) -> Vec<LateTag> {
+    let typed = |enter: f64| typing.iter().find(|ty| ty.1 == enter).copied();
+    let mut out = Vec::new();
+    for k in 0..tags.len().saturating_sub(1) {
+        let Some((a, b)) = typed(tags[k].1) else {
+            continue;
+        };
+        // The set-off looked for from the first digit to the next tag's (or a while after the
+        // Enter), where the cruise after it is.
+        let next = typed(tags[k + 1].1).map_or(tags[k + 1].1, |ty| ty.0);
+        let i0 = t.partition_point(|&x| x < a);
+        let i1 = t.partition_point(|&x| x <= next.min(b + SET_OFF_REACH));
+        let Some(s) = speed::set_off_before(&t[i0..i1], &along[i0..i1], b) else {
+            continue;
+        };
+        if s.distance > TYPING_ROLL_M {
+            out.push(LateTag {
+                tag: k,
+                from: s.ramp.at,
+                to: s.stop.map_or(b, |r| (r.at + r.tau).min(b)),
+                distance: s.distance,
+            });
+        }
+    }
+    out
+}
+
+/// How far after an Enter a set-off and the cruise are looked at, s.
+const SET_OFF_REACH: f64 = 3.0;
 
 /// Keeps the runs of `mask` that overlap one of the `intervals` (times), and sets the samples
 /// inside the intervals.
@@ -252,7 +336,7 @@ pub fn phone_distances(c: &mut Curve, nominal_speed: f64) {
         .iter()
         .map(|&f| if f & flags::STATIONARY == 0 { 1.0 } else { 0.0 })
         .collect();
-    distances_by_speed(c, &moving, nominal_speed);
+    distances_by_speed(c, &moving, nominal_speed, &[]);
 }
 
 /// Phone: a curve's distances made again after a segment's length arrived late: each
@@ -287,10 +371,20 @@ pub(super) fn rescale_segments(c: &mut Curve) {
 /// Phone distances from a speed shape (`speed`, one per sample, ≥ 0: [`speed::speed_shape`]):
 /// within each segment distance grows with the time integral of the shape, scaled to the
 /// segment's measured length, else to `nominal_speed` × the integral.
-pub(super) fn distances_by_speed(c: &mut Curve, speed: &[f64], nominal_speed: f64) {
+///
+/// A tag entered late (`late`, [`late_set_offs`]) is where the device set off: its segments'
+/// lengths, measured from Enter to Enter, give the one before it `distance` less and the
+/// typing after the set-off that `distance` (linearly in time).
+pub(super) fn distances_by_speed(
+    c: &mut Curve,
+    speed: &[f64],
+    nominal_speed: f64,
+    late: &[LateTag],
+) {
     let s = &mut c.samples;
     let n = s.t.len();
-    if n == 0 || c.tags.len() < 2 {
+    let nt = c.tags.len();
+    if n == 0 || nt < 2 {
         return;
     }
     // The shape's integral at each sample.
@@ -299,36 +393,57 @@ pub(super) fn distances_by_speed(c: &mut Curve, speed: &[f64], nominal_speed: f6
         tau[i] = tau[i - 1] + speed[i] * (s.t[i] - s.t[i - 1]);
     }
     let tag_tau: Vec<f64> = c.tags.iter().map(|g| interp(&s.t, &tau, g.t)).collect();
-    let mut start_d = vec![0.0; c.tags.len()];
-    for k in 0..c.tags.len() - 1 {
-        let dt = tag_tau[k + 1] - tag_tau[k];
-        let len = c
-            .segment_lengths
-            .get(k)
-            .copied()
-            .flatten()
-            .unwrap_or(nominal_speed * dt);
-        start_d[k + 1] = start_d[k] + len;
+    let mut late_of: Vec<Option<&LateTag>> = vec![None; nt];
+    for l in late.iter().filter(|l| l.tag < nt) {
+        late_of[l.tag] = Some(l);
     }
-    let d_of = |x: f64| -> f64 {
-        let k = tag_tau.partition_point(|&v| v <= x);
-        if k == 0 {
-            return 0.0;
-        }
-        if k >= tag_tau.len() {
-            return start_d[tag_tau.len() - 1];
-        }
-        let (a, b) = (tag_tau[k - 1], tag_tau[k]);
-        if b > a {
-            start_d[k - 1] + (start_d[k] - start_d[k - 1]) * (x - a) / (b - a)
-        } else {
-            start_d[k - 1]
-        }
-    };
-    for (d, &x) in s.d.iter_mut().zip(&tau) {
-        *d = d_of(x);
+    let went = |k: usize| late_of[k].map_or(0.0, |l| l.distance);
+    // Each tag's distance where the device stood at it (`at`) and at its Enter (`enter`).
+    let mut at = vec![0.0; nt];
+    let mut enter = vec![0.0; nt];
+    enter[0] = went(0);
+    for k in 0..nt - 1 {
+        let len = match c.segment_lengths.get(k).copied().flatten() {
+            // Enter to Enter: the late tag's own stretch is the typing's.
+            Some(len) => (len - went(k + 1)).max(0.5 * len),
+            None => nominal_speed * (tag_tau[k + 1] - tag_tau[k]),
+        };
+        at[k + 1] = enter[k] + len;
+        enter[k + 1] = at[k + 1] + went(k + 1);
     }
-    for (tag, d) in c.tags.iter_mut().zip(start_d) {
+    // Sample by sample, in time: `j` tags entered so far.
+    let mut j = 0;
+    for (i, d) in s.d.iter_mut().enumerate() {
+        let x = s.t[i];
+        while j < nt && c.tags[j].t <= x {
+            j += 1;
+        }
+        *d = match late_of.get(j).copied().flatten() {
+            // Typing a late tag's index, after the set-off.
+            Some(l) if x >= l.from => {
+                let span = l.to - l.from;
+                let f = if span > 0.0 {
+                    ((x - l.from) / span).min(1.0)
+                } else {
+                    1.0
+                };
+                at[j] + f * l.distance
+            }
+            _ if j == 0 => 0.0,
+            _ if j == nt => enter[nt - 1],
+            _ => {
+                let (a, b) = (tag_tau[j - 1], tag_tau[j]);
+                if tau[i] >= b {
+                    at[j]
+                } else if tau[i] > a {
+                    enter[j - 1] + (at[j] - enter[j - 1]) * (tau[i] - a) / (b - a)
+                } else {
+                    enter[j - 1]
+                }
+            }
+        };
+    }
+    for (tag, d) in c.tags.iter_mut().zip(at) {
         tag.d = d;
     }
 }
@@ -397,6 +512,74 @@ mod tests {
         assert!(none.iter().all(|m| !m));
     }
 
+    /// Issue 49: a phone tag entered late is placed where the device set off: its segment
+    /// lengths count from Enter to Enter, so the one before gives the distance the device went
+    /// while the index was typed to the typing; the samples after the set-off go on linearly to
+    /// the Enter.
+    #[test]
+    fn issue_49_a_late_phone_tag_is_placed_where_the_device_set_off() {
+        let t: Vec<f64> = (0..=400).map(|i| i as f64 * 0.01).collect();
+        // Moving on (0.2, 1.4) and (2.2, 3.6) s; tags entered at 0, 2 and 4 s; the second's
+        // index typed from 1.5 s, the device set off at 1.6 s and went 4 cm by its Enter.
+        let speed: Vec<f64> = t
+            .iter()
+            .map(|&x| f64::from(u8::from((0.2..1.4).contains(&x) || (2.2..3.6).contains(&x))))
+            .collect();
+        let n = t.len();
+        let curve = |lengths: Vec<Option<f64>>| Curve {
+            index: 0,
+            kind: CurveKind::Interior,
+            closed: false,
+            tags: [0.0, 2.0, 4.0]
+                .iter()
+                .enumerate()
+                .map(|(k, &t)| Tag {
+                    node: k as u32,
+                    d: 0.0,
+                    t,
+                    uncertain: false,
+                })
+                .collect(),
+            segment_lengths: lengths,
+            samples: Samples {
+                t: t.clone(),
+                d: vec![0.0; n],
+                q: vec![[1.0, 0.0, 0.0, 0.0]; n],
+                flags: vec![0; n],
+                w: vec![1.0; n],
+            },
+        };
+        let late = [LateTag {
+            tag: 1,
+            from: 1.6,
+            to: 2.0,
+            distance: 0.04,
+        }];
+        let at = |c: &Curve, x: f64| interp(&c.samples.t, &c.samples.d, x);
+        // Measured, Enter to Enter: 0.34 m and 0.26 m.
+        let mut c = curve(vec![Some(0.34), Some(0.26)]);
+        distances_by_speed(&mut c, &speed, 0.05, &late);
+        let d: Vec<f64> = c.tags.iter().map(|g| g.d).collect();
+        for (got, want) in d.iter().zip([0.0, 0.30, 0.60]) {
+            assert!((got - want).abs() < 1e-12, "{d:?}");
+        }
+        assert!((at(&c, 1.55) - 0.30).abs() < 1e-12);
+        assert!((at(&c, 1.8) - 0.32).abs() < 1e-9);
+        assert!((at(&c, 2.1) - 0.34).abs() < 1e-12);
+        assert!(c.samples.d.windows(2).all(|w| w[1] >= w[0]));
+        // Not measured: the nominal speed over the moving time, the typing's distance added.
+        let mut c = curve(vec![None, None]);
+        distances_by_speed(&mut c, &speed, 0.05, &late);
+        let d: Vec<f64> = c.tags.iter().map(|g| g.d).collect();
+        for (got, want) in d.iter().zip([0.0, 0.06, 0.17]) {
+            assert!((got - want).abs() < 1e-3, "{d:?}");
+        }
+        // No late tag: the Enter is the tag.
+        let mut c = curve(vec![Some(0.34), Some(0.26)]);
+        distances_by_speed(&mut c, &speed, 0.05, &[]);
+        assert!((c.tags[1].d - 0.34).abs() < 1e-12);
+    }
+
     /// Issue 33: a segment length that arrives after the curve ended scales that segment's
     /// distances as the speed shape spread them (a gentle ramp stays gentle), and moves the
     /// later segments by the difference.
@@ -435,7 +618,7 @@ mod tests {
                 w: vec![1.0; n],
             },
         };
-        distances_by_speed(&mut c, &speed, 0.05);
+        distances_by_speed(&mut c, &speed, 0.05, &[]);
         let before = c.samples.d.clone();
         let second = c.tags[2].d - c.tags[1].d;
         c.segment_lengths[0] = Some(0.6);

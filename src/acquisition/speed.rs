@@ -24,6 +24,11 @@
 //! and even the true standing mask with a constant speed between is wrong by the ramps (the
 //! independent simulator's bumpy cube: 0.80 % with its true mask, BENCHMARKS.md "Validation
 //! on the independent simulator's captures").
+//!
+//! The same pulses tell a late Enter (issue 49): the operator stands while typing a node's
+//! index, so a set-off between its first digit and its Enter ([`set_off_before`]) means the
+//! Enter was pressed on the way to the next node; its speed times the time to the Enter (or to
+//! a stop before it) says how far on.
 
 use std::f64::consts::PI;
 
@@ -103,13 +108,14 @@ fn pulse(x: f64, tau: f64) -> f64 {
 }
 
 /// The best pulse of sign `sign` (+1 setting off, −1 stopping) in `y` (samples at `t`), with
-/// its start `at` within `[lo, hi]` and the pulse inside `[t₀, t_last]`; its area (the speed)
-/// fitted, or `fixed` if given. `None` if none has the sign.
+/// its start `at` within `[lo, hi]` and the pulse inside `[t₀, min(end, t_last)]`; its area
+/// (the speed) fitted, or `fixed` if given. `None` if none has the sign.
 fn best_pulse(
     t: &[f64],
     y: &[f64],
     sign: f64,
     (lo, hi): (f64, f64),
+    end: f64,
     fixed: Option<f64>,
     trend: bool,
 ) -> Option<Ramp> {
@@ -138,7 +144,7 @@ fn best_pulse(
     let yp: Vec<f64> = y.iter().zip(&u).map(|(y, u)| y - ym - slope * u).collect();
     let mut best: Option<Ramp> = None;
     for &tau in &TAUS {
-        let steps = ((hi.min(t1 - tau) - lo) / STEP).floor();
+        let steps = ((hi.min(end.min(t1) - tau) - lo) / STEP).floor();
         if steps.is_nan() || steps < 0.0 {
             continue;
         }
@@ -218,9 +224,9 @@ fn without(t: &[f64], y: &[f64], r: &Ramp, sign: f64) -> Vec<f64> {
 /// is found (a stretch too short, or nothing in it).
 pub fn fit_stretch(t: &[f64], along: &[f64], trend: bool) -> Option<Stretch> {
     let (&t0, &t1) = (t.first()?, t.last()?);
-    let mut start = best_pulse(t, along, 1.0, (t0, t1), None, trend)?;
+    let mut start = best_pulse(t, along, 1.0, (t0, t1), t1, None, trend)?;
     let y = without(t, along, &start, 1.0);
-    let mut stop = best_pulse(t, &y, -1.0, (t0, t1), None, trend)?;
+    let mut stop = best_pulse(t, &y, -1.0, (t0, t1), t1, None, trend)?;
     let mut fixed = (None, None);
     // The weaker end's own pulse, when it is fitted again with the other's speed.
     let mut weak: Option<Ramp> = None;
@@ -229,10 +235,18 @@ pub fn fit_stretch(t: &[f64], along: &[f64], trend: bool) -> Option<Stretch> {
         // The start before the stop's ramp ends, the stop after the start's begins.
         let hi = stop.at + stop.tau;
         let y = without(t, along, &stop, -1.0);
-        start = best_pulse(t, &y, 1.0, (t0, hi), fixed.0, trend).unwrap_or(start);
+        start = best_pulse(t, &y, 1.0, (t0, hi), t1, fixed.0, trend).unwrap_or(start);
         let y = without(t, along, &start, 1.0);
-        stop =
-            best_pulse(t, &y, -1.0, (start.at.max(stop_after), t1), fixed.1, trend).unwrap_or(stop);
+        stop = best_pulse(
+            t,
+            &y,
+            -1.0,
+            (start.at.max(stop_after), t1),
+            t1,
+            fixed.1,
+            trend,
+        )
+        .unwrap_or(stop);
         // The two ends see the same cruise: a pulse far smaller than the other end's is not
         // this stretch's start or stop (a hand tilting the phone, a stall, a creeping
         // approach); that end is fitted again with the other's speed. The larger speed is
@@ -254,7 +268,7 @@ pub fn fit_stretch(t: &[f64], along: &[f64], trend: bool) -> Option<Stretch> {
         // the stop is looked for after it.
         let end = stop.at + stop.tau;
         let y = without(t, &without(t, along, &start, 1.0), &stop, -1.0);
-        match best_pulse(t, &y, 1.0, (end, t1), None, trend) {
+        match best_pulse(t, &y, 1.0, (end, t1), t1, None, trend) {
             Some(off) if off.c >= AGREE * start.c => stop_after = off.at + off.tau,
             _ if again => {}
             _ => break,
@@ -280,6 +294,52 @@ pub fn fit_stretch(t: &[f64], along: &[f64], trend: bool) -> Option<Stretch> {
         }
     }
     Some(Stretch { start, stop, found })
+}
+
+/// Where a device set off before `enter` (the Enter of a tag, inside `t`): the operator was to
+/// stand from the first digit of its index (`t`'s start) to the Enter, and go on after.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SetOff {
+    /// The set-off's ramp (its speed `c`, m/s).
+    pub ramp: Ramp,
+    /// Where it stopped again before the Enter, if it did.
+    pub stop: Option<Ramp>,
+    /// How far it went by the Enter, m.
+    pub distance: f64,
+}
+
+/// Finds a set-off before `enter` in `t` (samples from the first digit of a tag's index to
+/// some way into the cruise after its Enter; `along` as for [`fit_stretch`]): the strongest
+/// setting-off pulse, standing out of the noise ([`SIGNIFICANT`] noise variances), that
+/// starts before `enter`; and a stop before `enter` where one of the set-off's speed
+/// ([`AGREE`]) is there. `None` where the device set off after the Enter.
+pub fn set_off_before(t: &[f64], along: &[f64], enter: f64) -> Option<SetOff> {
+    let (&t0, &t1) = (t.first()?, t.last()?);
+    // The set-off's pulse ends by the Enter: one that straddles it set off as the key was
+    // pressed.
+    let ramp = best_pulse(t, along, 1.0, (t0, t1), enter, None, false)?;
+    if ramp.gain < SIGNIFICANT * noise_variance(along) {
+        return None;
+    }
+    let y = without(t, along, &ramp, 1.0);
+    let from = ramp.at + ramp.tau;
+    let stop =
+        best_pulse(t, &y, -1.0, (from, t1), enter, None, false).filter(|s| s.c >= AGREE * ramp.c);
+    let up = |x: f64| smoothstep((x - ramp.at) / ramp.tau);
+    let v = |x: f64| match stop {
+        Some(s) => up(x).min(1.0 - smoothstep((x - s.at) / s.tau)) * 0.5 * (ramp.c + s.c),
+        None => up(x) * ramp.c,
+    };
+    let ie = t.partition_point(|&x| x <= enter);
+    let distance = t[..ie]
+        .windows(2)
+        .map(|w| 0.5 * (v(w[0]) + v(w[1])) * (w[1] - w[0]))
+        .sum();
+    Some(SetOff {
+        ramp,
+        stop,
+        distance,
+    })
 }
 
 /// The speed's shape at `t` in a stretch fitted as `s`: 0 standing, 1 cruising, the ramps
@@ -402,6 +462,51 @@ mod tests {
             })
             .collect();
         (t, y, truth)
+    }
+
+    /// Issue 49: the acceleration along T of a device standing from 0 to `off` (the first
+    /// digit at 0), setting off abruptly to 0.05 m/s, then (`stop`) easing to rest over 0.5 s
+    /// before the Enter at 2 s and setting off again at 2.5 s, or rolling on through it; 200 Hz,
+    /// seeded noise of 0.13 m/s².
+    fn typing(off: Option<f64>, stop: bool) -> (Vec<f64>, Vec<f64>) {
+        let t: Vec<f64> = (0..1000).map(|i| i as f64 * 0.005).collect();
+        let mut rng = sfs_geometry::rng::Rng::new(11);
+        let y = t
+            .iter()
+            .map(|&x| {
+                let mut a = 0.13 * rng.gauss() + 0.02;
+                if let Some(off) = off {
+                    a += 0.05 * pulse((x - off) / 0.05, 0.05);
+                    if stop {
+                        a -= 0.05 * pulse((x - 1.5) / 0.5, 0.5);
+                        a += 0.05 * pulse((x - 2.5) / 0.05, 0.05);
+                    }
+                } else {
+                    a += 0.05 * pulse((x - 2.3) / 0.05, 0.05);
+                }
+                a
+            })
+            .collect();
+        (t, y)
+    }
+
+    #[test]
+    fn issue_49_a_set_off_before_the_enter_is_found_with_how_far_it_went() {
+        // Rolling on through the Enter: set off at 0.8 s, 1.2 s at 5 cm/s by the Enter.
+        let (t, y) = typing(Some(0.8), false);
+        let s = set_off_before(&t, &y, 2.0).expect("a set-off");
+        assert!((s.ramp.at - 0.8).abs() < 0.05, "{s:?}");
+        assert!(s.stop.is_none(), "{s:?}");
+        assert!((s.distance - 0.0588).abs() < 0.01, "{s:?}");
+        // Eased to rest before the Enter: 0.925 s at 5 cm/s between the ramps' middles.
+        let (t, y) = typing(Some(0.8), true);
+        let s = set_off_before(&t, &y, 2.0).expect("a set-off");
+        assert!(s.stop.is_some_and(|r| (r.at - 1.5).abs() < 0.1), "{s:?}");
+        assert!((s.distance - 0.0463).abs() < 0.01, "{s:?}");
+        // Stood through the typing, set off after the Enter: nothing found, or nothing far.
+        let (t, y) = typing(None, false);
+        let s = set_off_before(&t, &y, 2.0);
+        assert!(s.is_none_or(|s| s.distance < 0.005), "{s:?}");
     }
 
     #[test]
