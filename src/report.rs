@@ -146,7 +146,8 @@ pub struct Suspect {
     /// What it rests on (the warning's figures).
     pub evidence: serde_json::Value,
     /// What was done: `placed` (the tag put where the device stood), `detached` (the tag
-    /// left out, its curve kept), `kept` (nothing: rescan it).
+    /// left out, its curve kept), `retagged` (the tag put on the node its curve lands on once
+    /// let go: `evidence.kept_as`), `kept` (nothing: rescan it).
     pub repair: &'static str,
     /// The keys that rescan the curve in place (issue 49, point 4): its number, its kind's
     /// start key, the curve again, `E` (e.g. `3 B … E`).
@@ -187,8 +188,12 @@ impl Quality {
                     node: Some(d.node),
                     kind: "wrong-node",
                     reason: w.to_string(),
-                    evidence: serde_json::json!({"offset_m": d.offset_m, "share": d.share}),
-                    repair: "detached",
+                    evidence: serde_json::json!({
+                        "offset_m": d.offset_m,
+                        "share": d.share,
+                        "kept_as": d.kept_as,
+                    }),
+                    repair: if d.retagged { "retagged" } else { "detached" },
                     rescan: String::new(),
                 }),
                 Warning::Network(NetworkWarning::SlipSuspected(s)) => Some(Suspect {

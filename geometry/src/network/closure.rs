@@ -14,6 +14,12 @@
 //! A curve that would have to be pulled further than [`FAR`] of the network's size to meet
 //! its node is such a sign: no drift does that.
 //!
+//! Where the device stood is another ([`LAND`]): let go of its node, a curve whose index was
+//! typed wrong lands on the node it passed, and the tag is put on that node instead of an
+//! anonymous one. It also tells which of two tags the loops blame alike is wrong: both ends of
+//! a curve of one segment (freeing either frees the segment), the two tags at a node only two
+//! curves hold; only the wrong one lands on another node (issue 49).
+//!
 //! ## The test
 //! Each segment `s` of a curve (between two consecutive tags, nodes `a → b`) integrates its
 //! tangents to a chord `d_s = Σ_j h_j (T_j + T_{j+1})/2`. Eliminating the samples inside the
@@ -45,6 +51,18 @@ pub const RATIO: f64 = 50.0;
 /// torus).
 pub const FAR: f64 = 0.15;
 
+/// A refused tag whose curve, let go of its node, lands this close to another node (a share
+/// of how far it had to be pulled) was typed for the node it lands on: where the loops cannot
+/// tell which of two tags is wrong (they explain the same), this says; and the tag is put on
+/// that node (issue 49). Measured (BENCHMARKS.md "Trust"): planted wrong nodes land within
+/// 0.17 of their offset of the node meant; the right tags that explain as much, 0.57 or more
+/// from any node.
+pub const LAND: f64 = 0.3;
+/// Of tags the loops blame alike, the one whose curve lands this many times closer to another
+/// node than any other's is the wrong one ([`LAND`]). Measured: the wrong tags 10 times closer
+/// or more.
+pub const LAND_MARGIN: f64 = 4.0;
+
 /// At most this many tags are detached (a network that needs more has a worse problem).
 pub const MAX_DETACHED: usize = 4;
 
@@ -71,8 +89,11 @@ pub struct Detached {
     pub tag: usize,
     /// The node it was typed as.
     pub node: u32,
-    /// The anonymous node it keeps.
-    pub anonymous: u32,
+    /// The node the tag now has: a fresh anonymous node that joins no other curve, or
+    /// (`retagged`) the node its curve lands on once let go ([`LAND`]).
+    pub kept_as: u32,
+    /// Whether the tag was put on the node its curve lands on rather than left anonymous.
+    pub retagged: bool,
     /// How far the curve's end(s) at the tag had to be pulled to meet the node, m.
     pub offset_m: f64,
     /// Share of the network's misfit energy it explained.
@@ -83,14 +104,26 @@ impl std::fmt::Display for Detached {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "curve {}, node {} (tag {} of the curve): the network's loops do not close through this tag (the curve would have to be pulled {:.0} mm to meet the node; {:.0} % of the network's misfit); probably a mistyped index or a digit lost on the link: the tag is kept as anonymous node {} that joins no other curve",
+            "curve {}, node {} (tag {} of the curve): the network's loops do not close through this tag (the curve would have to be pulled {:.0} mm to meet the node; {:.0} % of the network's misfit); probably a mistyped index or a digit lost on the link",
             self.curve,
             self.node,
             self.tag + 1,
             self.offset_m * 1e3,
             self.share * 100.0,
-            self.anonymous
-        )
+        )?;
+        if self.retagged {
+            write!(
+                f,
+                ": let go, the curve meets node {} there, so the tag is put on node {} (was it meant?)",
+                self.kept_as, self.kept_as
+            )
+        } else {
+            write!(
+                f,
+                ": the tag is kept as anonymous node {} that joins no other curve",
+                self.kept_as
+            )
+        }
     }
 }
 
@@ -156,6 +189,9 @@ struct Candidate {
     tag: usize,
     drop: f64,
     offset: f64,
+    /// For a tag that stands out ([`Drops::refuses`]): where its curve's end lands once the
+    /// tag lets go of its node, the nearest other node there and how far from it, m.
+    lands: Option<(u32, f64)>,
 }
 
 /// A segment's energy drop when its length is free: `(index into the segments, drop, κ)`.
@@ -215,6 +251,16 @@ impl Drops {
             .iter()
             .any(|o| o.seg != best.seg && o.drop >= LOCATED * best.drop);
         let short = best.kappa / (1.0 + best.kappa);
+        tracing::debug!(
+            curve = curves[self.segs[best.seg].curve].index,
+            tag = self.segs[best.seg].tags.0,
+            share = best.drop / self.energy,
+            per_dof = best.drop / per_dof.max(f64::MIN_POSITIVE),
+            vs_tag = best.drop / best_tag.max(f64::MIN_POSITIVE),
+            located,
+            short,
+            "closure: the segment that explains most"
+        );
         if !(refuses
             && located
             && best.drop >= SLIP_VS_TAG * best_tag
@@ -245,20 +291,44 @@ impl Drops {
     /// Whether no other tag explains the misfit as well as `c`: on a single loop (a closed
     /// curve alone, early in a live session) every tag does, and the misfit is the loop's
     /// drift, not any one tag's.
+    ///
+    /// Where other tags explain as much (the two ends of a curve of one segment, the two tags
+    /// of a node that only two curves hold), the one whose curve lands on another node once
+    /// let go ([`Drops::lands`]) is located, if it lands [`LAND_MARGIN`] times closer than
+    /// any of them: the device was there.
     fn located(&self, c: &Candidate) -> bool {
-        !self
+        let mut rivals = self
             .tags
             .iter()
-            .any(|o| !std::ptr::eq(o, c) && o.drop >= LOCATED * c.drop)
+            .filter(|o| !std::ptr::eq(*o, c) && o.drop >= LOCATED * c.drop)
+            .peekable();
+        rivals.peek().is_none()
+            || (self.lands(c) && rivals.all(|o| land_ratio(o) > LAND_MARGIN * land_ratio(c)))
     }
+
+    /// Whether `c`'s curve, let go of its node, lands on another node: within [`LAND`] of
+    /// how far it had to be pulled. The index typed was probably that node's.
+    fn lands(&self, c: &Candidate) -> bool {
+        land_ratio(c) <= LAND
+    }
+}
+
+/// How close `c`'s curve lands to another node once let go, as a share of how far it had to
+/// be pulled (infinite where it was not looked at).
+fn land_ratio(c: &Candidate) -> f64 {
+    c.lands.map_or(f64::INFINITY, |(_, r)| r / c.offset)
 }
 
 fn drops(curves: &[UniformCurve]) -> Option<Drops> {
     let mut var: BTreeMap<u32, usize> = BTreeMap::new();
+    let mut ids = Vec::new();
     for c in curves {
         for &(_, n) in &c.nodes {
             let k = var.len();
-            var.entry(n).or_insert(k);
+            var.entry(n).or_insert_with(|| {
+                ids.push(n);
+                k
+            });
         }
     }
     let n = var.len();
@@ -325,6 +395,7 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
     if energy.is_nan() || energy <= 0.0 || energy.is_infinite() {
         return None;
     }
+    let dof = (3 * loops).saturating_sub(3).max(1) as f64;
     // Segments at each tag: (segment, the tag is its end b?).
     let mut at: BTreeMap<(usize, usize), Vec<(usize, bool)>> = BTreeMap::new();
     for (si, s) in segs.iter().enumerate() {
@@ -357,11 +428,30 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
         if sigma.is_nan() || sigma <= 1e-9 * hdd {
             continue; // detaching the tag frees nothing (the node holds only this curve)
         }
+        let drop = g.norm_squared() / sigma;
+        // Let go, the tag's end moves by δ = −g/σ off its node, and the nodes by −y δ: it
+        // lands at x_v + (1 − y_v) δ. Only for the tags that stand out (one pass over the
+        // nodes each).
+        let stands_out = drop > SHARE * energy && drop > RATIO * (energy - drop).max(0.0) / dof;
+        let lands = if stands_out {
+            // Not on a node of its own curve: one close along it is no other place.
+            let own: Vec<usize> = curves[ci].nodes.iter().map(|m| var[&m.1]).collect();
+            let v = var[&curves[ci].nodes[tag].1];
+            let shift = g / sigma;
+            let landing = x[v] - shift * (1.0 - y[v][0]);
+            (0..n)
+                .filter(|j| !own.contains(j))
+                .map(|j| (ids[j], (x[j] + shift * y[j][0] - landing).norm()))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+        } else {
+            None
+        };
         tags.push(Candidate {
             curve: ci,
             tag,
-            drop: g.norm_squared() / sigma,
+            drop,
             offset: g.norm() / sigma,
+            lands,
         });
     }
     // Each segment with its length free: e_s(κ) = x_b − x_a − (1 + κ) d_s; the drop is
@@ -403,7 +493,7 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
         size: crate::bbox_diagonal(&x),
         energy,
         mean_c,
-        dof: (3 * loops).saturating_sub(3).max(1) as f64,
+        dof,
         tags,
         segments,
     })
@@ -622,9 +712,21 @@ pub fn detach_outlier_tags(
                 uncertain(curves[c.curve].index, c.tag)
                     || repeats_in_curve(&curves[c.curve], c.tag)
                     || d.far(c)
+                    || d.lands(c)
             })
             .filter(|c| d.refuses(c) && d.located(c))
             .max_by(|a, b| a.drop.total_cmp(&b.drop));
+        for c in d.tags.iter().filter(|c| c.lands.is_some()) {
+            tracing::debug!(
+                curve = curves[c.curve].index,
+                tag = c.tag,
+                offset_m = c.offset,
+                share = c.drop / d.energy,
+                lands = ?c.lands,
+                located = d.located(c),
+                "closure: a tag stands out"
+            );
+        }
         if let Some(w) = worst {
             tracing::debug!(
                 "closure: worst tag curve {} tag {}: {:.0} % of the misfit, offset {:.1} mm",
@@ -653,14 +755,16 @@ pub fn detach_outlier_tags(
             .max()
             .map_or(ANONYMOUS_NODE_BASE, |m| m.saturating_add(1))
             .max(ANONYMOUS_NODE_BASE);
+        let lands_on = c.lands.filter(|_| d.lands(&c)).map(|l| l.0);
         let cu = &mut curves[c.curve];
         let node = cu.nodes[c.tag].1;
-        cu.nodes[c.tag].1 = next;
+        cu.nodes[c.tag].1 = lands_on.unwrap_or(next);
         out.detached.push(Detached {
             curve: cu.index,
             tag: c.tag,
             node,
-            anonymous: next,
+            kept_as: cu.nodes[c.tag].1,
+            retagged: lands_on.is_some(),
             offset_m: c.offset,
             share: c.drop / d.energy,
         });
@@ -798,6 +902,21 @@ mod tests {
             // (x = 1, y = 1), a node it never passes.
             assert_eq!(g[2].nodes[2].1, 18);
             g[2].nodes[2].1 = 9;
+            // Let go, the curve lands on node 18, which the curve along y at x = 2 tags: the
+            // tag is put there, with no other sign needed (issue 49), and the loops close.
+            let mut retagged = g.clone();
+            let r = detach_outlier_tags(&mut retagged, |_, _| false);
+            assert_eq!(r.detached.len(), 1, "seed {seed}: {r:?}");
+            let d = &r.detached[0];
+            assert_eq!((d.curve, d.tag, d.node, d.kept_as), (2, 2, 9, 18), "{d:?}");
+            assert!(d.retagged && r.refused.is_empty(), "{r:?}");
+            assert_eq!(retagged[2].nodes[2].1, 18);
+            assert!(d.to_string().contains("put on node 18"), "{d}");
+            // Without that crossing tagged (curve 10, along y at x = 2, not tagged at node 18),
+            // the curve lands on no node.
+            assert_eq!(g[10].nodes[2].1, 18);
+            g[10].nodes.remove(2);
+            g[10].h.pop();
             // With no second sign of a wrong index the tag is kept, with a warning.
             let kept = detach_outlier_tags(&mut g.clone(), |_, _| false);
             assert!(kept.detached.is_empty());
@@ -834,8 +953,8 @@ mod tests {
                 .collect();
             assert_eq!(shown, vec![(2, 2, 9, true)], "seed {seed}");
             assert_eq!((d[0].curve, d[0].tag, d[0].node), (2, 2, 9));
-            assert!(crate::curve::is_anonymous(d[0].anonymous));
-            assert_eq!(g[2].nodes[2].1, d[0].anonymous);
+            assert!(crate::curve::is_anonymous(d[0].kept_as) && !d[0].retagged);
+            assert_eq!(g[2].nodes[2].1, d[0].kept_as);
             // The curve had to reach 1 m sideways (spread over its segments and the others).
             assert!(d[0].offset_m > 0.5 && d[0].share > 0.9, "{}", d[0]);
             let msg = d[0].to_string();
