@@ -138,9 +138,13 @@ pub struct EvalArgs {
     /// The reconstruction (`network.glb`).
     #[arg(long)]
     pub glb: PathBuf,
-    /// Also write the JSON object to this file.
+    /// Write the JSON object to this new file instead of standard output (an existing file
+    /// is refused unless --force; an input never). `--report` is an old name of it.
+    #[arg(long, value_name = "FILE", alias = "report")]
+    pub out: Option<PathBuf>,
+    /// Replace an existing --out file (never one of the inputs).
     #[arg(long)]
-    pub report: Option<PathBuf>,
+    pub force: bool,
 }
 
 #[derive(Debug, Args)]
@@ -196,9 +200,13 @@ pub struct CalibrateArgs {
 pub struct ReplayArgs {
     /// The capture file (raw bytes as the device sent them).
     pub capture: PathBuf,
-    /// Output directory (created if missing).
+    /// Output directory (created if missing). One that already holds a session (a
+    /// capture.bin) or the outputs of a run or a replay is refused unless --force.
     #[arg(long, short)]
     pub out: PathBuf,
+    /// Write into an --out directory that already holds outputs, replacing them.
+    #[arg(long)]
+    pub force: bool,
     /// Replay as fast as possible ("fast"), paced by the device timestamps ("realtime"), or
     /// paced N times faster ("x10").
     #[arg(long, default_value = "fast", value_parser = |s: &str| s.parse::<Pace>())]

@@ -63,6 +63,29 @@ macro_rules! complain {
 
 fn replay(a: ReplayArgs) -> i32 {
     sfs::logging::set_session(&a.out.display().to_string());
+    // Nothing the user made is written over unless asked: a session (its outputs belong to
+    // its capture), or another run's or replay's outputs.
+    let there = outputs_in(&a.out);
+    if !there.is_empty() && !a.force {
+        let session = there.contains(&session::CAPTURE_FILE);
+        complain!(
+            "sfs: {} already holds {} ({}): give another --out directory, or --force to replace {}",
+            a.out.display(),
+            if session {
+                "a session"
+            } else {
+                "the outputs of a run or a replay"
+            },
+            there.join(", "),
+            if session {
+                "its outputs with this capture's (its capture.bin stays)"
+            } else {
+                "them"
+            }
+        );
+        return exit::USAGE;
+    }
+    let existed = a.out.exists();
     let spec = SourceSpec::Replay {
         path: a.capture.clone(),
         pace: a.pace,
@@ -87,9 +110,22 @@ fn replay(a: ReplayArgs) -> i32 {
     };
     let monitoring = settings.monitor.is_some();
     let capture = a.capture.clone();
-    run_session_then(spec, &a.out, &settings, session::Start::New, |o| {
+    let code = run_session_then(spec, &a.out, &settings, session::Start::New, |o| {
         replay_verdict(o, &capture, monitoring)
-    })
+    });
+    // A failed replay leaves nothing behind: what it wrote goes, and the directory if it made
+    // it (what was there before it, with --force, was replaced already).
+    if code != exit::OK && code != exit::INTERRUPTED {
+        for f in outputs_in(&a.out) {
+            if !there.contains(&f) {
+                let _ = std::fs::remove_file(a.out.join(f));
+            }
+        }
+        if !existed {
+            let _ = std::fs::remove_dir(&a.out);
+        }
+    }
+    code
 }
 
 /// A replay that found nothing to work on says so: no packet at all (exit 5), or a sensor
@@ -515,6 +551,24 @@ fn simulate(a: SimulateArgs) -> i32 {
 }
 
 fn eval(a: EvalArgs) -> i32 {
+    // Nothing the user made is written over: an input never, another file only if asked.
+    if let Some(out) = &a.out {
+        if let Some(input) = [&a.truth, &a.glb].into_iter().find(|i| same_file(out, i)) {
+            complain!(
+                "sfs: --out {} is an input of this evaluation ({}): give another file",
+                out.display(),
+                input.display()
+            );
+            return exit::USAGE;
+        }
+        if out.exists() && !a.force {
+            complain!(
+                "sfs: --out {} exists: give another file, or --force to replace it",
+                out.display()
+            );
+            return exit::USAGE;
+        }
+    }
     let truth = match sfs::simulate::truth::Truth::load(&a.truth) {
         Ok(t) => t,
         Err(e) => {
@@ -544,11 +598,13 @@ fn eval(a: EvalArgs) -> i32 {
         }
     };
     let json = serde_json::to_string_pretty(&ev).unwrap_or_default();
-    say!("{json}");
-    if let Some(r) = &a.report {
-        if let Err(e) = sfs::atomic::write_atomic(r, format!("{json}\n").as_bytes()) {
-            complain!("sfs: cannot write {}: {e}", r.display());
-            return exit::OUTPUT;
+    match &a.out {
+        None => say!("{json}"),
+        Some(r) => {
+            if let Err(e) = sfs::atomic::write_atomic(r, format!("{json}\n").as_bytes()) {
+                complain!("sfs: cannot write {}: {e}", r.display());
+                return exit::OUTPUT;
+            }
         }
     }
     if !ev.registration.fits {
@@ -563,6 +619,35 @@ fn eval(a: EvalArgs) -> i32 {
         return exit::UNUSABLE;
     }
     exit::OK
+}
+
+/// Whether `a` and `b` name the same existing file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
+    }
+}
+
+/// What a replay into `dir` would write over: a session's capture and configuration, and the
+/// outputs of a run or a replay (scanning or monitoring), those there.
+fn outputs_in(dir: &Path) -> Vec<&'static str> {
+    use sfs::monitor::run::{EVENTS_FILE, LATEST_FILE, METRICS_FILE, REFERENCE_FILE};
+    use sfs::pipeline::{NETWORK_FILE, REPORT_FILE, SCAN_FILE};
+    [
+        session::CAPTURE_FILE,
+        session::CONFIG_COPY,
+        REPORT_FILE,
+        SCAN_FILE,
+        NETWORK_FILE,
+        METRICS_FILE,
+        EVENTS_FILE,
+        LATEST_FILE,
+        REFERENCE_FILE,
+    ]
+    .into_iter()
+    .filter(|f| dir.join(f).exists())
+    .collect()
 }
 
 /// `1 curve`, `2 curves`.
@@ -645,8 +730,8 @@ fn run_session_then(
         tokio::spawn(signals(shutdown.clone()));
         match session::run(spec, out, settings, start, shutdown.clone()).await {
             Ok(mut o) => {
-                print_summary(&o);
                 let code = verdict(&o);
+                print_summary(&o, code == exit::OK);
                 if let Some(serving) = o.serving.take() {
                     serving.until(&shutdown).await;
                 }
@@ -693,7 +778,9 @@ async fn signals(shutdown: Shutdown) {
     }
 }
 
-fn print_summary(o: &Outcome) {
+/// The summary lines of a finished session; the outputs' paths when `kept` (a failed replay
+/// removes them).
+fn print_summary(o: &Outcome, kept: bool) {
     let l = &o.report.link;
     say!(
         "{}: {} bytes, {} packets, {} rejected (crc {}, cobs {}, length {}), {} unknown, {} lost, {} reboots, {} clock wraps ({}, {:.2} s)",
@@ -728,6 +815,9 @@ fn print_summary(o: &Outcome) {
     if o.report.monitor.is_none() {
         let q = &o.report.quality;
         say!("scan: {} ({})", q.verdict.name(), q.verdict_reason);
+    }
+    if !kept {
+        return;
     }
     if let Some(c) = &o.capture_path {
         say!("capture: {}", c.display());

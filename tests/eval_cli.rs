@@ -63,8 +63,6 @@ fn eval(t: &Truth, glb: &[u8], name: &str) -> serde_json::Value {
         .arg(dir.join("t.truth.json"))
         .arg("--glb")
         .arg(dir.join("n.glb"))
-        .arg("--report")
-        .arg(dir.join("eval.json"))
         .output()
         .unwrap();
     assert!(
@@ -72,11 +70,80 @@ fn eval(t: &Truth, glb: &[u8], name: &str) -> serde_json::Value {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let printed: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let written: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.join("eval.json")).unwrap()).unwrap();
-    assert_eq!(printed, written);
-    printed
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// `sfs eval` with `args` added, in `dir` (truth `t.truth.json`, glb `n.glb`).
+fn eval_with(dir: &std::path::Path, args: &[&std::ffi::OsStr]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["eval", "--truth"])
+        .arg(dir.join("t.truth.json"))
+        .arg("--glb")
+        .arg(dir.join("n.glb"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Issue 50 point 1: `sfs eval` writes its JSON to standard output, or to a new file given
+/// with `--out` (`--report`, its old name, alike); an existing file is refused unless
+/// `--force`, and an input never, whatever is given.
+#[test]
+fn issue_50_eval_writes_over_no_file_of_the_user() {
+    let t = truth();
+    let (c, n) = curves_of(&t, |_, p| p);
+    let glb = network_glb(&c, &n, None).unwrap();
+    let printed = eval(&t, &glb, "out");
+    let dir =
+        PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("eval-{}-out", std::process::id()));
+    let (truth_file, glb_file) = (dir.join("t.truth.json"), dir.join("n.glb"));
+    let truth_bytes = std::fs::read(&truth_file).unwrap();
+    // A new file: written, nothing on standard output.
+    let new = dir.join("eval.json");
+    let out = eval_with(&dir, &["--out".as_ref(), new.as_os_str()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(out.stdout.is_empty());
+    let written: serde_json::Value = serde_json::from_slice(&std::fs::read(&new).unwrap()).unwrap();
+    assert_eq!(written, printed);
+    // A session's report given as --out (or --report): refused, unchanged.
+    let report = dir.join("report.json");
+    std::fs::write(&report, b"{\"link\": 1}").unwrap();
+    for flag in ["--out", "--report"] {
+        let out = eval_with(&dir, &[flag.as_ref(), report.as_os_str()]);
+        assert_eq!(out.status.code(), Some(sfs::exit::USAGE));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("exists") && err.contains("--force"), "{err}");
+        assert_eq!(std::fs::read(&report).unwrap(), b"{\"link\": 1}");
+    }
+    // The truth or the glb: refused even with --force.
+    for input in [&truth_file, &glb_file] {
+        let out = eval_with(
+            &dir,
+            &["--out".as_ref(), input.as_os_str(), "--force".as_ref()],
+        );
+        assert_eq!(out.status.code(), Some(sfs::exit::USAGE));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("is an input"), "{err}");
+    }
+    assert_eq!(std::fs::read(&truth_file).unwrap(), truth_bytes);
+    assert_eq!(std::fs::read(&glb_file).unwrap(), glb);
+    // Asked for: replaced.
+    let out = eval_with(
+        &dir,
+        &["--out".as_ref(), report.as_os_str(), "--force".as_ref()],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let replaced: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(replaced, printed);
 }
 
 fn f(v: &serde_json::Value, path: &[&str]) -> f64 {

@@ -192,3 +192,104 @@ fn issue_14_warnings_carry_stable_codes() {
         "{texts:?}"
     );
 }
+
+/// Issue 50 point 1: `sfs replay --out DIR` into a directory that holds a session (a
+/// capture.bin) or the outputs of another run or replay refuses (exit 2), says what is there,
+/// and changes nothing; `--force` replaces the outputs (a session's capture stays).
+#[test]
+fn issue_50_replay_refuses_a_directory_with_outputs_unless_forced() {
+    let dir = tmpdir("replay-refuse");
+    let (bytes, _) = fault_stream(200);
+    let cap = dir.join("faults.bin");
+    std::fs::write(&cap, &bytes).unwrap();
+    // A session: its capture and its report, as `sfs run` leaves them.
+    let session = dir.join("session");
+    std::fs::create_dir_all(&session).unwrap();
+    std::fs::write(session.join("capture.bin"), b"the session's own bytes").unwrap();
+    std::fs::write(session.join("report.json"), b"{\"the session's\": 1}").unwrap();
+    let replay = |out: &std::path::Path, force: bool| {
+        let mut c = sfs();
+        c.args(["--log", "off", "replay"])
+            .arg(&cap)
+            .arg("--out")
+            .arg(out);
+        if force {
+            c.arg("--force");
+        }
+        c.output().unwrap()
+    };
+    let out = replay(&session, false);
+    assert_eq!(out.status.code(), Some(sfs::exit::USAGE));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("a session")
+            && err.contains("capture.bin, report.json")
+            && err.contains("--force"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read(session.join("report.json")).unwrap(),
+        b"{\"the session's\": 1}"
+    );
+    assert!(!session.join("network.glb").exists());
+    // Forced: the outputs are this capture's, the session's capture is kept.
+    let out = replay(&session, true);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(read_report(&session)["link"]["bytes"], bytes.len());
+    assert_eq!(
+        std::fs::read(session.join("capture.bin")).unwrap(),
+        b"the session's own bytes"
+    );
+    // Another replay's outputs: refused too, and replaced when forced.
+    let first = dir.join("first");
+    assert!(replay(&first, false).status.success());
+    let before = std::fs::read(first.join("report.json")).unwrap();
+    let out = replay(&first, false);
+    assert_eq!(out.status.code(), Some(sfs::exit::USAGE));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("report.json, scan.json"), "{err}");
+    assert_eq!(std::fs::read(first.join("report.json")).unwrap(), before);
+    assert!(replay(&first, true).status.success());
+}
+
+/// Issue 50 point 1: a replay that fails (here a file of no capture: exit 5) leaves nothing
+/// behind: no output directory, no report, and no `report:` line in the summary. Into a
+/// directory that was there, what it wrote goes and the rest stays.
+#[test]
+fn issue_50_a_failed_replay_leaves_nothing_behind() {
+    let dir = tmpdir("replay-failed");
+    let junk = dir.join("junk.bin");
+    std::fs::write(&junk, [0x42u8; 300]).unwrap();
+    let out_dir = dir.join("out");
+    let out = sfs()
+        .args(["--log", "off", "replay"])
+        .arg(&junk)
+        .arg("--out")
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(sfs::exit::UNUSABLE));
+    assert!(!out_dir.exists(), "the output directory is left behind");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(!stdout.contains("report:"), "{stdout}");
+    // An existing directory with a file of the user's: kept, and nothing added.
+    std::fs::create_dir_all(&out_dir).unwrap();
+    std::fs::write(out_dir.join("notes.txt"), b"mine").unwrap();
+    let out = sfs()
+        .args(["--log", "off", "replay"])
+        .arg(&junk)
+        .arg("--out")
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(sfs::exit::UNUSABLE));
+    let left: Vec<_> = std::fs::read_dir(&out_dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(left, vec![std::ffi::OsString::from("notes.txt")]);
+}
