@@ -34,7 +34,8 @@
 //!   network, surface, curve being scanned, status and warnings, kept current by server-sent
 //!   events), with the Prometheus [`metrics`] on the same server.
 //! - [`report`]: `report.json`, assembled in one place; [`warning`]: the typed warnings
-//!   it lists; [`memory`]: resident size; [`atomic`]: atomic replacement of output files.
+//!   it lists; [`percentiles`]: the distributions it summarises; [`memory`]: resident size;
+//!   [`atomic`]: atomic replacement of output files.
 //! - [`session`]: one session, prepared, streamed (source → decoder → acquisition → live
 //!   worker and monitor) and finished (scan.json, network.glb, report.json).
 //! - [`monitor`]: instrumented structures (sensor arrays): layout → shape per epoch →
@@ -73,6 +74,7 @@ pub mod metrics;
 pub mod monitor;
 pub mod named_file;
 pub mod orientation;
+pub mod percentiles;
 pub mod pipeline;
 pub mod ports;
 pub mod report;

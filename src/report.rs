@@ -13,6 +13,7 @@ pub const MAX_CURVES_LISTED: usize = 1000;
 fn is_zero(n: &u64) -> bool {
     *n == 0
 }
+pub use crate::percentiles::Percentiles;
 use serde::Serialize;
 use std::path::Path;
 
@@ -351,33 +352,6 @@ pub struct LiveReport {
     /// Every curves latency, ms (summarised in `curves_latency_ms`).
     #[serde(skip)]
     pub curves_latencies: Vec<f64>,
-}
-
-/// A distribution summarised.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
-pub struct Percentiles {
-    pub n: usize,
-    pub p50: f64,
-    pub p95: f64,
-    pub max: f64,
-}
-
-impl Percentiles {
-    /// Nearest-rank percentiles of `v`.
-    pub fn of(v: &[f64]) -> Self {
-        if v.is_empty() {
-            return Percentiles::default();
-        }
-        let mut s = v.to_vec();
-        s.sort_by(f64::total_cmp);
-        let rank = |p: f64| s[((p * s.len() as f64).ceil() as usize).clamp(1, s.len()) - 1];
-        Percentiles {
-            n: s.len(),
-            p50: rank(0.5),
-            p95: rank(0.95),
-            max: *s.last().expect("not empty"),
-        }
-    }
 }
 
 /// A session's state at the time of a report, besides the pipeline's products.

@@ -66,9 +66,22 @@ fn modules(src: &Path) -> BTreeMap<Vec<String>, PathBuf> {
 }
 
 /// Every `crate::…` path in `text` (use declarations, groups `crate::{a, b::{c, d}}` included,
-/// and qualified names), as its segments; the unit tests at the end of a file do not count.
+/// and qualified names), as its segments; the unit tests at the end of a file and comments
+/// (a doc link names a module, it does not import it) do not count.
 fn crate_paths(text: &str) -> Vec<Vec<String>> {
+    paths_after(text, "crate::")
+}
+
+/// Every path in `text` that follows `start` (`crate::`, `super::`, `self::`, `use `), as its
+/// segments (see [`crate_paths`]).
+fn paths_after(text: &str, start: &str) -> Vec<Vec<String>> {
     let text = &text[..text.find("#[cfg(test)]").unwrap_or(text.len())];
+    let code: String = text
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("//"))
+        .flat_map(|l| [l, "\n"])
+        .collect();
+    let text = code.as_str();
     let b = text.as_bytes();
     let ident = |i: usize| {
         let n = b[i..]
@@ -129,13 +142,36 @@ fn crate_paths(text: &str) -> Vec<Vec<String>> {
     }
     let mut out = Vec::new();
     let mut from = 0;
-    while let Some(k) = text[from..].find("crate::") {
+    while let Some(k) = text[from..].find(start) {
         let at = from + k;
         let word_before = at > 0 && (b[at - 1].is_ascii_alphanumeric() || b[at - 1] == b'_');
         if !word_before {
-            paths_at(text, at + 7, Vec::new(), &ident, &mut out);
+            paths_at(text, at + start.len(), Vec::new(), &ident, &mut out);
         }
-        from = at + 7;
+        from = at + start.len();
+    }
+    out
+}
+
+/// The crate-rooted paths that the module `m` names: `crate::…`, and the relative ones
+/// (`super::…`, `self::…`, and a `use` of one of its child modules, `children`), resolved.
+fn module_paths(text: &str, m: &[String], children: &BTreeSet<String>) -> Vec<Vec<String>> {
+    let mut out = crate_paths(text);
+    for mut p in paths_after(text, "super::") {
+        let mut base = m[..m.len().saturating_sub(1)].to_vec();
+        while p.first().is_some_and(|s| s == "super") {
+            p.remove(0);
+            base.pop();
+        }
+        base.extend(p);
+        out.push(base);
+    }
+    for p in paths_after(text, "self::").into_iter().chain(
+        paths_after(text, "use ")
+            .into_iter()
+            .filter(|p| p.first().is_some_and(|s| children.contains(s))),
+    ) {
+        out.push(m.iter().cloned().chain(p).collect());
     }
     out
 }
@@ -146,14 +182,22 @@ fn import_graph(src: &Path) -> BTreeMap<Vec<String>, BTreeSet<Vec<String>>> {
     let mut edges: BTreeMap<Vec<String>, BTreeSet<Vec<String>>> = BTreeMap::new();
     for (m, file) in &mods {
         let text = std::fs::read_to_string(file).unwrap();
-        for p in crate_paths(&text) {
+        let children: BTreeSet<String> = mods
+            .keys()
+            .filter(|c| c.len() == m.len() + 1 && c.starts_with(m))
+            .map(|c| c[m.len()].clone())
+            .collect();
+        for p in module_paths(&text, m, &children) {
             // The longest prefix of the path that is a module.
             if let Some(t) = (1..=p.len())
                 .rev()
                 .map(|k| &p[..k])
                 .find(|t| mods.contains_key(*t))
             {
-                if t != m.as_slice() {
+                // A child naming its own ancestor (`super::`, `crate::parent::`) is how a
+                // folder module shares its items: not an edge; the ancestor's use of the
+                // child is.
+                if t != m.as_slice() && !m.starts_with(t) {
                     edges.entry(m.clone()).or_default().insert(t.to_vec());
                 }
             }
@@ -270,5 +314,43 @@ fn issue_30_the_import_cycle_check_finds_a_planted_cycle() {
     let edges = import_graph(&dir.join("src"));
     let cycle = ["a", "b::d", "c"].map(String::from).to_vec();
     assert_eq!(cycles(&edges), vec![cycle], "{edges:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 50 point 12: cycles through relative paths are found too: two siblings naming each
+/// other through `super::`, and a parent that re-exports its child (`pub use q::Q`) whose
+/// child names a module that names the parent (the `report` ↔ `source::phone` circle).
+#[test]
+fn issue_50_the_import_cycle_check_reads_relative_paths() {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("layering-rel-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("src/x")).unwrap();
+    std::fs::create_dir_all(dir.join("src/p")).unwrap();
+    let write = |f: &str, text: &str| std::fs::write(dir.join(f), text).unwrap();
+    write("src/lib.rs", "pub mod x;\npub mod p;\npub mod r;\n");
+    write("src/x/mod.rs", "pub mod y;\npub mod z;\n");
+    write("src/x/y.rs", "use super::z::Z;\n");
+    write("src/x/z.rs", "pub struct Z;\n");
+    write("src/p/mod.rs", "mod q;\npub use q::Q;\n");
+    write("src/p/q.rs", "pub struct Q;\n");
+    write(
+        "src/r.rs",
+        "pub struct R;\nfn f() { let _ = crate::p::Q; }\n",
+    );
+    assert!(cycles(&import_graph(&dir.join("src"))).is_empty());
+    write(
+        "src/x/z.rs",
+        "pub struct Z;\nfn f() { self::g(); super::y::h(); }\n",
+    );
+    write("src/p/q.rs", "pub struct Q;\nuse crate::r::R;\n");
+    let found = cycles(&import_graph(&dir.join("src")));
+    let want = vec![
+        ["p", "p::q", "r"].map(String::from).to_vec(),
+        ["x::y", "x::z"].map(String::from).to_vec(),
+    ];
+    let mut found = found;
+    found.sort();
+    assert_eq!(found, want);
     let _ = std::fs::remove_dir_all(&dir);
 }

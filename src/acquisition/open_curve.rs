@@ -159,11 +159,7 @@ impl Acquisition {
                     .copied()
                     .or_else(|| from_cfg.and_then(|v| v.get(k).copied()));
             }
-            let nominal = self.cfg.nominal_speed;
-            match &motion.speed {
-                Some(v) => super::phone::distances_by_speed(&mut curve, v, nominal, &motion.late),
-                None => super::phone::phone_distances(&mut curve, nominal),
-            }
+            self.phone_distances(&mut curve, &motion);
         } else if n > 0 {
             self.wheel_distances(&mut curve, &wheel, &o.typing);
         }

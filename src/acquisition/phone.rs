@@ -36,6 +36,16 @@ pub(super) struct LateTag {
 }
 
 impl Acquisition {
+    /// Phone: a finished curve's distances, from the speed's shape where `motion` has it (the
+    /// tags entered late placed where the device set off), else from the standing mask.
+    pub(super) fn phone_distances(&self, curve: &mut Curve, motion: &PhoneMotion) {
+        let nominal = self.cfg.nominal_speed;
+        match &motion.speed {
+            Some(v) => distances_by_speed(curve, v, nominal, &motion.late),
+            None => phone_distances(curve, nominal),
+        }
+    }
+
     /// Phone: flags where the operator stands (the smoother's orientations replacing the
     /// causal filter's first, on curves it smooths); returns the speed's shape between the
     /// stands where the accelerometer gives it ([`speed`]), and the tags entered late.

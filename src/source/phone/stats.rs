@@ -2,7 +2,7 @@
 //! timestamps), how the messages arrived, the latency from a sensor event to the daemon, and
 //! what was refused (`report.json` `phone`).
 
-use crate::report::Percentiles;
+use crate::percentiles::Percentiles;
 use device_protocol::{Decoder, Event, Packet};
 use serde::Serialize;
 
