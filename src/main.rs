@@ -812,9 +812,14 @@ fn print_summary(o: &Outcome, kept: bool) {
             m.alarms_raised
         );
     }
-    if o.report.monitor.is_none() {
-        let q = &o.report.quality;
+    let r = &o.report;
+    if r.monitor.is_none() {
+        say!("{}", network_summary(r));
+        say!("{}", warnings_summary(r));
+        let q = &r.quality;
         say!("scan: {} ({})", q.verdict.name(), q.verdict_reason);
+    } else {
+        say!("{}", warnings_summary(r));
     }
     if !kept {
         return;
@@ -823,4 +828,62 @@ fn print_summary(o: &Outcome, kept: bool) {
         say!("capture: {}", c.display());
     }
     say!("report:  {}", o.report_path.display());
+    // The other outputs beside the report (scan.json, network.glb; monitoring's files).
+    let dir = o.report_path.parent().unwrap_or(Path::new("."));
+    let others: Vec<String> = outputs_in(dir)
+        .into_iter()
+        .filter(|f| ![session::CAPTURE_FILE, session::CONFIG_COPY, "report.json"].contains(f))
+        .map(|f| dir.join(f).display().to_string())
+        .collect();
+    if !others.is_empty() {
+        say!("outputs: {}", others.join(", "));
+    }
+}
+
+/// `curves: 7 accepted (1 discarded, 0 left out of the network), 12 nodes; surface: 8
+/// patches, 3312 triangles` (or why there is none).
+fn network_summary(r: &sfs::report::Report) -> String {
+    let accepted = r.curves.len() as u64 + r.curves_left_out;
+    let left_out = r.network.as_ref().map_or(0, |n| n.curves_left_out);
+    let surface = match (&r.network, &r.surface) {
+        (_, Some(s)) => format!(
+            "{}, {} triangles{}",
+            plural(s.patches, "patch").replace("patchs", "patches"),
+            s.triangles,
+            if s.holes > 0 {
+                format!(", {}", plural(s.holes, "hole"))
+            } else {
+                String::new()
+            }
+        ),
+        (None, None) => "none (no network)".to_string(),
+        (Some(_), None) => match r.warnings.iter().find(|w| w.code() == "no_surface") {
+            Some(w) => format!("none ({w})"),
+            None => "none".to_string(),
+        },
+    };
+    format!(
+        "curves: {} accepted ({} discarded, {} left out of the network), {}; surface: {surface}",
+        accepted,
+        r.acquisition.curves_discarded,
+        left_out,
+        plural(r.nodes.len(), "node"),
+    )
+}
+
+/// `warnings: 3 (keypad_repeat 2, tag_detached 1)`, or `warnings: none`.
+fn warnings_summary(r: &sfs::report::Report) -> String {
+    let total: u64 = r.warnings_by_code.values().sum();
+    if total == 0 {
+        return "warnings: none".to_string();
+    }
+    let by: Vec<String> = r
+        .warnings_by_code
+        .iter()
+        .map(|(code, n)| format!("{code} {n}"))
+        .collect();
+    format!(
+        "warnings: {total} ({}; their texts in the report)",
+        by.join(", ")
+    )
 }

@@ -293,3 +293,54 @@ fn issue_50_a_failed_replay_leaves_nothing_behind() {
         .collect();
     assert_eq!(left, vec![std::ffi::OsString::from("notes.txt")]);
 }
+
+/// Issue 50 point 6: the summary says what was made: curves accepted, discarded and left
+/// out, nodes, whether a surface was built (or why not), the warnings by code, the verdict
+/// and every output's path. A capture cut inside its first curve says so, not a clean line.
+#[test]
+fn issue_50_the_summary_says_what_was_made() {
+    let dir = tmpdir("replay-summary");
+    let cone =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("replay-logs/cone-morphorider.bin");
+    let summary = |cap: &std::path::Path, out: &std::path::Path| {
+        let o = sfs()
+            .args(["--log", "off", "replay"])
+            .arg(cap)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let out = dir.join("cone");
+    let s = summary(&cone, &out);
+    let report = read_report(&out);
+    let patches = report["surface"]["patches"].as_u64().unwrap();
+    for want in [
+        "curves: 7 accepted (0 discarded, 0 left out of the network), 12 nodes".to_string(),
+        format!("surface: {patches} patches"),
+        "warnings: none".to_string(),
+        "scan: good (".to_string(),
+        format!("report:  {}", out.join("report.json").display()),
+        format!(
+            "outputs: {}, {}",
+            out.join("scan.json").display(),
+            out.join("network.glb").display()
+        ),
+    ] {
+        assert!(s.contains(&want), "{want:?} not in:\n{s}");
+    }
+    // Cut inside its first curve: nothing accepted, why there is no surface, the warning.
+    let bytes = std::fs::read(&cone).unwrap();
+    let cut = dir.join("cut.bin");
+    std::fs::write(&cut, &bytes[..60_000]).unwrap();
+    let s = summary(&cut, &dir.join("cut"));
+    for want in [
+        "curves: 0 accepted (1 discarded",
+        "surface: none (no network)",
+        "warnings: 1 (curve_never_ended 1",
+    ] {
+        assert!(s.contains(want), "{want:?} not in:\n{s}");
+    }
+}
