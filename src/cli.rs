@@ -74,7 +74,8 @@ pub enum Command {
     /// `[phone]` section: the daemon serves the phone page over HTTPS), or a capture file
     /// replayed as if live (kind = "replay" with its path and pace, as config/demo.toml).
     /// Writes into SESSION: capture.bin (every byte, before it is decoded), config.toml (the
-    /// configuration it started with, for --resume), network.glb and report.json (after
+    /// configuration it started with, the source and view of the flags written in, so that
+    /// --resume SESSION alone continues it), network.glb and report.json (after
     /// every curve the operator ends with E, replaced atomically), scan.json (at the end);
     /// with `[monitor]`, metrics.csv, events.log, latest.glb and reference.json. A session is
     /// stopped with Ctrl-C or SIGTERM (the outputs are finished first) and continued with

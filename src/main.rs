@@ -204,12 +204,88 @@ fn run(a: RunArgs) -> i32 {
     let start = if resume {
         session::Start::Resume
     } else {
-        match config.as_deref().map(|f| (f, config::read_config_file(f))) {
-            Some((f, Ok(text))) => session::Start::NewWithConfig(config::kept_config(&text, f)),
-            _ => session::Start::New,
+        match session_config(&a, config.as_deref()) {
+            Ok(Some(kept)) => session::Start::NewWithConfig(kept),
+            Ok(None) => session::Start::New,
+            Err(e) => {
+                complain!("sfs: {e}");
+                return exit::USAGE;
+            }
         }
     };
     run_session(spec, &dir, &settings, start)
+}
+
+/// The configuration a new session keeps as its `config.toml`, so that `--resume DIR` alone
+/// continues it: the file given, with what the flags chose over it (the source: `--serial`
+/// and its `--baud`, `--watchdog-ms`; `--stdin`; `--phone`; and `--view`) written in.
+fn session_config(a: &RunArgs, config: Option<&Path>) -> Result<Option<String>, String> {
+    let text = match config {
+        Some(f) => config::read_config_file(f).map_err(|e| e.to_string())?,
+        None => String::new(),
+    };
+    let flags = a.serial.is_some()
+        || a.stdin
+        || a.phone.is_some()
+        || a.baud.is_some()
+        || a.watchdog_ms.is_some()
+        || a.view.is_some();
+    if !flags {
+        return Ok(config.map(|f| config::kept_config(&text, f)));
+    }
+    let mut t: toml::Table = text.parse().map_err(|e| format!("{e}"))?;
+    let table = |t: &toml::Table, k: &str| -> toml::Table {
+        t.get(k)
+            .and_then(|v| v.as_table())
+            .cloned()
+            .unwrap_or_default()
+    };
+    let mut source = table(&t, "source");
+    if let Some(p) = &a.serial {
+        let p = std::path::absolute(p).unwrap_or_else(|_| p.clone());
+        source = toml::Table::new();
+        source.insert("kind".into(), "serial".into());
+        source.insert("path".into(), p.display().to_string().into());
+    }
+    if a.stdin {
+        source = toml::Table::new();
+        source.insert("kind".into(), "stdin".into());
+    }
+    if let Some(b) = a.baud {
+        source.insert("baud".into(), i64::from(b).into());
+    }
+    if let Some(w) = a.watchdog_ms {
+        source.insert(
+            "watchdog_ms".into(),
+            i64::try_from(w).unwrap_or(i64::MAX).into(),
+        );
+    }
+    if let Some(addr) = a.phone {
+        // The phone page is the source: a [source] would be read before it.
+        t.remove("source");
+        let mut phone = table(&t, "phone");
+        if let Some(addr) = addr {
+            phone.insert("address".into(), addr.to_string().into());
+        }
+        t.insert("phone".into(), phone.into());
+    } else if !source.is_empty() {
+        t.insert("source".into(), source.into());
+    }
+    if let Some(v) = a.view {
+        let mut view = table(&t, "view");
+        view.insert("address".into(), v.to_string().into());
+        t.insert("view".into(), view.into());
+    }
+    let body = toml::to_string(&t).map_err(|e| e.to_string())?;
+    Ok(Some(match config {
+        // Its relative paths still resolve where it was copied from.
+        Some(f) => config::kept_config(
+            &format!("# {} with the command line's flags:\n{body}", f.display()),
+            f,
+        ),
+        // The flags' paths are absolute.
+        None => format!("# The session's configuration, from the command line's flags:\n{body}"),
+    }))
 }
 
 /// Flags over the configuration file over the defaults.

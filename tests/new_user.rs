@@ -352,3 +352,83 @@ fn issue_30_the_binary_works_from_any_directory() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("not a regular file"), "{err}");
 }
+
+/// Issue 50 point 5: a session started from flags alone (`--stdin`, `--serial PATH`) keeps
+/// its source in `config.toml`, so that `sfs run --resume DIR` alone continues it: the
+/// resumed stdin session appends to the capture and rebuilds the whole scan; a serial
+/// session's copy names the port by its absolute path, with the baud and watchdog given.
+#[test]
+fn issue_50_a_session_started_from_flags_resumes_with_resume_alone() {
+    use std::io::Write as _;
+    let dir = tmpdir("resume-flags");
+    let cone = std::fs::read(log("cone-morphorider.bin")).unwrap();
+    let session = dir.join("s");
+    let feed = |args: &[&std::ffi::OsStr], bytes: &[u8]| {
+        let mut child = common::sfs()
+            .args(["--log", "off", "run"])
+            .args(args)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        child.stdin.take().unwrap().write_all(bytes).unwrap();
+        child.wait_with_output().unwrap()
+    };
+    let half = cone.len() / 2;
+    let out = feed(
+        &[
+            "--stdin".as_ref(),
+            "--session".as_ref(),
+            session.as_os_str(),
+        ],
+        &cone[..half],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let kept = std::fs::read_to_string(session.join("config.toml")).unwrap();
+    assert!(kept.contains("kind = \"stdin\""), "{kept}");
+    // Resumed with nothing but the directory.
+    let out = feed(&["--resume".as_ref(), session.as_os_str()], &cone[half..]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(std::fs::read(session.join("capture.bin")).unwrap(), cone);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("curves: 7 accepted"), "{stdout}");
+    // A serial session, on a pseudo-terminal reached through a link: its copy names the
+    // port by its absolute path, with the baud and watchdog given.
+    let link = dir.join("ttySFS");
+    let _device = common::pty::plug(&link);
+    let serial = dir.join("serial");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sfs"))
+        .args(["--log", "off", "run", "--serial"])
+        .arg(&link)
+        .args(["--baud", "57600", "--watchdog-ms", "250", "--session"])
+        .arg(&serial)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    common::wait_for("the session's config.toml", Duration::from_secs(10), || {
+        serial.join("config.toml").exists()
+    });
+    let _ = child.kill();
+    let _ = child.wait();
+    let kept = std::fs::read_to_string(serial.join("config.toml")).unwrap();
+    let t: toml::Table = kept.parse().unwrap();
+    assert_eq!(t["source"]["kind"].as_str(), Some("serial"), "{kept}");
+    assert_eq!(
+        t["source"]["path"].as_str(),
+        Some(link.to_str().unwrap()),
+        "{kept}"
+    );
+    assert_eq!(t["source"]["baud"].as_integer(), Some(57600), "{kept}");
+    assert_eq!(t["source"]["watchdog_ms"].as_integer(), Some(250), "{kept}");
+}
