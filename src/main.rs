@@ -732,9 +732,17 @@ fn plural(n: usize, word: &str) -> String {
 }
 
 fn config_check(file: &Path) -> i32 {
-    match config::load(file) {
+    match config::check(file) {
         Ok(settings) => {
             say!("{}: ok", file.display());
+            // A view others can reach and no token: anyone on that network watches the scan.
+            if let Some(v) = settings.view {
+                if !v.ip().is_loopback() && settings.view_access.token.is_none() {
+                    say!(
+                        "warning: view.address {v} is reachable from the network and view.token is not set: anyone there can watch this session (set a token, or serve on 127.0.0.1)"
+                    );
+                }
+            }
             // What a monitoring configuration describes, to check it against the structure.
             if let Some(m) = &settings.monitor {
                 let rotation = settings.capture_rotation;
@@ -770,8 +778,13 @@ fn config_check(file: &Path) -> i32 {
             }
             exit::OK
         }
-        Err(e) => {
-            complain!("sfs: {e}");
+        Err(errors) => {
+            for e in &errors {
+                complain!("sfs: {e}");
+            }
+            if errors.len() > 1 {
+                complain!("sfs: {}: {} errors", file.display(), errors.len());
+            }
             exit::USAGE
         }
     }

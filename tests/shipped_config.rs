@@ -103,3 +103,59 @@ fn shipped_monitoring_layouts_are_the_simulators() {
         }
     }
 }
+
+/// Issue 50 point 7: `sfs config check` reports every error of a file, each with its key (an
+/// unknown key in one section, a bad value in another, a bad address in a third); a syntax
+/// error with its line and column; and it warns of a view others can reach with no token.
+#[test]
+fn issue_50_config_check_reports_every_error() {
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+    let p = dir.join(format!("three-errors-{}.toml", std::process::id()));
+    std::fs::write(
+        &p,
+        "[source]\nkind = \"serial\"\npath = \"/dev/x\"\nwatchdog_ms = 5\n\n\
+         [acquisition]\nstationary_window_s = -1.0\n\n\
+         [view]\naddress = \"nowhere\"\n\n\
+         [surface]\nno_such_key = 1\n",
+    )
+    .unwrap();
+    let out = check(&p);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    for key in [
+        "source.watchdog_ms",
+        "acquisition.stationary_window_s",
+        "view.address",
+        "no_such_key",
+    ] {
+        assert!(err.contains(key), "{key} not named:\n{err}");
+    }
+    // A syntax error: where it is.
+    std::fs::write(&p, "[source]\nkind = \"serial\"\npath = /dev/x\n").unwrap();
+    let out = check(&p);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("line 3, column 8"), "{err}");
+    // A view on every interface with no token: valid, with a warning; with a token, none.
+    std::fs::write(&p, "[view]\naddress = \"0.0.0.0:8040\"\n").unwrap();
+    let out = check(&p);
+    assert!(out.status.success());
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        said.contains("warning: view.address 0.0.0.0:8040") && said.contains("view.token"),
+        "{said}"
+    );
+    std::fs::write(
+        &p,
+        "[view]\naddress = \"0.0.0.0:8040\"\ntoken = \"a-long-secret-token-0123\"\n",
+    )
+    .unwrap();
+    let out = check(&p);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!String::from_utf8_lossy(&out.stdout).contains("warning"));
+    let _ = std::fs::remove_file(&p);
+}

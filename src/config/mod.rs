@@ -244,6 +244,12 @@ pub fn from_text(text: &str, path: &Path) -> Result<Settings, ConfigError> {
             e.message().trim(),
         )
     })?;
+    resolve_paths(&mut cfg, path);
+    cfg.settings(path)
+}
+
+/// A replayed capture's relative path is relative to the configuration's directory.
+fn resolve_paths(cfg: &mut ConfigFile, path: &Path) {
     let base = path.parent().unwrap_or(Path::new(""));
     if let Some(src) = &mut cfg.source {
         if let Some(p) = &mut src.path {
@@ -252,7 +258,6 @@ pub fn from_text(text: &str, path: &Path) -> Result<Settings, ConfigError> {
             }
         }
     }
-    cfg.settings(path)
 }
 
 /// Loads a session's kept configuration (`SESSION/config.toml`, see [`kept_config`]): its
@@ -266,17 +271,126 @@ pub fn load_kept(path: &Path) -> Result<Settings, ConfigError> {
     .and_then(|s| files_named(s, path))
 }
 
+/// Every error of a configuration file, each naming its key (see [`ConfigError`]): what
+/// `sfs config check` reports. [`load`] stops at the first.
+pub fn check(path: &Path) -> Result<Settings, Vec<ConfigError>> {
+    let text = read_config_file(path).map_err(|reason| vec![ConfigError::new(path, "", reason)])?;
+    // A syntax error stops the reading: where it is, by line and column.
+    let table: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+        let at = e.span().map_or(String::new(), |s| {
+            let (line, col) = line_col(&text, s.start);
+            format!("line {line}, column {col}: ")
+        });
+        vec![ConfigError::new(
+            path,
+            "",
+            format!("{at}{}", e.message().trim()),
+        )]
+    })?;
+    // Each section on its own, so that one's error does not hide another's; the sections
+    // that read are then resolved, and their errors added.
+    let mut errors = Vec::new();
+    let mut good = toml::Table::new();
+    for (k, v) in &table {
+        let mut one = toml::Table::new();
+        one.insert(k.clone(), v.clone());
+        let piece = toml::to_string(&one).unwrap_or_default();
+        match toml::from_str::<ConfigFile>(&piece) {
+            Ok(_) => {
+                good.insert(k.clone(), v.clone());
+            }
+            Err(e) => {
+                let key = e.span().map(|s| key_at(&piece, s.start)).unwrap_or_else(|| k.clone());
+                errors.push(ConfigError::new(path, key, e.message().trim()));
+            }
+        }
+    }
+    let mut cfg: ConfigFile = match toml::Value::Table(good).try_into() {
+        Ok(c) => c,
+        Err(e) => {
+            errors.push(ConfigError::new(path, "", e.message().trim()));
+            return Err(errors);
+        }
+    };
+    resolve_paths(&mut cfg, path);
+    match cfg.settings_all(path) {
+        Ok(s) if errors.is_empty() => files_named(s, path).map_err(|e| vec![e]),
+        Ok(_) => Err(errors),
+        Err(more) => {
+            errors.extend(more);
+            Err(errors)
+        }
+    }
+}
+
+/// Line and column (from 1, in characters) of byte `at` of `text`.
+fn line_col(text: &str, at: usize) -> (usize, usize) {
+    let before = &text[..at.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
+}
+
+/// A section's value, or the error kept in `errors`.
+fn take<T>(r: Result<T, ConfigError>, errors: &mut Vec<ConfigError>) -> Option<T> {
+    r.map_err(|e| errors.push(e)).ok()
+}
+
 impl ConfigFile {
-    /// Every section resolved, once.
+    /// Every section resolved, once; the first error.
     fn settings(&self, file: &Path) -> Result<Settings, ConfigError> {
-        let source = self.source.as_ref().map(|s| s.spec(file)).transpose()?;
+        self.settings_all(file).map_err(|mut e| e.swap_remove(0))
+    }
+
+    /// Every section resolved, once; every section's error.
+    fn settings_all(&self, file: &Path) -> Result<Settings, Vec<ConfigError>> {
+        let mut errors = Vec::new();
+        let e = &mut errors;
+        let source = take(self.source.as_ref().map(|s| s.spec(file)).transpose(), e);
         let raw = self.source.clone().unwrap_or_default();
-        let mut acquisition = self.acquisition_config(file)?;
-        acquisition.kinds = self.curve_kinds(file)?;
-        let network = self.network_params(file)?;
-        let joins = self.join_settings(file)?;
-        let surface = self.surface_params(file)?;
-        let monitor = self.monitor_config(file, surface, &network)?;
+        let acquisition = take(self.acquisition_config(file), e);
+        let kinds = take(self.curve_kinds(file), e);
+        let network = take(self.network_params(file), e);
+        let joins = take(self.join_settings(file), e);
+        let surface = take(self.surface_params(file), e);
+        // The monitor's reconstruction builds on the network's and the surface's settings.
+        let monitor = match (&network, surface) {
+            (Some(n), Some(s)) => take(self.monitor_config(file, s, n), e),
+            _ => None,
+        };
+        let capture_rotation = take(self.capture_rotation(file), e);
+        let view = take(self.view_address(file), e);
+        let view_access = take(self.view_access(file), e);
+        let phone = take(self.phone(file), e);
+        let (
+            Some(source),
+            Some(mut acquisition),
+            Some(kinds),
+            Some(network),
+            Some(joins),
+            Some(surface),
+            Some(monitor),
+            Some(capture_rotation),
+            Some(view),
+            Some(view_access),
+            Some(phone),
+        ) = (
+            source,
+            acquisition,
+            kinds,
+            network,
+            joins,
+            surface,
+            monitor,
+            capture_rotation,
+            view,
+            view_access,
+            phone,
+        )
+        else {
+            return Err(errors);
+        };
+        acquisition.kinds = kinds;
         let settings = Settings {
             source,
             serial: SerialSettings {
@@ -290,11 +404,11 @@ impl ConfigFile {
             live: self.output.live.unwrap_or(true) && self.monitor.is_none(),
             snapshots: self.output.snapshots.unwrap_or(false),
             monitor: None,
-            capture_rotation: self.capture_rotation(file)?,
-            view: self.view_address(file)?,
+            capture_rotation,
+            view,
             keep_serving: false,
-            view_access: self.view_access(file)?,
-            phone: self.phone(file)?,
+            view_access,
+            phone,
         };
         Ok(match monitor {
             Some(m) => settings.with_monitor(m),
