@@ -659,6 +659,14 @@ fn eval(a: EvalArgs) -> i32 {
             return exit::INPUT;
         }
     };
+    if !bytes.starts_with(b"glTF") {
+        complain!(
+            "sfs: {}: this is {}, not a glb (a session's network.glb)",
+            a.glb.display(),
+            sfs::simulate::truth::looks_like(&bytes)
+        );
+        return exit::INPUT;
+    }
     let rec = match sfs::gltf_out::read_glb(&bytes) {
         Ok(r) => r,
         Err(e) => {
@@ -682,6 +690,15 @@ fn eval(a: EvalArgs) -> i32 {
                 return exit::OUTPUT;
             }
         }
+    }
+    if !ev.registration.nodes_unknown.is_empty() {
+        complain!(
+            "sfs: {} has nodes the truth of scene {} does not have ({:?}): is the truth of the scene that was scanned?",
+            a.glb.display(),
+            ev.scene,
+            ev.registration.nodes_unknown
+        );
+        return exit::UNUSABLE;
     }
     if !ev.registration.fits {
         complain!(

@@ -298,3 +298,71 @@ fn issue_15_a_glb_without_nodes_is_registered_from_the_best_start() {
         }
     }
 }
+
+/// Issue 50 point 8: a file of another kind given as the truth or the glb is named for what
+/// it is (exit 3), and a network of another scene is refused (exit 5) even where the
+/// registration's residual alone would pass it: its nodes are not the truth's.
+#[test]
+fn issue_50_eval_names_a_wrong_file_and_refuses_another_scene() {
+    let t = truth(); // the bowl: nodes 0–8
+    let (c, n) = curves_of(&t, |_, p| p);
+    let bowl = network_glb(&c, &n, None).unwrap();
+    let printed = eval(&t, &bowl, "wrong-files");
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("eval-{}-wrong-files", std::process::id()));
+    let report = dir.join("report.json");
+    std::fs::write(&report, b"{\"link\": {}, \"quality\": {}}").unwrap();
+    let capture = dir.join("capture.bin");
+    std::fs::write(&capture, [0u8, 0x93, 0xff, 0x10, 0x80]).unwrap();
+    let run = |truth: &std::path::Path, glb: &std::path::Path| {
+        Command::new(env!("CARGO_BIN_EXE_sfs"))
+            .args(["eval", "--truth"])
+            .arg(truth)
+            .arg("--glb")
+            .arg(glb)
+            .output()
+            .unwrap()
+    };
+    let glb = dir.join("n.glb");
+    for (truth_file, what) in [
+        (&report, "a session's report.json"),
+        (&capture, "a binary file"),
+        (&glb, "a glTF binary"),
+    ] {
+        let out = run(truth_file, &glb);
+        assert_eq!(out.status.code(), Some(sfs::exit::INPUT));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains(what) && err.contains("not a scene's truth"),
+            "{err}"
+        );
+    }
+    let out = run(&dir.join("t.truth.json"), &report);
+    assert_eq!(out.status.code(), Some(sfs::exit::INPUT));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("a session's report.json, not a glb"), "{err}");
+    // The bowl's network against the sphere-octa's truth (nodes 0–5): nodes 6, 7, 8 unknown.
+    let octa = simulate::run(
+        &scene::builtin("sphere-octa").unwrap(),
+        device_protocol::DeviceKind::Morphorider,
+        Profile::Default,
+        1,
+    )
+    .truth;
+    let octa_file = dir.join("octa.truth.json");
+    std::fs::write(&octa_file, serde_json::to_vec(&octa).unwrap()).unwrap();
+    let out = run(&octa_file, &glb);
+    assert_eq!(out.status.code(), Some(sfs::exit::UNUSABLE));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("[6, 7, 8]") && err.contains("sphere-octa"),
+        "{err}"
+    );
+    let ev: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(ev["registration"]["fits"], false);
+    // Its own truth: no unknown node.
+    assert_eq!(
+        printed["registration"]["nodes_unknown"],
+        serde_json::json!([])
+    );
+}

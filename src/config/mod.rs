@@ -300,7 +300,10 @@ pub fn check(path: &Path) -> Result<Settings, Vec<ConfigError>> {
                 good.insert(k.clone(), v.clone());
             }
             Err(e) => {
-                let key = e.span().map(|s| key_at(&piece, s.start)).unwrap_or_else(|| k.clone());
+                let key = e
+                    .span()
+                    .map(|s| key_at(&piece, s.start))
+                    .unwrap_or_else(|| k.clone());
                 errors.push(ConfigError::new(path, key, e.message().trim()));
             }
         }

@@ -96,6 +96,12 @@ pub enum TruthError {
         #[source]
         source: std::io::Error,
     },
+    /// A file of another kind (a report, a glb, a capture, a structure's truth).
+    #[error("{}: this is {what}, not a scene's truth (sfs simulate's PREFIX.truth.json)", path.display())]
+    NotATruth {
+        path: std::path::PathBuf,
+        what: &'static str,
+    },
     #[error("{}: {source}", path.display())]
     Format {
         path: std::path::PathBuf,
@@ -107,14 +113,53 @@ pub enum TruthError {
 impl Truth {
     /// Reads a truth file.
     pub fn load(path: &std::path::Path) -> Result<Truth, TruthError> {
-        let text = std::fs::read_to_string(path).map_err(|source| TruthError::Read {
+        let bytes = std::fs::read(path).map_err(|source| TruthError::Read {
             path: path.to_owned(),
             source,
         })?;
-        serde_json::from_str(&text).map_err(|source| TruthError::Format {
+        let what = looks_like(&bytes);
+        if what != SCENE_TRUTH {
+            return Err(TruthError::NotATruth {
+                path: path.to_owned(),
+                what,
+            });
+        }
+        serde_json::from_slice(&bytes).map_err(|source| TruthError::Format {
             path: path.to_owned(),
             source,
         })
+    }
+}
+
+/// What [`looks_like`] calls a scene's truth.
+pub const SCENE_TRUTH: &str = "a scene's truth";
+
+/// What a file given to `sfs eval` looks like, to name a wrong one: a scene's truth, a
+/// structure's, a session's report or scan, a glb, a capture.
+pub fn looks_like(bytes: &[u8]) -> &'static str {
+    if bytes.starts_with(b"glTF") {
+        return "a glTF binary (a network.glb)";
+    }
+    let Ok(serde_json::Value::Object(v)) = serde_json::from_slice::<serde_json::Value>(bytes)
+    else {
+        return match std::str::from_utf8(bytes) {
+            Ok(_) => "a text file, not a JSON object",
+            Err(_) => "a binary file (a capture?)",
+        };
+    };
+    let has = |k: &str| v.contains_key(k);
+    if has("scene") && has("curves") {
+        SCENE_TRUTH
+    } else if has("structure") {
+        "a structure's truth (sfs simulate --structure)"
+    } else if has("link") && has("quality") {
+        "a session's report.json"
+    } else if has("registration") {
+        "the output of sfs eval"
+    } else if has("curves") {
+        "a scan.json"
+    } else {
+        "a JSON object of another kind"
     }
 }
 
