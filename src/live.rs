@@ -390,8 +390,9 @@ fn status_lines(scan: &Scan, p: &Products, lat: &[(usize, f64)], compute_ms: f64
     if lat.len() > STATUS_LINES_PER_UPDATE {
         tracing::info!(
             curves = lat.len(),
-            "{} curves in network.glb in this update (the lines of the first {STATUS_LINES_PER_UPDATE} follow)",
-            lat.len()
+            "{} curves in network.glb in this update: the first {STATUS_LINES_PER_UPDATE} are logged below, the other {} only counted here (every curve is in report.json)",
+            lat.len(),
+            lat.len() - STATUS_LINES_PER_UPDATE
         );
     }
     for (index, latency) in lat.iter().take(STATUS_LINES_PER_UPDATE) {
