@@ -698,9 +698,8 @@ fn eval(a: EvalArgs) -> i32 {
             ev.scene,
             ev.registration.nodes_unknown
         );
-        return exit::UNUSABLE;
     }
-    if !ev.registration.fits {
+    if ev.registration.residual_rms_pct > sfs::eval::MAX_RESIDUAL_PCT {
         complain!(
             "sfs: no rigid registration fits {} onto the truth of scene {}: {:.1} % of the diagonal left after {} iterations (at most {} % for the same shape): is the truth of the scene that was scanned?",
             a.glb.display(),
@@ -709,6 +708,8 @@ fn eval(a: EvalArgs) -> i32 {
             ev.registration.icp_iterations,
             sfs::eval::MAX_RESIDUAL_PCT
         );
+    }
+    if !ev.registration.fits {
         return exit::UNUSABLE;
     }
     exit::OK
