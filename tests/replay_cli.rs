@@ -265,13 +265,16 @@ fn issue_50_a_failed_replay_leaves_nothing_behind() {
     let junk = dir.join("junk.bin");
     std::fs::write(&junk, [0x42u8; 300]).unwrap();
     let out_dir = dir.join("out");
-    let out = sfs()
-        .args(["--log", "off", "replay"])
-        .arg(&junk)
-        .arg("--out")
-        .arg(&out_dir)
-        .output()
-        .unwrap();
+    let replay = || {
+        sfs()
+            .args(["--log", "off", "replay"])
+            .arg(&junk)
+            .arg("--out")
+            .arg(&out_dir)
+            .output()
+            .unwrap()
+    };
+    let out = replay();
     assert_eq!(out.status.code(), Some(sfs::exit::UNUSABLE));
     assert!(!out_dir.exists(), "the output directory is left behind");
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -279,13 +282,7 @@ fn issue_50_a_failed_replay_leaves_nothing_behind() {
     // An existing directory with a file of the user's: kept, and nothing added.
     std::fs::create_dir_all(&out_dir).unwrap();
     std::fs::write(out_dir.join("notes.txt"), b"mine").unwrap();
-    let out = sfs()
-        .args(["--log", "off", "replay"])
-        .arg(&junk)
-        .arg("--out")
-        .arg(&out_dir)
-        .output()
-        .unwrap();
+    let out = replay();
     assert_eq!(out.status.code(), Some(sfs::exit::UNUSABLE));
     let left: Vec<_> = std::fs::read_dir(&out_dir)
         .unwrap()

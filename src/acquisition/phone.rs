@@ -522,21 +522,11 @@ mod tests {
         assert!(none.iter().all(|m| !m));
     }
 
-    /// Issue 49: a phone tag entered late is placed where the device set off: its segment
-    /// lengths count from Enter to Enter, so the one before gives the distance the device went
-    /// while the index was typed to the typing; the samples after the set-off go on linearly to
-    /// the Enter.
-    #[test]
-    fn issue_49_a_late_phone_tag_is_placed_where_the_device_set_off() {
-        let t: Vec<f64> = (0..=400).map(|i| i as f64 * 0.01).collect();
-        // Moving on (0.2, 1.4) and (2.2, 3.6) s; tags entered at 0, 2 and 4 s; the second's
-        // index typed from 1.5 s, the device set off at 1.6 s and went 4 cm by its Enter.
-        let speed: Vec<f64> = t
-            .iter()
-            .map(|&x| f64::from(u8::from((0.2..1.4).contains(&x) || (2.2..3.6).contains(&x))))
-            .collect();
+    /// A phone curve sampled at `t` with tags entered at 0, 2 and 4 s (nodes 0, 1, 2) and
+    /// the segment lengths `lengths`; its distances not made yet.
+    fn three_tags(t: &[f64], lengths: Vec<Option<f64>>) -> Curve {
         let n = t.len();
-        let curve = |lengths: Vec<Option<f64>>| Curve {
+        Curve {
             index: 0,
             kind: CurveKind::Interior,
             closed: false,
@@ -552,13 +542,29 @@ mod tests {
                 .collect(),
             segment_lengths: lengths,
             samples: Samples {
-                t: t.clone(),
+                t: t.to_vec(),
                 d: vec![0.0; n],
                 q: vec![[1.0, 0.0, 0.0, 0.0]; n],
                 flags: vec![0; n],
                 w: vec![1.0; n],
             },
-        };
+        }
+    }
+
+    /// Issue 49: a phone tag entered late is placed where the device set off: its segment
+    /// lengths count from Enter to Enter, so the one before gives the distance the device went
+    /// while the index was typed to the typing; the samples after the set-off go on linearly to
+    /// the Enter.
+    #[test]
+    fn issue_49_a_late_phone_tag_is_placed_where_the_device_set_off() {
+        let t: Vec<f64> = (0..=400).map(|i| i as f64 * 0.01).collect();
+        // Moving on (0.2, 1.4) and (2.2, 3.6) s; tags entered at 0, 2 and 4 s; the second's
+        // index typed from 1.5 s, the device set off at 1.6 s and went 4 cm by its Enter.
+        let speed: Vec<f64> = t
+            .iter()
+            .map(|&x| f64::from(u8::from((0.2..1.4).contains(&x) || (2.2..3.6).contains(&x))))
+            .collect();
+        let curve = |lengths: Vec<Option<f64>>| three_tags(&t, lengths);
         let late = [LateTag {
             tag: 1,
             from: 1.6,
@@ -605,29 +611,7 @@ mod tests {
             })
             .collect();
         let n = t.len();
-        let mut c = Curve {
-            index: 0,
-            kind: CurveKind::Interior,
-            closed: false,
-            tags: [0.0, 2.0, 4.0]
-                .iter()
-                .enumerate()
-                .map(|(k, &t)| Tag {
-                    node: k as u32,
-                    d: 0.0,
-                    t,
-                    uncertain: false,
-                })
-                .collect(),
-            segment_lengths: vec![Some(0.3), None],
-            samples: Samples {
-                t: t.clone(),
-                d: vec![0.0; n],
-                q: vec![[1.0, 0.0, 0.0, 0.0]; n],
-                flags: vec![0; n],
-                w: vec![1.0; n],
-            },
-        };
+        let mut c = three_tags(&t, vec![Some(0.3), None]);
         distances_by_speed(&mut c, &speed, 0.05, &[]);
         let before = c.samples.d.clone();
         let second = c.tags[2].d - c.tags[1].d;
