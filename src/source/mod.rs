@@ -144,7 +144,7 @@ pub enum SourceError {
         #[source]
         source: std::io::Error,
     },
-    #[error("cannot open serial port {}: {message}", path.display())]
+    #[error("cannot open serial port {}: {message} (`sfs ports` lists this machine's serial ports; `sfs ports --probe` says which speak this protocol)", path.display())]
     Serial { path: PathBuf, message: String },
     #[error("cannot listen on {addr}: {source}")]
     Bind {
