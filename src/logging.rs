@@ -20,8 +20,21 @@ pub fn set_session(name: &str) {
     let _ = SESSION.set(name.to_owned());
 }
 
+/// Whether the log is JSON lines (`--log-format json`): then nothing but JSON may go to
+/// standard error (the phone page's banner is logged as an event instead).
+static JSON: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Whether [`init`] made the log JSON lines.
+pub fn json() -> bool {
+    JSON.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 /// Installs the global subscriber.
 pub fn init(format: LogFormat, filter: Option<&str>) {
+    JSON.store(
+        matches!(format, LogFormat::Json),
+        std::sync::atomic::Ordering::Relaxed,
+    );
     use tracing_subscriber::EnvFilter;
     let filter = match filter {
         Some(f) => EnvFilter::new(f),

@@ -236,7 +236,10 @@ fn issue_30_a_serial_port_that_does_not_exist_leaves_no_session_behind() {
     assert_eq!(code, 3, "{err}");
     assert!(err.contains("ttyNOPE"), "{err}");
     // Issue 50 point 2: where to look for the right one.
-    assert!(err.contains("`sfs ports`") && err.contains("--probe"), "{err}");
+    assert!(
+        err.contains("`sfs ports`") && err.contains("--probe"),
+        "{err}"
+    );
     assert!(!session.exists(), "{:?}", std::fs::read_dir(&session).ok());
     // With a configuration (kept as config.toml), in a directory that was already there.
     let there = dir.join("there");

@@ -174,3 +174,26 @@ async fn issue_32_the_phone_port_refuses_what_it_must() {
     assert_eq!(other.token().len(), 32);
     other.stop();
 }
+
+/// Issue 50 point 4: with `--log-format json` standard error holds nothing but JSON lines: the
+/// phone page's banner (the address as text and QR code) is an event with the url and the
+/// certificate's fingerprint as fields.
+#[test]
+fn issue_50_a_json_log_takes_no_banner() {
+    let dir = tmpdir("phone-json-log");
+    let session = dir.join("s");
+    let d = Daemon::start(&session, false, &["--log-format", "json"]);
+    let url = d.url.clone();
+    d.stop();
+    let log = std::fs::read_to_string(session.with_extension("log")).unwrap();
+    let mut served = false;
+    for line in log.lines().filter(|l| !l.trim().is_empty()) {
+        let v: serde_json::Value =
+            serde_json::from_str(line).unwrap_or_else(|e| panic!("not JSON ({e}): {line:?}"));
+        served |= v["fields"]["url"].as_str() == Some(url.as_str())
+            && v["fields"]["fingerprint"]
+                .as_str()
+                .is_some_and(|f| !f.is_empty());
+    }
+    assert!(served, "no event with the url {url}:\n{log}");
+}

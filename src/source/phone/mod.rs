@@ -311,6 +311,11 @@ fn public_host(bound: SocketAddr) -> SocketAddr {
 /// the summary).
 fn announce(url: &str, fingerprint: &str, bound: SocketAddr) {
     use std::io::Write;
+    // A JSON log takes nothing but JSON: the address and fingerprint as an event's fields.
+    if crate::logging::json() {
+        tracing::info!(%url, %bound, %fingerprint, "phone page served: open the url on the phone, accept the certificate of this fingerprint");
+        return;
+    }
     let mut text = String::new();
     text.push_str(&format!(
         "\nScan with your phone: open this address on the phone (or scan the QR code):\n\n  {url}\n\n"
