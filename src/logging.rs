@@ -9,7 +9,6 @@
 //!   own and no colours: journald stamps every line itself.
 //! - A closed log pipe never stops or panics the daemon: write errors are ignored.
 
-use crate::cli::LogFormat;
 use std::sync::OnceLock;
 
 static SESSION: OnceLock<String> = OnceLock::new();
@@ -29,12 +28,10 @@ pub fn json() -> bool {
     JSON.load(std::sync::atomic::Ordering::Relaxed)
 }
 
-/// Installs the global subscriber.
-pub fn init(format: LogFormat, filter: Option<&str>) {
-    JSON.store(
-        matches!(format, LogFormat::Json),
-        std::sync::atomic::Ordering::Relaxed,
-    );
+/// Installs the global subscriber: JSON lines when `json` (`--log-format json`), else
+/// human-readable ones.
+pub fn init(json: bool, filter: Option<&str>) {
+    JSON.store(json, std::sync::atomic::Ordering::Relaxed);
     use tracing_subscriber::EnvFilter;
     let filter = match filter {
         Some(f) => EnvFilter::new(f),
@@ -45,13 +42,13 @@ pub fn init(format: LogFormat, filter: Option<&str>) {
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_ansi(std::io::stderr().is_terminal() && !journal);
-    match format {
-        LogFormat::Human if journal => builder
+    match json {
+        false if journal => builder
             .without_time()
             .with_writer(|| Stderr { json: false })
             .init(),
-        LogFormat::Human => builder.with_writer(|| Stderr { json: false }).init(),
-        LogFormat::Json => builder.json().with_writer(|| Stderr { json: true }).init(),
+        false => builder.with_writer(|| Stderr { json: false }).init(),
+        true => builder.json().with_writer(|| Stderr { json: true }).init(),
     }
 }
 

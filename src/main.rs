@@ -30,7 +30,10 @@ fn main() {
             std::process::exit(code);
         }
     };
-    sfs::logging::init(cli.log_format, cli.log.as_deref());
+    sfs::logging::init(
+        matches!(cli.log_format, sfs::cli::LogFormat::Json),
+        cli.log.as_deref(),
+    );
     // As many descriptors as the system allows this process (the view's connections are
     // capped well under them, keeping a reserve for the session's files).
     sfs::view::conn::raise_file_limit();
