@@ -942,7 +942,14 @@ fn print_summary(o: &Outcome, kept: bool) {
     let dir = o.report_path.parent().unwrap_or(Path::new("."));
     let others: Vec<String> = outputs_in(dir)
         .into_iter()
-        .filter(|f| ![session::CAPTURE_FILE, session::CONFIG_COPY, "report.json"].contains(f))
+        .filter(|f| {
+            ![
+                session::CAPTURE_FILE,
+                session::CONFIG_COPY,
+                sfs::pipeline::REPORT_FILE,
+            ]
+            .contains(f)
+        })
         .map(|f| dir.join(f).display().to_string())
         .collect();
     if !others.is_empty() {
@@ -957,8 +964,9 @@ fn network_summary(r: &sfs::report::Report) -> String {
     let left_out = r.network.as_ref().map_or(0, |n| n.curves_left_out);
     let surface = match (&r.network, &r.surface) {
         (_, Some(s)) => format!(
-            "{}, {} triangles{}",
-            plural(s.patches, "patch").replace("patchs", "patches"),
+            "{} {}, {} triangles{}",
+            s.patches,
+            if s.patches == 1 { "patch" } else { "patches" },
             s.triangles,
             if s.holes > 0 {
                 format!(", {}", plural(s.holes, "hole"))
@@ -967,7 +975,11 @@ fn network_summary(r: &sfs::report::Report) -> String {
             }
         ),
         (None, None) => "none (no network)".to_string(),
-        (Some(_), None) => match r.warnings.iter().find(|w| w.code() == "no_surface") {
+        (Some(_), None) => match r
+            .warnings
+            .iter()
+            .find(|w| matches!(w, sfs::warning::Warning::NoSurface(_)))
+        {
             Some(w) => format!("none ({w})"),
             None => "none".to_string(),
         },

@@ -237,13 +237,7 @@ fn files_named(settings: Settings, file: &Path) -> Result<Settings, ConfigError>
 
 /// As [`load`], for the text of a file at `path`.
 pub fn from_text(text: &str, path: &Path) -> Result<Settings, ConfigError> {
-    let mut cfg: ConfigFile = toml::from_str(text).map_err(|e| {
-        ConfigError::new(
-            path,
-            e.span().map(|s| key_at(text, s.start)).unwrap_or_default(),
-            e.message().trim(),
-        )
-    })?;
+    let mut cfg: ConfigFile = toml::from_str(text).map_err(|e| de_error(path, text, &e, ""))?;
     resolve_paths(&mut cfg, path);
     cfg.settings(path)
 }
@@ -299,13 +293,7 @@ pub fn check(path: &Path) -> Result<Settings, Vec<ConfigError>> {
             Ok(_) => {
                 good.insert(k.clone(), v.clone());
             }
-            Err(e) => {
-                let key = e
-                    .span()
-                    .map(|s| key_at(&piece, s.start))
-                    .unwrap_or_else(|| k.clone());
-                errors.push(ConfigError::new(path, key, e.message().trim()));
-            }
+            Err(e) => errors.push(de_error(path, &piece, &e, k)),
         }
     }
     let mut cfg: ConfigFile = match toml::Value::Table(good).try_into() {
@@ -324,6 +312,15 @@ pub fn check(path: &Path) -> Result<Settings, Vec<ConfigError>> {
             Err(errors)
         }
     }
+}
+
+/// A configuration `text` of `path` that does not read as the file's sections: the key where
+/// it went wrong (`key` when the error says no place), and why.
+fn de_error(path: &Path, text: &str, e: &toml::de::Error, key: &str) -> ConfigError {
+    let key = e
+        .span()
+        .map_or_else(|| key.to_owned(), |s| key_at(text, s.start));
+    ConfigError::new(path, key, e.message().trim())
 }
 
 /// Line and column (from 1, in characters) of byte `at` of `text`.

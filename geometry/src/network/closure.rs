@@ -220,12 +220,18 @@ struct Drops {
     size: f64,
 }
 
+/// Whether an energy drop `drop` explains `share` of the network's misfit `energy` and
+/// `ratio` times the misfit per degree of freedom (`dof`) left without it.
+fn explains(drop: f64, energy: f64, dof: f64, share: f64, ratio: f64) -> bool {
+    let per_dof = (energy - drop).max(0.0) / dof;
+    drop > share * energy && drop > ratio * per_dof
+}
+
 impl Drops {
     /// Whether `c` explains `share` of the energy and `ratio` times the energy per degree of
-    /// freedom left.
+    /// freedom left ([`explains`]).
     fn stands_out(&self, c: &Candidate, share: f64, ratio: f64) -> bool {
-        let per_dof = (self.energy - c.drop).max(0.0) / self.dof;
-        c.drop > share * self.energy && c.drop > ratio * per_dof
+        explains(c.drop, self.energy, self.dof, share, ratio)
     }
 
     /// Whether the curve would have to be pulled further than [`FAR`] of the network's size
@@ -244,7 +250,7 @@ impl Drops {
             .iter()
             .max_by(|a, b| a.drop.total_cmp(&b.drop))?;
         let per_dof = (self.energy - best.drop).max(0.0) / self.dof;
-        let refuses = best.drop > SHARE * self.energy && best.drop > RATIO * per_dof;
+        let refuses = explains(best.drop, self.energy, self.dof, SHARE, RATIO);
         let best_tag = self.tags.iter().map(|c| c.drop).fold(0.0, f64::max);
         let located = !self
             .stretches
@@ -432,8 +438,7 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
         // Let go, the tag's end moves by δ = −g/σ off its node, and the nodes by −y δ: it
         // lands at x_v + (1 − y_v) δ. Only for the tags that stand out (one pass over the
         // nodes each).
-        let stands_out = drop > SHARE * energy && drop > RATIO * (energy - drop).max(0.0) / dof;
-        let lands = if stands_out {
+        let lands = if explains(drop, energy, dof, SHARE, RATIO) {
             // Not on a node of its own curve: one close along it is no other place.
             let own: Vec<usize> = curves[ci].nodes.iter().map(|m| var[&m.1]).collect();
             let v = var[&curves[ci].nodes[tag].1];
