@@ -259,3 +259,266 @@ impl LinkStats {
         }
     }
 }
+
+/// How long a connected link may stay without a byte before it is `silent` (at least; five
+/// sample periods of the device's HELLO rate when that is longer).
+pub const SILENT_AFTER: std::time::Duration = std::time::Duration::from_secs(1);
+/// How long a serial port may be connected without one valid frame before it is named as no
+/// sfs device ([`LinkState::problem`]).
+pub const UNHEARD_AFTER: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// The link's state as it happens: `/status` `link.state` and the fields beside it, and the
+/// `sfs_link_up` gauge.
+///
+/// `connecting` (nothing yet), `connected`, `silent` (connected, no byte for
+/// [`SILENT_AFTER`]), `disconnected` (lost; a serial port is reopened), `reconnecting`
+/// (reopening failed `attempt` times), `ended` (the source finished).
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct LinkState {
+    pub state: &'static str,
+    /// When the state began (for `silent`: the last byte; for `reconnecting`: the loss), Unix
+    /// time in ms.
+    pub since_unix_ms: Option<u64>,
+    /// For how long, s.
+    pub for_s: Option<f64>,
+    /// Failed attempts to reopen the port, while `reconnecting`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub attempt: Option<u64>,
+    /// Why the link was lost, or why reopening fails.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// What is wrong with the port itself: nothing heard on it, or bytes but no valid frame,
+    /// for [`UNHEARD_AFTER`] (with `sfs ports --probe` suggested).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub problem: Option<String>,
+}
+
+impl LinkState {
+    /// Whether the device is connected (`sfs_link_up`): `connected` or `silent`.
+    pub fn up(&self) -> bool {
+        matches!(self.state, "connected" | "silent")
+    }
+}
+
+/// Follows the source's events and the bytes to say what the link is doing now
+/// ([`LinkState`]). Time is given, so that it is tested without waiting.
+#[derive(Debug, Clone)]
+pub struct LinkTracker {
+    state: &'static str,
+    since: std::time::Instant,
+    last_byte: Option<std::time::Instant>,
+    attempt: Option<u64>,
+    reason: Option<String>,
+    /// The port's name when the source is a serial port (the only source whose bytes may come
+    /// from something other than an sfs device).
+    port: Option<String>,
+    first_connected: Option<std::time::Instant>,
+    problem: Option<String>,
+}
+
+impl LinkTracker {
+    /// A link not connected yet; `port` names a serial port (checked for a device that is no
+    /// sfs device).
+    pub fn new(now: std::time::Instant, port: Option<String>) -> LinkTracker {
+        LinkTracker {
+            state: "connecting",
+            since: now,
+            last_byte: None,
+            attempt: None,
+            reason: None,
+            port,
+            first_connected: None,
+            problem: None,
+        }
+    }
+
+    pub fn connected(&mut self, now: std::time::Instant) {
+        self.set("connected", now);
+        self.first_connected.get_or_insert(now);
+        self.last_byte = None;
+    }
+
+    pub fn disconnected(&mut self, now: std::time::Instant, reason: &str) {
+        self.set("disconnected", now);
+        self.reason = Some(reason.to_owned());
+    }
+
+    /// Reopening failed for the `attempt`-th time since the loss.
+    pub fn reconnecting(&mut self, now: std::time::Instant, attempt: u64, error: &str) {
+        if self.state != "reconnecting" && self.state != "disconnected" {
+            self.since = now;
+        }
+        self.state = "reconnecting";
+        self.attempt = Some(attempt);
+        self.reason = Some(error.to_owned());
+    }
+
+    /// Bytes arrived (a source that never says `Connected`, a replay or standard input, is
+    /// connected by its first bytes).
+    pub fn bytes(&mut self, now: std::time::Instant) {
+        if self.state == "connecting" {
+            self.connected(now);
+        }
+        if self.state == "silent" {
+            self.state = "connected";
+            self.since = now;
+        }
+        self.last_byte = Some(now);
+    }
+
+    pub fn ended(&mut self, now: std::time::Instant) {
+        self.set("ended", now);
+    }
+
+    fn set(&mut self, state: &'static str, now: std::time::Instant) {
+        self.state = state;
+        self.since = now;
+        self.attempt = None;
+        self.reason = None;
+    }
+
+    /// Moves time on to `now`: a connected link without bytes turns `silent`; a serial port
+    /// connected for [`UNHEARD_AFTER`] without a valid frame is named. Returns the problem when
+    /// it is new (for the log), and logs when it is gone.
+    pub fn tick(&mut self, now: std::time::Instant, stats: &LinkStats) -> Option<String> {
+        let silent_after = stats
+            .hello
+            .as_ref()
+            .filter(|h| h.rate_hz > 0)
+            .map_or(SILENT_AFTER, |h| {
+                SILENT_AFTER.max(std::time::Duration::from_secs_f64(5.0 / h.rate_hz as f64))
+            });
+        if self.state == "connected" {
+            let last = self.last_byte.unwrap_or(self.since);
+            if now.saturating_duration_since(last) >= silent_after {
+                self.state = "silent";
+                self.since = last;
+            }
+        }
+        if stats.packets.total() > 0 {
+            if self.problem.take().is_some() {
+                tracing::info!(
+                    port = self.port.as_deref(),
+                    "valid frames now come from the port"
+                );
+            }
+            return None;
+        }
+        let (Some(port), Some(first)) = (&self.port, self.first_connected) else {
+            return None;
+        };
+        if self.problem.is_some() || now.saturating_duration_since(first) < UNHEARD_AFTER {
+            return None;
+        }
+        let secs = UNHEARD_AFTER.as_secs();
+        let problem = if stats.bytes == 0 {
+            format!("no byte from {port} in {secs} s: no sfs device was heard there (is it the device's port, and is the device on? `sfs ports --probe` says which ports speak this protocol)")
+        } else {
+            format!("{} bytes from {port} in {secs} s but no valid frame: not an sfs device, or a wrong baud rate (`sfs ports --probe` says which ports speak this protocol)", stats.bytes)
+        };
+        self.problem = Some(problem.clone());
+        Some(problem)
+    }
+
+    /// The state now; `now_unix_ms` is the wall clock at `now`.
+    pub fn state(&self, now: std::time::Instant, now_unix_ms: u64) -> LinkState {
+        let age = now.saturating_duration_since(self.since);
+        LinkState {
+            state: self.state,
+            since_unix_ms: Some(now_unix_ms.saturating_sub(age.as_millis() as u64)),
+            for_s: Some((age.as_secs_f64() * 10.0).round() / 10.0),
+            attempt: self.attempt,
+            reason: self.reason.clone(),
+            problem: self.problem.clone(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::{Duration, Instant};
+
+    fn frames(n: u64) -> LinkStats {
+        let mut s = LinkStats::default();
+        s.packets.0[1] = n;
+        s.bytes = 30 * n;
+        s
+    }
+
+    #[test]
+    fn a_link_goes_silent_then_lost_then_reconnecting_then_back() {
+        let t0 = Instant::now();
+        let mut l = LinkTracker::new(t0, Some("/dev/ttyUSB0".into()));
+        assert_eq!(l.state(t0, 0).state, "connecting");
+        assert!(!l.state(t0, 0).up());
+        l.connected(t0);
+        l.bytes(t0 + Duration::from_millis(100));
+        assert_eq!(l.tick(t0 + Duration::from_millis(500), &frames(10)), None);
+        assert_eq!(l.state(t0, 0).state, "connected");
+        // No byte for a second: silent since the last byte, still up.
+        l.tick(t0 + Duration::from_millis(1200), &frames(10));
+        let s = l.state(t0 + Duration::from_millis(1200), 10_000);
+        assert_eq!((s.state, s.up()), ("silent", true));
+        assert_eq!(s.since_unix_ms, Some(10_000 - 1100));
+        assert_eq!(s.for_s, Some(1.1));
+        let lost = t0 + Duration::from_secs(3);
+        l.disconnected(lost, "read error");
+        assert!(!l.state(lost, 0).up());
+        l.reconnecting(lost + Duration::from_millis(100), 1, "No such file");
+        l.reconnecting(lost + Duration::from_millis(300), 2, "No such file");
+        let s = l.state(lost + Duration::from_secs(1), 50_000);
+        assert_eq!((s.state, s.attempt), ("reconnecting", Some(2)));
+        // Since the loss, not since the last attempt.
+        assert_eq!(s.since_unix_ms, Some(49_000));
+        l.connected(lost + Duration::from_secs(2));
+        l.bytes(lost + Duration::from_secs(2));
+        let s = l.state(lost + Duration::from_secs(2), 0);
+        assert_eq!((s.state, s.attempt, s.reason), ("connected", None, None));
+    }
+
+    #[test]
+    fn a_port_that_never_sends_a_frame_is_named_once() {
+        let t0 = Instant::now();
+        let mut l = LinkTracker::new(t0, Some("/dev/ttyS0".into()));
+        l.connected(t0);
+        assert_eq!(
+            l.tick(t0 + Duration::from_secs(9), &LinkStats::default()),
+            None
+        );
+        let p = l
+            .tick(t0 + Duration::from_secs(10), &LinkStats::default())
+            .unwrap();
+        assert!(
+            p.contains("no byte from /dev/ttyS0") && p.contains("sfs ports --probe"),
+            "{p}"
+        );
+        assert_eq!(
+            l.tick(t0 + Duration::from_secs(11), &LinkStats::default()),
+            None
+        );
+        assert_eq!(l.state(t0, 0).problem, Some(p));
+        // Bytes that are no frame.
+        let mut l = LinkTracker::new(t0, Some("/dev/ttyS0".into()));
+        l.connected(t0);
+        let noise = LinkStats {
+            bytes: 512,
+            ..LinkStats::default()
+        };
+        let p = l.tick(t0 + Duration::from_secs(10), &noise).unwrap();
+        assert!(
+            p.contains("512 bytes") && p.contains("no valid frame"),
+            "{p}"
+        );
+        // A frame clears it.
+        assert_eq!(l.tick(t0 + Duration::from_secs(12), &frames(1)), None);
+        assert_eq!(l.state(t0, 0).problem, None);
+        // Not a serial port: never named.
+        let mut l = LinkTracker::new(t0, None);
+        l.connected(t0);
+        assert_eq!(
+            l.tick(t0 + Duration::from_secs(60), &LinkStats::default()),
+            None
+        );
+    }
+}

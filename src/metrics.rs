@@ -36,6 +36,8 @@ pub struct SessionMetrics {
     pub link_lost: Counter,
     pub link_reboots: Counter,
     pub link_disconnects: Counter,
+    /// 1 while the device is connected (`connected` or `silent`), 0 otherwise.
+    pub link_up: Gauge,
     pub curves_accepted: Counter,
     pub curves_discarded: Counter,
     pub warnings: Counter,
@@ -65,6 +67,7 @@ impl SessionMetrics {
             link_lost: Counter::default(),
             link_reboots: Counter::default(),
             link_disconnects: Counter::default(),
+            link_up: Gauge::default(),
             curves_accepted: Counter::default(),
             curves_discarded: Counter::default(),
             warnings: Counter::default(),
@@ -105,6 +108,11 @@ impl SessionMetrics {
             "link_disconnects",
             "Times the device was lost (unplug, read error, watchdog)",
             m.link_disconnects.clone(),
+        );
+        registry.register(
+            "link_up",
+            "1 while the device is connected (bytes flowing or silent), 0 while it is lost or not yet connected",
+            m.link_up.clone(),
         );
         registry.register(
             "curves_accepted",

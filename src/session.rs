@@ -22,6 +22,9 @@ use std::time::{Duration, Instant};
 pub const CAPTURE_FILE: &str = "capture.bin";
 /// How often a running session logs its link statistics (when they changed).
 const STATS_LOG_INTERVAL: Duration = Duration::from_secs(10);
+/// How often the link's state is looked at while nothing happens (a silent link, a port
+/// never heard): the view's banner follows within this.
+const LINK_TICK: Duration = Duration::from_millis(500);
 
 /// How long the pipeline keeps draining a source after shutdown was asked for.
 const SHUTDOWN_GRACE: Duration = Duration::from_millis(300);
@@ -134,6 +137,10 @@ pub async fn run(
     let started = Instant::now();
     let created = prepared.created;
     let mut spec = spec;
+    let port = match &spec {
+        SourceSpec::Serial(s) => Some(s.path.display().to_string()),
+        _ => None,
+    };
     if let SourceSpec::Phone(p) = &mut spec {
         p.session_dir = out_dir.to_owned();
     }
@@ -167,6 +174,7 @@ pub async fn run(
         view.clone(),
     )?;
     flow.phone = src.phone.clone();
+    flow.link = crate::link::LinkTracker::new(Instant::now(), port);
     // The service manager is told once the source is open (a resumed capture is decoded
     // after, with the watchdog fed as it goes).
     flow.notifier.ready(&format!("reading {description}"));
@@ -413,6 +421,8 @@ fn prepare(
 struct Flow {
     decoder: Decoder,
     stats: LinkStats,
+    /// What the link is doing now (`/status` `link.state`, `sfs_link_up`).
+    link: crate::link::LinkTracker,
     acq: Acquisition,
     monitor: Option<Monitor>,
     live: Option<crate::live::Live>,
@@ -464,6 +474,7 @@ impl Flow {
         Ok(Flow {
             decoder: Decoder::new(),
             stats: LinkStats::default(),
+            link: crate::link::LinkTracker::new(Instant::now(), None),
             acq: Acquisition::starting_at(
                 AcquisitionConfig {
                     preview: view.is_some(),
@@ -518,11 +529,21 @@ impl Flow {
         self.show();
     }
 
+    /// Tells the view the link's state and counters (and the metrics).
+    fn show_link(&self) {
+        let Some(v) = &self.view else { return };
+        let unix_ms = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as u64);
+        let state = self.link.state(Instant::now(), unix_ms);
+        v.link(&self.stats, state, self.acq.session_time());
+    }
+
     /// Tells the view the link's counters, the curve being scanned and the new warnings.
     fn show(&mut self) {
         self.tell_phone();
+        self.show_link();
         let Some(v) = &self.view else { return };
-        v.link(&self.stats, self.acq.session_time());
         let curve = self.acq.open_curve().map(|c| crate::view::CurrentCurve {
             index: c.index,
             kind: c.kind.name(),
@@ -630,11 +651,21 @@ impl Flow {
         let ping_period = self.notifier.ping_period();
         let mut watchdog =
             tokio::time::interval(ping_period.unwrap_or(std::time::Duration::from_secs(3600)));
+        // The link's state moves with time too (silent, a port never heard).
+        let mut link_tick = tokio::time::interval(LINK_TICK);
+        link_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         loop {
             self.notifier.alive();
             let ev = tokio::select! {
                 ev = src.events.recv() => ev,
                 _ = watchdog.tick(), if ping_period.is_some() => continue,
+                _ = link_tick.tick() => {
+                    if let Some(problem) = self.link.tick(Instant::now(), &self.stats) {
+                        tracing::warn!("{problem}");
+                    }
+                    self.show_link();
+                    continue;
+                }
                 _ = tick.tick() => {
                     if self.stats != logged {
                         log_stats("link", &self.stats);
@@ -656,6 +687,7 @@ impl Flow {
             match ev {
                 Some(SourceEvent::Bytes(bytes)) => {
                     self.stats.bytes += bytes.len() as u64;
+                    self.link.bytes(Instant::now());
                     if self.stall_after.is_some_and(|n| self.stats.bytes >= n) {
                         crate::service::stall();
                     }
@@ -664,15 +696,31 @@ impl Flow {
                     }
                     self.feed(&bytes, true);
                 }
-                Some(SourceEvent::Connected { .. }) => self.stats.connects += 1,
-                Some(SourceEvent::Disconnected { .. }) => self.stats.disconnects += 1,
+                Some(SourceEvent::Connected { .. }) => {
+                    self.stats.connects += 1;
+                    self.link.connected(Instant::now());
+                    self.show_link();
+                }
+                Some(SourceEvent::Disconnected { reason }) => {
+                    self.stats.disconnects += 1;
+                    self.link.disconnected(Instant::now(), &reason);
+                    self.show_link();
+                }
+                Some(SourceEvent::Reconnecting { attempt, error }) => {
+                    self.link.reconnecting(Instant::now(), attempt, &error);
+                    self.show_link();
+                }
                 Some(SourceEvent::CaptureFailed { path, kind, error }) => {
                     self.capture_failure.get_or_insert(OutputError {
                         path,
                         source: std::io::Error::new(kind, error),
                     });
                 }
-                Some(SourceEvent::End { reason }) => return reason,
+                Some(SourceEvent::End { reason }) => {
+                    self.link.ended(Instant::now());
+                    self.show_link();
+                    return reason;
+                }
                 None => return EndReason::Shutdown,
             }
         }

@@ -473,3 +473,89 @@ async fn issue_48_the_view_on_this_machine_shows_the_phone_address() {
     browser.close().await;
     d.stop();
 }
+
+/// Issue 50 point 2: the view's banner turns red within 5 s of the device being unplugged,
+/// says it is reconnecting, and turns green again when it is back.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(sfs_chromium),
+    ignore = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
+)]
+async fn issue_50_the_banner_turns_red_while_the_device_is_away() {
+    use common::pty::{plug, write};
+    available();
+    let dir = tmpdir("view-link-lost");
+    let link = dir.join("ttySFS");
+    let port = common::view::free_port();
+    let dev = plug(&link);
+    let _served = common::view::serve_serial(&link, &dir.join("session"), port, &dir.join("log"));
+    let browser = Browser::start(&dir.join("profile")).await;
+    let t0 = std::time::Instant::now();
+    while reqwest::get(format!("http://127.0.0.1:{port}/status"))
+        .await
+        .is_err()
+    {
+        assert!(t0.elapsed() < Duration::from_secs(20), "no view served");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    browser.goto(&format!("http://127.0.0.1:{port}/")).await;
+    let pill = |s: &serde_json::Value| (s["link"]["cls"].clone(), s["link"]["pill"].clone());
+    browser
+        .watch(Duration::from_secs(20), |s| {
+            s["link"]["state"] == "connected" || s["link"]["state"] == "silent"
+        })
+        .await;
+    let unplugged = std::time::Instant::now();
+    drop(dev);
+    std::fs::remove_file(&link).unwrap();
+    let seen = browser
+        .watch(Duration::from_secs(5), |s| s["link"]["cls"] == "lost")
+        .await
+        .pop()
+        .unwrap();
+    assert!(unplugged.elapsed() < Duration::from_secs(5));
+    let (cls, text) = pill(&seen);
+    assert_eq!(cls, "lost");
+    assert!(text.as_str().unwrap().starts_with("device lost"), "{text}");
+    let colour = browser
+        .execute(
+            "return getComputedStyle(document.getElementById('state')).backgroundColor;",
+            serde_json::json!([]),
+        )
+        .await;
+    assert_eq!(colour, "rgb(198, 40, 40)");
+    let reconnecting = browser
+        .watch(Duration::from_secs(5), |s| {
+            s["link"]["state"] == "reconnecting"
+        })
+        .await
+        .pop()
+        .unwrap();
+    assert!(
+        reconnecting["link"]["pill"]
+            .as_str()
+            .unwrap()
+            .contains("reconnecting (attempt"),
+        "{}",
+        reconnecting["link"]
+    );
+    // Back: green again.
+    let mut dev = plug(&link);
+    browser
+        .watch(Duration::from_secs(10), |s| {
+            s["link"]["state"] == "connected"
+        })
+        .await;
+    let mut b = Builder::new();
+    b.packet(hello());
+    write(&mut dev, &b.bytes);
+    let back = browser
+        .watch(Duration::from_secs(5), |s| {
+            s["link"]["cls"] == "running" || s["link"]["cls"] == "silent"
+        })
+        .await
+        .pop()
+        .unwrap();
+    assert_eq!(back["errors"], serde_json::json!([]), "console errors");
+    browser.close().await;
+}

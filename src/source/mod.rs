@@ -101,6 +101,8 @@ pub enum SourceEvent {
     Bytes(Vec<u8>),
     /// The link was lost (unplug, read error, watchdog); a serial source keeps reconnecting.
     Disconnected { reason: String },
+    /// Reopening a lost serial port failed, for the `attempt`-th time since the loss.
+    Reconnecting { attempt: u64, error: String },
     /// Appending to the capture failed (a full disk, say): the source stops (then `End`).
     CaptureFailed {
         path: PathBuf,

@@ -51,7 +51,11 @@ fn run(spec: SerialSpec, first: serialport::TTYPort, mut out: Out, shutdown: Shu
                         tracing::warn!(path = %spec.path.display(), error = %e, attempts = failures,
                             retry_in_ms = backoff.as_millis() as u64, "serial port not available");
                     }
-                    if shutdown.sleep_blocking(backoff) {
+                    let attempt = SourceEvent::Reconnecting {
+                        attempt: failures,
+                        error: e.to_string(),
+                    };
+                    if out.send(attempt).is_err() || shutdown.sleep_blocking(backoff) {
                         break EndReason::Shutdown;
                     }
                     backoff = (backoff * 2).min(spec.backoff_max);

@@ -72,7 +72,7 @@ pub fn parse_address(s: &str) -> Result<std::net::SocketAddr, String> {
     })
 }
 
-use crate::link::LinkStats;
+use crate::link::{LinkState, LinkStats};
 use crate::metrics::SessionMetrics;
 use crate::report::{LiveReport, Percentiles};
 use crate::warning::Warning;
@@ -271,6 +271,10 @@ pub struct CurrentCurve {
 
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct LinkStatus {
+    /// What the link is doing now: `state` (connecting, connected, silent, disconnected,
+    /// reconnecting, ended), since when, the attempt and reason, a port's problem.
+    #[serde(flatten)]
+    pub state: LinkState,
     pub bytes: u64,
     pub packets: u64,
     /// Over the last status period.
@@ -470,12 +474,14 @@ impl View {
     }
 
     /// The link's counters (status and metrics).
-    pub fn link(&self, stats: &LinkStats, session_time_s: f64) {
+    pub fn link(&self, stats: &LinkStats, state: LinkState, session_time_s: f64) {
         self.shared.metrics.link(stats);
+        self.shared.metrics.link_up.set(state.up() as i64);
         self.update(|s| {
             s.state = "running";
             s.session_time_s = session_time_s;
             s.link = LinkStatus {
+                state,
                 bytes: stats.bytes,
                 packets: stats.packets.total(),
                 packets_per_s: s.link.packets_per_s,

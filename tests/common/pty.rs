@@ -47,6 +47,12 @@ pub fn play(dev: &mut Device, bytes: &[u8]) {
         Duration::from_secs(10),
         || opened(&dev.pts) >= 2,
     );
+    write(dev, bytes);
+}
+
+/// Writes `bytes` in small pieces, as a device at a few kB/s would (the port must be open on
+/// the other side: a pty not yet in raw mode would echo and edit them).
+pub fn write(dev: &mut Device, bytes: &[u8]) {
     for c in bytes.chunks(257) {
         dev.master.write_all(c).unwrap();
         std::thread::sleep(Duration::from_micros(300));

@@ -131,3 +131,20 @@ pub fn serve_ended(dir: &Path, name: &str, bytes: &[u8]) -> (u16, Served, serde_
     let report = ended_report(&out, Duration::from_secs(60));
     (port, served, report)
 }
+
+/// `sfs run --serial LINK --view 127.0.0.1:PORT`, its standard error into `log`.
+pub fn serve_serial(link: &Path, session: &Path, port: u16, log: &Path) -> Served {
+    let err = std::fs::File::create(log).unwrap();
+    Served(
+        Command::new(env!("CARGO_BIN_EXE_sfs"))
+            .args(["--log", "warn", "run", "--serial"])
+            .arg(link)
+            .arg("--session")
+            .arg(session)
+            .args(["--view", &format!("127.0.0.1:{port}")])
+            .stdout(Stdio::null())
+            .stderr(err)
+            .spawn()
+            .unwrap(),
+    )
+}

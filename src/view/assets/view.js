@@ -450,6 +450,27 @@ function showPhone(phone) {
     .catch(withheld);
 }
 
+// The banner's pill: the session's state, and while it runs what the link does (red while
+// the device is lost, orange while it is silent).
+function showLink(s) {
+  const pill = document.getElementById('state');
+  const l = s.link;
+  let label = s.state;
+  let cls = s.state;
+  const secs = l.for_s != null ? ` ${l.for_s.toFixed(0)} s` : '';
+  if (s.state === 'running') {
+    if (l.state === 'disconnected') { label = `device lost${secs}`; cls = 'lost'; }
+    else if (l.state === 'reconnecting') { label = `device lost${secs} · reconnecting (attempt ${l.attempt})`; cls = 'lost'; }
+    else if (l.state === 'silent') { label = `device silent${secs}`; cls = 'silent'; }
+    else if (l.state === 'connecting') { label = 'waiting for the device'; cls = 'starting'; }
+    if (l.problem) { label = 'no sfs device heard'; cls = 'lost'; }
+  }
+  pill.textContent = label;
+  pill.className = 'pill ' + cls;
+  pill.title = [l.problem, l.reason].filter(Boolean).join(' — ');
+  state.link = { state: l.state, pill: label, cls, problem: l.problem || null };
+}
+
 function showStatus(s) {
   state.status = s;
   if (!warningsShown) {
@@ -458,9 +479,7 @@ function showStatus(s) {
     for (const w of s.warnings) addWarning(w);
   }
   redraw();
-  const pill = document.getElementById('state');
-  pill.textContent = s.state;
-  pill.className = 'pill ' + s.state;
+  showLink(s);
   if (s.curve) {
     const d = s.curve.distance_m != null ? `, ${s.curve.distance_m.toFixed(2)} m` : '';
     text('curve', `curve ${s.curve.index} (${s.curve.kind}): nodes ${s.curve.nodes.join(' → ') || '—'}, ${s.curve.samples} samples${d}`);
@@ -470,7 +489,8 @@ function showStatus(s) {
   text('accepted', `${s.curves_accepted} curve(s) accepted`);
   showPhone(s.phone);
   const l = s.link;
-  text('link', `link ${l.packets_per_s.toFixed(0)} pkt/s · ${l.rejected} rejected · ${l.lost} lost · ${l.reboots} reboots`, l.lost > 0 || l.disconnects > 0);
+  const lostCount = l.disconnects ? ` · lost ${l.disconnects}×` : '';
+  text('link', `link ${l.packets_per_s.toFixed(0)} pkt/s · ${l.rejected} rejected · ${l.lost} lost · ${l.reboots} reboots${lostCount}`, l.lost > 0 || l.disconnects > 0);
   if (s.device) {
     const d = s.device;
     const batt = d.battery_mv != null ? ` · battery ${(d.battery_mv / 1000).toFixed(2)} V` : '';
