@@ -241,8 +241,10 @@ pub struct RunArgs {
     #[arg(long)]
     pub stdin: bool,
     /// Scan with a phone: serve the phone page over HTTPS at ADDR (default `[phone] address`,
-    /// else 0.0.0.0:8443, every interface) and read what it streams. Prints the page's address
-    /// (also as a QR code, and into SESSION/phone.url) and the certificate's fingerprint.
+    /// else 0.0.0.0:8443, every interface) and read what it streams. A port alone (`--phone
+    /// 8443`) means every interface, as a phone is another machine (`--view 8040` alone means
+    /// this machine only). Prints the page's address (also as a QR code, and into
+    /// SESSION/phone.url) and the certificate's fingerprint; a loopback address is warned about.
     #[arg(long, value_name = "ADDR", num_args = 0..=1, conflicts_with_all = ["stdin", "serial"], value_parser = crate::source::phone::parse_address)]
     pub phone: Option<Option<std::net::SocketAddr>>,
     /// Session directory of a new session (created if missing; refused if it already holds
@@ -261,7 +263,8 @@ pub struct RunArgs {
     pub continue_existing: bool,
     /// Serve the live view (a web page: the network as it grows, the curve being scanned,
     /// the status, the warnings) at ADDR (default 127.0.0.1:8040) while the session runs;
-    /// overrides `[view] address`.
+    /// overrides `[view] address`. A port alone means this machine only (127.0.0.1:PORT);
+    /// another machine needs an address (`0.0.0.0:8040`) and `[view] token`.
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::view::DEFAULT_ADDRESS, value_parser = crate::view::parse_address)]
     pub view: Option<std::net::SocketAddr>,
 }

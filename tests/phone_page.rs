@@ -140,7 +140,12 @@ async fn perform(b: &Browser, play: &Play) -> usize {
         last = Instant::now();
         let t = t_first + start.elapsed().as_secs_f64();
         while k < play.keys.len() && play.keys[k].0 <= t {
-            b.click(&buttons[&data_key(play.keys[k].1)]).await;
+            let key = data_key(play.keys[k].1);
+            b.click(&buttons[&key]).await;
+            if key == "C" {
+                // The page sends C on a second tap (issue 50).
+                b.click(&buttons[&key]).await;
+            }
             k += 1;
         }
         if t > t_end && k == play.keys.len() {
@@ -424,4 +429,122 @@ async fn issue_32_a_reconnection_continues_the_session() {
     let curves = report["curves"].as_array().unwrap();
     assert_eq!(curves.len(), 1, "{}", report["warnings"]);
     assert_eq!(curves[0]["nodes"], serde_json::json!([0, 1]));
+}
+
+/// Issue 50 point 4: a browser that sends no motion (no sensor overridden: headless chromium
+/// has none) is told so 3 s after Start, with the likely causes, and never connects (the
+/// daemon logs no disconnect every 3 s); keys pressed before Start are refused with a hint and
+/// never reach the daemon; the letter keys have a legend.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(sfs_chromium),
+    ignore = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
+)]
+async fn issue_50_a_browser_without_motion_is_told_why() {
+    available();
+    let dir = tmpdir("phone-no-motion");
+    let d = Daemon::start(&dir.join("session"), false, &[]);
+    let b = Browser::start_with(&dir.join("profile"), true).await;
+    b.goto(&d.url).await;
+    let legend = b
+        .execute(
+            "return [...document.querySelectorAll('#legend dt')].map((e) => e.textContent)",
+            serde_json::json!([]),
+        )
+        .await;
+    for k in ["B", "I", "K", "G", "C", "E", "U", "Enter"] {
+        assert!(
+            legend.as_array().unwrap().iter().any(|d| d == k),
+            "{k} not in {legend}"
+        );
+    }
+    // A key before Start: refused, with a hint.
+    let key_b = b.find("[data-key=\"B\"]").await;
+    b.click(&key_b).await;
+    let p = page_state(&b).await;
+    assert_eq!(p["refused_keys"], 1, "{p}");
+    assert!(
+        p["hint"].as_str().unwrap().contains("Press Start first"),
+        "{p}"
+    );
+    // Start: no motion comes.
+    let start = b.find("[data-action=start]").await;
+    b.click(&start).await;
+    let t0 = Instant::now();
+    let p = wait_page(&b, Duration::from_secs(6), |p| p["state"] == "no-motion").await;
+    assert!(
+        t0.elapsed() >= Duration::from_millis(2900),
+        "{:?}",
+        t0.elapsed()
+    );
+    let shown = b
+        .execute(
+            "const h = document.getElementById('hint'); return [h.hidden, h.textContent, document.getElementById('state').textContent]",
+            serde_json::json!([]),
+        )
+        .await;
+    assert_eq!(shown[0], false, "{shown}");
+    let text = shown[1].as_str().unwrap();
+    assert!(
+        text.contains("No motion data") && text.contains("desktop") && text.contains("refused"),
+        "{text}"
+    );
+    assert_eq!(shown[2], "no motion data");
+    assert_eq!(p["connections"], 0, "{p}");
+    // Keys now: refused too.
+    b.click(&key_b).await;
+    assert_eq!(page_state(&b).await["refused_keys"], 2);
+    tokio::time::sleep(Duration::from_secs(4)).await;
+    b.close().await;
+    let report = d.stop();
+    assert_eq!(report["link"]["connects"], 0, "{}", report["link"]);
+    assert_eq!(report["link"]["disconnects"], 0, "{}", report["link"]);
+    assert_eq!(report["link"]["packets"]["KEY"], 0);
+}
+
+/// Issue 50 point 4: C cancels the whole curve only when tapped twice within 2 s; a single
+/// tap (or two taps further apart) sends nothing.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(sfs_chromium),
+    ignore = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
+)]
+async fn issue_50_c_cancels_only_when_confirmed() {
+    available();
+    let dir = tmpdir("phone-confirm-c");
+    let d = Daemon::start(&dir.join("session"), false, &[]);
+    let b = open_page(&d, &dir.join("profile")).await;
+    let mut buttons = HashMap::new();
+    for k in ["B", "0", "Enter", "C"] {
+        buttons.insert(k, b.find(&format!("[data-key=\"{k}\"]")).await);
+    }
+    for k in ["B", "0", "Enter"] {
+        b.click(&buttons[k]).await;
+    }
+    wait_page(&b, Duration::from_secs(5), |p| {
+        p["feedback"]["curve"]["nodes"] == serde_json::json!([0])
+    })
+    .await;
+    let keys = page_state(&b).await["keys"].as_u64().unwrap();
+    b.click(&buttons["C"]).await;
+    let p = page_state(&b).await;
+    assert_eq!(p["keys"].as_u64().unwrap(), keys, "one tap sent C: {p}");
+    assert!(p["hint"].as_str().unwrap().contains("Tap C again"), "{p}");
+    // The confirmation lapses.
+    tokio::time::sleep(Duration::from_millis(2300)).await;
+    b.click(&buttons["C"]).await;
+    assert_eq!(page_state(&b).await["keys"].as_u64().unwrap(), keys);
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert!(page_state(&b).await["feedback"]["curve"].is_object());
+    // Confirmed.
+    b.click(&buttons["C"]).await;
+    let p = wait_page(&b, Duration::from_secs(5), |p| {
+        p["feedback"]["curve"].is_null()
+    })
+    .await;
+    assert_eq!(p["keys"].as_u64().unwrap(), keys + 1, "{p}");
+    b.close().await;
+    let report = d.stop();
+    assert_eq!(report["link"]["packets"]["KEY"], keys + 1);
+    assert_eq!(report["curves"].as_array().unwrap().len(), 0);
 }

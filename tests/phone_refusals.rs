@@ -197,3 +197,30 @@ fn issue_50_a_json_log_takes_no_banner() {
     }
     assert!(served, "no event with the url {url}:\n{log}");
 }
+
+/// Issue 50 point 4: a phone page on a loopback address is warned about, with this machine's
+/// LAN addresses named; `/` on the phone port says where the page is.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn issue_50_a_loopback_page_is_warned_about_and_the_root_explains() {
+    let dir = tmpdir("phone-loopback");
+    let session = dir.join("s");
+    let d = Daemon::start(&session, false, &[]);
+    let (status, body) = Client::of(&d).get("/").await;
+    assert_eq!(status, 200, "{body}");
+    assert!(
+        body.contains("/phone?token=") && body.contains("phone.url"),
+        "{body}"
+    );
+    d.stop();
+    let log = std::fs::read_to_string(session.with_extension("log")).unwrap();
+    let warning = log
+        .lines()
+        .find(|l| l.contains("a loopback address: no phone can reach it"))
+        .unwrap_or_else(|| panic!("no loopback warning:\n{log}"));
+    for ip in sfs::source::phone::lan_addresses() {
+        assert!(
+            warning.contains(&ip.to_string()),
+            "{ip} not named: {warning}"
+        );
+    }
+}

@@ -306,11 +306,65 @@ fn public_host(bound: SocketAddr) -> SocketAddr {
     SocketAddr::new(ip, bound.port())
 }
 
+/// This machine's IPv4 addresses on interfaces that are up, loopback left out: where a phone
+/// on the LAN may reach it.
+pub fn lan_addresses() -> Vec<std::net::IpAddr> {
+    let mut out = Vec::new();
+    let mut list: *mut libc::ifaddrs = std::ptr::null_mut();
+    // SAFETY: getifaddrs fills `list` with a linked list we only read, then free once.
+    if unsafe { libc::getifaddrs(&mut list) } != 0 {
+        return out;
+    }
+    let mut at = list;
+    while !at.is_null() {
+        // SAFETY: `at` is a node of the list getifaddrs returned, not yet freed.
+        let ifa = unsafe { &*at };
+        at = ifa.ifa_next;
+        let up = ifa.ifa_flags & (libc::IFF_UP as libc::c_uint) != 0;
+        let lo = ifa.ifa_flags & (libc::IFF_LOOPBACK as libc::c_uint) != 0;
+        if ifa.ifa_addr.is_null() || !up || lo {
+            continue;
+        }
+        // SAFETY: a non-null ifa_addr points to a sockaddr whose family says its type.
+        if unsafe { (*ifa.ifa_addr).sa_family } as libc::c_int == libc::AF_INET {
+            let sin = unsafe { &*(ifa.ifa_addr as *const libc::sockaddr_in) };
+            let ip = std::net::Ipv4Addr::from(u32::from_be(sin.sin_addr.s_addr));
+            if !out.contains(&ip.into()) {
+                out.push(ip.into());
+            }
+        }
+    }
+    // SAFETY: `list` came from getifaddrs and is freed once.
+    unsafe { libc::freeifaddrs(list) };
+    out
+}
+
+/// The warning for a phone page on a loopback address: no phone reaches it. Names this
+/// machine's LAN addresses and how to serve on them.
+pub fn loopback_warning(bound: SocketAddr, lan: &[std::net::IpAddr]) -> Option<String> {
+    if !bound.ip().is_loopback() {
+        return None;
+    }
+    let port = bound.port();
+    let how = match lan {
+        [] => format!("this machine has no LAN address up: connect it to the phone's network, then serve with `--phone {port}` (every interface)"),
+        [one] => format!("serve with `--phone {port}` (every interface) or `--phone {one}:{port}`: this machine's LAN address is {one}"),
+        more => format!(
+            "serve with `--phone {port}` (every interface) or `--phone IP:{port}` with one of this machine's LAN addresses: {}",
+            more.iter().map(|a| a.to_string()).collect::<Vec<_>>().join(", ")
+        ),
+    };
+    Some(format!("the phone page is served on {bound}, a loopback address: no phone can reach it (the QR code works only in a browser on this machine); {how}"))
+}
+
 /// Tells the operator where to point the phone: the address as text and as a QR code, and the
 /// certificate's fingerprint (standard error, so that a redirected standard output keeps only
 /// the summary).
 fn announce(url: &str, fingerprint: &str, bound: SocketAddr) {
     use std::io::Write;
+    if let Some(w) = loopback_warning(bound, &lan_addresses()) {
+        tracing::warn!("{w}");
+    }
     // A JSON log takes nothing but JSON: the address and fingerprint as an event's fields.
     if crate::logging::json() {
         tracing::info!(%url, %bound, %fingerprint, "phone page served: open the url on the phone, accept the certificate of this fingerprint");
@@ -328,4 +382,37 @@ fn announce(url: &str, fingerprint: &str, bound: SocketAddr) {
     ));
     let _ = std::io::stderr().write_all(text.as_bytes());
     tracing::info!(%bound, %fingerprint, "phone page served");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_loopback_page_names_the_lan_addresses() {
+        let lo: SocketAddr = "127.0.0.1:8443".parse().unwrap();
+        let lan: Vec<std::net::IpAddr> =
+            vec!["192.168.1.20".parse().unwrap(), "10.0.0.5".parse().unwrap()];
+        let w = loopback_warning(lo, &lan).unwrap();
+        assert!(
+            w.contains("no phone can reach it") && w.contains("192.168.1.20, 10.0.0.5"),
+            "{w}"
+        );
+        assert!(w.contains("--phone 8443"), "{w}");
+        let w = loopback_warning(lo, &lan[..1]).unwrap();
+        assert!(w.contains("--phone 192.168.1.20:8443"), "{w}");
+        assert!(loopback_warning(lo, &[])
+            .unwrap()
+            .contains("no LAN address"));
+        assert_eq!(
+            loopback_warning("0.0.0.0:8443".parse().unwrap(), &lan),
+            None
+        );
+        assert_eq!(
+            loopback_warning("192.168.1.20:8443".parse().unwrap(), &lan),
+            None
+        );
+        // This machine's addresses are never loopback ones.
+        assert!(lan_addresses().iter().all(|a| !a.is_loopback()));
+    }
 }

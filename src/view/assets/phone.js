@@ -22,11 +22,14 @@ const HELLO_PERIOD_MS = 5000;
 const MAX_MESSAGE = 32 * 1024; // the daemon takes 64 KiB
 const QUEUE_MS = 60000; // frames kept while the link is down
 const KEYS = { Enter: 0x0a };
+const NO_MOTION_MS = 3000; // Start without a motion sample for this long: said, with the causes
+const CONFIRM_MS = 2000; // C sends only when tapped again within this
 
 const token = new URLSearchParams(location.search).get('token') || '';
 const phone = window.sfsPhone = {
   state: 'ready', rate_hz: 0, sent_packets: 0, sent_bytes: 0, queued: 0, dropped: 0,
   samples: 0, keys: 0, connections: 0, orientation: false, acc_sign: 0,
+  motion_events: 0, orientation_events: 0, refused_keys: 0, hint: null,
   feedback: null, errors: [],
 };
 
@@ -43,11 +46,26 @@ let orientation = null; // the latest absolute orientation: { R (row-major 3×3 
 let accVotes = 0;
 let typed = '';
 
+const STATE_LABELS = { waiting: 'waiting for motion', 'no-motion': 'no motion data' };
+
 function setState(s) {
   phone.state = s;
   const el = document.getElementById('state');
-  el.textContent = s;
+  el.textContent = STATE_LABELS[s] || s;
   el.className = `pill ${s}`;
+}
+
+// A line (or a list) under the curve that tells the operator what to do; null hides it.
+function hint(text, causes) {
+  phone.hint = text;
+  const el = document.getElementById('hint');
+  el.hidden = !text;
+  el.textContent = text || '';
+  if (causes) {
+    const ul = document.createElement('ul');
+    for (const c of causes) { const li = document.createElement('li'); li.textContent = c; ul.append(li); }
+    el.append(ul);
+  }
 }
 
 function push(frame) {
@@ -107,6 +125,7 @@ function toDevice(R, v) {
 }
 
 function onOrientation(e) {
+  if (e.alpha != null) phone.orientation_events += 1;
   let alpha = e.alpha;
   if (typeof e.webkitCompassHeading === 'number' && e.webkitCompassHeading >= 0) {
     alpha = 360 - e.webkitCompassHeading; // iOS: clockwise from north
@@ -120,6 +139,7 @@ function onOrientation(e) {
 
 function onMotion(e) {
   const a = e.accelerationIncludingGravity, r = e.rotationRate;
+  if (a && a.x != null) phone.motion_events += 1;
   if (!orientation || !a || a.x == null || !r || r.alpha == null) return;
   if (e.interval > 0) interval = interval ? 0.95 * interval + 0.05 * e.interval : e.interval;
   phone.rate_hz = interval ? 1000 / interval : 0;
@@ -148,11 +168,62 @@ function onMotion(e) {
     mag: mag.map((x) => wire.counts(x, MAG_LSB)),
   }));
   phone.samples += 1;
+  if (phone.samples === 1) firstSample();
   flush();
 }
 
+// The first sample: the link opens only now, so that a browser that sends no motion does not
+// connect, time out and reconnect forever.
+function firstSample() {
+  if (phone.state === 'no-motion') hint(null);
+  setState('connecting');
+  connect();
+}
+
+// Started, and no sample yet: why, as far as the page can tell.
+function noMotion() {
+  if (phone.samples > 0 || phone.state === 'stopped') return;
+  setState('no-motion');
+  const causes = [];
+  if (phone.motion_events === 0) {
+    causes.push('this browser sends no motion data: a desktop or laptop has no motion sensors; open the page on a phone');
+    causes.push('motion access was refused: allow it for this site (iOS: Settings › Safari › Motion & Orientation Access; Chrome: site settings › Motion sensors), then reload');
+    if (!window.isSecureContext) causes.push('the page is not on https: motion needs a secure page');
+  } else if (!phone.orientation) {
+    causes.push(phone.orientation_events === 0
+      ? 'the browser sends motion but no orientation: allow orientation access for this site, then reload'
+      : 'the browser gives no absolute orientation (no compass): the phone needs a magnetometer, and the browser must give north (Chrome and Safari do)');
+  } else {
+    causes.push('the phone is still settling: hold it flat and still a moment');
+  }
+  hint('No motion data since Start. Likely causes:', causes);
+}
+
+let confirmUntil = 0, confirmTimer = 0;
+
 function onKey(e) {
   const k = e.currentTarget.dataset.key;
+  // Keys mean something only while the sensors stream: refused before, with a hint.
+  if (!['streaming', 'connecting', 'reconnecting'].includes(phone.state)) {
+    phone.refused_keys += 1;
+    hint(phone.state === 'ready'
+      ? 'Press Start first: keys are sent only while the phone streams its motion.'
+      : `Key ${k} not sent: the phone is not streaming yet (${STATE_LABELS[phone.state] || phone.state}).`);
+    return;
+  }
+  // C throws a whole curve away: a second tap within 2 s confirms it.
+  const cButton = document.querySelector('[data-key="C"]');
+  if (k === 'C' && e.timeStamp > confirmUntil) {
+    confirmUntil = e.timeStamp + CONFIRM_MS;
+    cButton.classList.add('confirm');
+    hint('Tap C again to cancel the whole curve.');
+    clearTimeout(confirmTimer);
+    confirmTimer = setTimeout(() => { cButton.classList.remove('confirm'); if (phone.hint?.startsWith('Tap C')) hint(null); }, CONFIRM_MS);
+    return;
+  }
+  confirmUntil = 0;
+  cButton.classList.remove('confirm');
+  if (phone.hint) hint(null);
   const code = KEYS[k] ?? k.charCodeAt(0);
   push(wire.key(nextSeq(), { tUs: wire.tUs(e.timeStamp), key: code }));
   phone.keys += 1;
@@ -249,9 +320,9 @@ async function start() {
     window.addEventListener('deviceorientation', onOrientation);
   }
   document.getElementById('start').hidden = true;
-  setState('connecting');
+  setState('waiting');
   keepAwake();
-  connect();
+  setTimeout(noMotion, NO_MOTION_MS);
 }
 
 document.getElementById('start').addEventListener('click', start);
