@@ -187,7 +187,7 @@ fn lock(m: &Mutex<Mail>) -> std::sync::MutexGuard<'_, Mail> {
 
 fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
     let mut scan = Scan::default();
-    let mut pipeline = Pipeline::with_joins(settings.joins.clone());
+    let mut pipeline = Pipeline::with_joins(settings.joins.clone()).live();
     let mut update_ms = Vec::new();
     let mut settle_ms = Vec::new();
     let mut report = LiveReport::default();

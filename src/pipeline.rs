@@ -100,6 +100,13 @@ impl Products {
     }
 }
 
+/// Logs the warnings of a session's final reconstruction when it came from the live worker
+/// (whose updates logged them as provisional), with the usual rate limit.
+pub fn log_final(p: &Products) {
+    let mut log = crate::warning::LogLimiter::default();
+    p.warnings.iter().for_each(|w| log.log(w));
+}
+
 /// The reconstruction caches kept between runs over a growing scan: the pre-filtered curves
 /// and the symbolic factorisations (they change the time a run takes, not its result).
 #[derive(Debug, Default)]
@@ -123,6 +130,16 @@ impl Pipeline {
         Pipeline {
             joins,
             ..Self::default()
+        }
+    }
+
+    /// For the live updates of a scan still going on: what a run cannot do yet (no cycle, a
+    /// face along one curve both ways) is logged at info, not as a warning; the session's
+    /// final outputs say what is left ([`log_final`]).
+    pub fn live(self) -> Self {
+        Pipeline {
+            log: crate::warning::LogLimiter::provisional(),
+            ..self
         }
     }
 

@@ -773,6 +773,10 @@ impl Flow {
                 true,
             ),
         };
+        if !fresh {
+            // The live updates logged theirs as provisional: the final ones are warnings.
+            crate::pipeline::log_final(&products);
+        }
         products.write_glb(out_dir)?;
         if let Some(l) = &mut live_report {
             crate::memory::release_free_memory();

@@ -351,9 +351,21 @@ const REMEMBERED: usize = 4096;
 pub struct LogLimiter {
     counts: BTreeMap<&'static str, u64>,
     seen: HashSet<String>,
+    /// The warnings are of a scan still going on (a live update's): an open face or a curve
+    /// not yet joined is a normal intermediate state, logged at info ("for now: …"); the
+    /// final reconstruction's are warnings.
+    provisional: bool,
 }
 
 impl LogLimiter {
+    /// A limiter for the live updates of a scan still going on: its lines are at info level.
+    pub fn provisional() -> LogLimiter {
+        LogLimiter {
+            provisional: true,
+            ..LogLimiter::default()
+        }
+    }
+
     /// Logs `w` at warn level if the limit allows.
     pub fn log(&mut self, w: &Warning) {
         let text = w.to_string();
@@ -365,6 +377,12 @@ impl LogLimiter {
         }
         let n = self.counts.entry(w.code()).or_insert(0);
         *n += 1;
+        if self.provisional && !matches!(w, Warning::Keypad(_) | Warning::Acquisition(_)) {
+            if *n <= LOGGED_PER_KIND {
+                tracing::info!(kind = w.code(), "for now, while the scan goes on: {text}");
+            }
+            return;
+        }
         if *n <= LOGGED_PER_KIND {
             match w {
                 Warning::Keypad(k) => tracing::warn!("keypad: {k}"),

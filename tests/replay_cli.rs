@@ -341,3 +341,80 @@ fn issue_50_the_summary_says_what_was_made() {
         assert!(s.contains(want), "{want:?} not in:\n{s}");
     }
 }
+
+/// Issue 50 point 9: what a live update cannot do yet while the scan goes on (no cycle, a
+/// face along one curve both ways) is logged at info ("for now"), never as a warning; what is
+/// left when the session ends is a warning, once.
+#[test]
+fn issue_50_intermediate_states_are_not_warnings() {
+    let dir = tmpdir("replay-intermediate");
+    let cone =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("replay-logs/cone-morphorider.bin");
+    // Live updates come with the view; it serves on after the end, until interrupted.
+    let log = |cap: &std::path::Path, out: &std::path::Path| {
+        let err = out.with_extension("log");
+        let mut child = sfs()
+            .args(["--log", "info", "replay"])
+            .arg(cap)
+            .arg("--out")
+            .arg(out)
+            .args(["--view", "127.0.0.1:0"])
+            // As fast as an update per curve allows (faster, the curves come in one update).
+            .args(["--pace", "x50"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::fs::File::create(&err).unwrap())
+            .spawn()
+            .unwrap();
+        wait_for(
+            "the replay's end",
+            std::time::Duration::from_secs(60),
+            || {
+                std::fs::read(out.join("report.json"))
+                    .ok()
+                    .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+                    .is_some_and(|r| r["ended"] == "end_of_input")
+            },
+        );
+        let _ = std::process::Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status();
+        assert!(child.wait().unwrap().success());
+        std::fs::read_to_string(err).unwrap()
+    };
+    let warns = |log: &str, what: &str| {
+        log.lines()
+            .filter(|l| l.contains(" WARN ") && l.contains(what))
+            .count()
+    };
+    // The whole cone: its first curves close no loop; the last ones do.
+    let full = log(&cone, &dir.join("full"));
+    assert!(
+        full.lines()
+            .any(|l| l.contains(" INFO ")
+                && l.contains("for now, while the scan goes on: no surface")),
+        "the intermediate states are not said at all:\n{full}"
+    );
+    assert_eq!(warns(&full, ""), 0, "{full}");
+    assert_eq!(
+        read_report(&dir.join("full"))["warnings"],
+        serde_json::json!([])
+    );
+    // Cut after its third curve: the state it ends in is a warning, once.
+    let bytes = std::fs::read(&cone).unwrap();
+    let cut = dir.join("cut.bin");
+    let at = bytes.len() * 2 / 5;
+    let at = bytes[..at].iter().rposition(|&b| b == 0).unwrap() + 1;
+    std::fs::write(&cut, &bytes[..at]).unwrap();
+    let cut_log = log(&cut, &dir.join("cut"));
+    let report = read_report(&dir.join("cut"));
+    assert!(
+        report["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w.as_str().is_some_and(|w| w.starts_with("no surface"))),
+        "{}",
+        report["warnings"]
+    );
+    assert_eq!(warns(&cut_log, "no surface"), 1, "{cut_log}");
+}
