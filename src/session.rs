@@ -440,6 +440,8 @@ struct Flow {
     stall_after: Option<u64>,
     /// The phone page, told the open curve and the latest warning.
     phone: Option<std::sync::Arc<source::phone::Phone>>,
+    /// The monitor's state the view was last given.
+    monitor_shown: Option<crate::monitor::run::MonitorStatus>,
 }
 
 impl Flow {
@@ -454,6 +456,10 @@ impl Flow {
         started: Instant,
         view: Option<crate::view::View>,
     ) -> Result<Flow, SessionError> {
+        let mut monitor = monitor;
+        if let (Some(m), Some(_)) = (&mut monitor, &view) {
+            m.show();
+        }
         let live = if settings.live {
             Some(
                 crate::live::Live::spawn(crate::live::LiveSettings {
@@ -492,6 +498,7 @@ impl Flow {
             notifier: crate::service::Notifier::from_env(),
             stall_after: crate::service::stall_after_bytes(),
             phone: None,
+            monitor_shown: None,
         })
     }
 
@@ -539,11 +546,34 @@ impl Flow {
         v.link(&self.stats, state, self.acq.session_time());
     }
 
+    /// Gives the view the scan's warnings it has not shown yet.
+    fn show_warnings(&mut self) {
+        let Some(v) = &self.view else { return };
+        let warnings = &self.acq.scan().warnings;
+        if warnings.len() > self.warnings_shown {
+            v.warnings(&warnings[self.warnings_shown..]);
+            self.warnings_shown = warnings.len();
+        }
+    }
+
     /// Tells the view the link's counters, the curve being scanned and the new warnings.
     fn show(&mut self) {
         self.tell_phone();
         self.show_link();
-        let Some(v) = &self.view else { return };
+        let Some(v) = self.view.clone() else { return };
+        if let Some(m) = &mut self.monitor {
+            // A structure monitored: its shape, alarms and sensors; nothing of a scan.
+            if let Some(latest) = m.take_latest() {
+                v.monitor_shape(latest);
+            }
+            let status = m.status();
+            if self.monitor_shown.as_ref() != Some(&status) {
+                self.monitor_shown = Some(status.clone());
+                v.monitor(status);
+            }
+            self.show_warnings();
+            return;
+        }
         let curve = self.acq.open_curve().map(|c| crate::view::CurrentCurve {
             index: c.index,
             kind: c.kind.name(),
@@ -560,11 +590,7 @@ impl Flow {
             s.curves_accepted = self.acq.scan().curves.len();
             s.orientation = orientation;
         });
-        let warnings = &self.acq.scan().warnings;
-        if warnings.len() > self.warnings_shown {
-            v.warnings(&warnings[self.warnings_shown..]);
-            self.warnings_shown = warnings.len();
-        }
+        self.show_warnings();
         // The curve being scanned, every `view::PREVIEW_PERIOD` at most; cleared once when it ends.
         let due = self
             .preview_at
@@ -741,8 +767,21 @@ impl Flow {
         let (mut acq, mut monitor) = (self.acq, self.monitor);
         acq.close_array();
         feed_monitor(&mut monitor, &mut acq);
+        let mut warnings = None;
+        let view = self.view.clone();
         let monitor_report = monitor.map(|mut m| {
             m.finish();
+            // The view shows the last epochs too (`/network.glb` is `latest.glb`).
+            if let Some(v) = &view {
+                if let Some(latest) = m.take_latest() {
+                    v.monitor_shape(latest);
+                }
+                v.monitor(m.status());
+            }
+            if let Some(w) = m.unknown_sensors() {
+                tracing::warn!("{w}");
+                warnings = Some(w);
+            }
             m.report
         });
         let live = self.live.map(|l| l.finish());
@@ -782,6 +821,9 @@ impl Flow {
             crate::memory::release_free_memory();
             (l.rss_mb, l.peak_rss_mb) = crate::memory::rss_mb();
         }
+        // The monitor's warning (its sensors the layout does not place) with the products'.
+        let mut products = products;
+        products.warnings.extend(warnings);
         let mut report = Report::assemble(
             Progress {
                 source: description,

@@ -28,6 +28,15 @@ pub enum Warning {
     GlbNotWritten(crate::gltf_out::GltfError),
     /// The surface could not be encoded: `network.glb` holds the curves alone.
     SurfaceNotWritten(crate::gltf_out::GltfError),
+    /// Monitoring: sensors streamed that the layout does not place (ignored), said once for
+    /// all of them.
+    UnknownSensors {
+        sensors: Vec<u16>,
+        /// The layout's sensors.
+        placed: Vec<u16>,
+        /// No sensor of the layout streamed at all (no epoch): the wrong layout.
+        none_placed: bool,
+    },
 }
 
 impl Warning {
@@ -41,6 +50,7 @@ impl Warning {
             Warning::NoSurface(_) => "no_surface",
             Warning::GlbNotWritten(_) => "glb_not_written",
             Warning::SurfaceNotWritten(_) => "surface_not_written",
+            Warning::UnknownSensors { .. } => "unknown_sensors",
         }
     }
 
@@ -77,6 +87,22 @@ impl std::fmt::Display for Warning {
                 f,
                 "the surface is left out of network.glb (it holds the curves): {e}"
             ),
+            Warning::UnknownSensors {
+                sensors,
+                placed,
+                none_placed,
+            } => {
+                write!(
+                    f,
+                    "monitor: {} sensor(s) streamed that the layout does not place, ignored: {sensors:?}",
+                    sensors.len()
+                )?;
+                if *none_placed {
+                    write!(f, "; no sensor of the layout ({placed:?}) streamed at all: the wrong layout for this array, or one numbered otherwise ([monitor] layout)")
+                } else {
+                    write!(f, " (the layout places {placed:?}): sensors added to the array since the layout was made, or numbered otherwise")
+                }
+            }
         }
     }
 }

@@ -1319,3 +1319,67 @@ fn an_epoch_is_written_as_soon_as_it_ends() {
     }
     assert!(checked >= 25, "{checked}");
 }
+
+/// Issue 50 point 3, its last bullet: a capture whose sensors the layout does not place (a
+/// panel replayed with the riser's layout) is one warning in the log at the first such sensor
+/// and one at the end, one in `report.json` (`unknown_sensors`) and in the summary; not a
+/// line per sensor.
+#[test]
+fn issue_50_sensors_the_layout_does_not_place_are_one_warning() {
+    let dir = common::tmpdir("monitor-wrong-layout");
+    let panel = dir.join("panel");
+    let sim = common::sfs()
+        .args([
+            "--log",
+            "off",
+            "simulate",
+            "--structure",
+            "panel",
+            "--duration",
+            "5",
+            "--seed",
+            "1",
+            "--out",
+        ])
+        .arg(&panel)
+        .output()
+        .unwrap();
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    let riser = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/riser.toml");
+    let out = dir.join("out");
+    let o = common::sfs()
+        .args(["--log", "warn", "replay"])
+        .arg(panel.with_extension("bin"))
+        .arg("--config")
+        .arg(&riser)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let log = String::from_utf8(o.stderr).unwrap();
+    let lines: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains("layout does not place"))
+        .collect();
+    assert_eq!(lines.len(), 2, "{log}");
+    let report = common::read_report(&out);
+    assert_eq!(
+        report["warnings_by_code"]["unknown_sensors"], 1,
+        "{}",
+        report["warnings_by_code"]
+    );
+    let unknown = report["monitor"]["unknown_sensors"].as_array().unwrap();
+    assert!(unknown.len() > 1);
+    let text = report["warnings"][0].as_str().unwrap();
+    assert!(
+        text.contains(&format!("{} sensor(s)", unknown.len())),
+        "{text}"
+    );
+    let summary = String::from_utf8(o.stdout).unwrap();
+    assert!(summary.contains("unknown_sensors 1"), "{summary}");
+}

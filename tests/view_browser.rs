@@ -559,3 +559,84 @@ async fn issue_50_the_banner_turns_red_while_the_device_is_away() {
     assert_eq!(back["errors"], serde_json::json!([]), "console errors");
     browser.close().await;
 }
+
+/// Issue 50 point 3: the view of a monitoring session shows the structure: its latest shape
+/// coloured by displacement over its reference, the alarms and each sensor's health, and none
+/// of the scanning interface (`target/view/monitor.png` for a person to look at).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(sfs_chromium),
+    ignore = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
+)]
+async fn issue_50_a_monitoring_session_shows_the_structure() {
+    available();
+    let dir = tmpdir("view-browser-monitor");
+    let out = dir.join("out");
+    let riser = root().join("config/riser.toml");
+    let (port, _served) = serve_replay_on_a_free_port(
+        &root().join("replay-logs/riser-array.bin"),
+        &out,
+        None,
+        &["--config", riser.to_str().unwrap()],
+    );
+    let report = ended_report(&out, Duration::from_secs(60));
+    let browser = Browser::start(&dir.join("profile")).await;
+    browser.goto(&format!("http://127.0.0.1:{port}/")).await;
+    let s = browser
+        .watch(Duration::from_secs(20), |s| {
+            s["monitor"].is_object() && s["monitorStatus"].is_object()
+        })
+        .await
+        .pop()
+        .unwrap();
+    let m = &s["monitor"];
+    let layout = std::fs::read_to_string(&riser).unwrap();
+    assert!(m["curves"].as_u64().unwrap() > 0, "{m}");
+    assert_eq!(
+        m["coloured"], m["curves"],
+        "every curve coloured by displacement: {m}"
+    );
+    assert_eq!(m["referenceCurves"], m["curves"], "{m}");
+    let largest = m["largestMm"].as_f64().unwrap();
+    let max = report["monitor"]["last"]["max_displacement"]
+        .as_f64()
+        .unwrap()
+        * 1000.0;
+    assert!(
+        (largest - max).abs() < 0.01,
+        "{largest} mm drawn, {max} mm in the report"
+    );
+    let sensors = s["monitorStatus"]["sensors"].as_object().unwrap();
+    assert_eq!(sensors.len(), layout.matches("\nsensor = ").count());
+    assert!(sensors.values().all(|h| h == "ok"), "{sensors:?}");
+    // The scanning interface is not shown; the monitor's panel is.
+    let shown = browser
+        .execute(
+            "const d = (id) => getComputedStyle(document.getElementById(id)).display;
+             return { curve: d('curve'), accepted: d('accepted'), suspects: d('suspects'), closure: d('closure'),
+                      monitor: d('monitor'), alarms: document.getElementById('alarms').textContent,
+                      epoch: document.getElementById('monitor-epoch').textContent };",
+            serde_json::json!([]),
+        )
+        .await;
+    for id in ["curve", "accepted", "suspects", "closure"] {
+        assert_eq!(shown[id], "none", "{id} shown: {shown}");
+    }
+    assert_ne!(shown["monitor"], "none", "{shown}");
+    assert!(
+        shown["alarms"]
+            .as_str()
+            .unwrap()
+            .contains("max_displacement"),
+        "{shown}"
+    );
+    assert!(
+        shown["epoch"].as_str().unwrap().contains("epoch 300"),
+        "{shown}"
+    );
+    assert_eq!(s["errors"], serde_json::json!([]), "console errors");
+    browser
+        .screenshot(&root().join("target/view/monitor.png"))
+        .await;
+    browser.close().await;
+}

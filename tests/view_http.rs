@@ -424,3 +424,88 @@ async fn issue_35_each_update_publishes_its_curves_before_its_surface() {
         assert!(c > 0.0 && c < a, "{p}: curves {c} ms, update {a} ms");
     }
 }
+
+/// Issue 50 point 3: a monitoring session's view. `/network.glb` is the structure's latest
+/// shape, the bytes of `latest.glb`; `/status` carries `monitor` (the latest epoch, the
+/// reference, the alarms and every sensor's health); `/monitor.json` the shape and its
+/// reference with each point's displacement.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn issue_50_a_monitoring_session_is_served_as_a_structure() {
+    let dir = tmpdir("view-monitor");
+    let out = dir.join("out");
+    let (port, mut served) = common::view::serve_replay_on_a_free_port(
+        &root().join("replay-logs/riser-array.bin"),
+        &out,
+        None,
+        &[
+            "--config",
+            root().join("config/riser.toml").to_str().unwrap(),
+        ],
+    );
+    let report = ended_report(&out, Duration::from_secs(60));
+    let at = |p: &str| format!("http://127.0.0.1:{port}{p}");
+    let glb = reqwest::get(at("/network.glb")).await.unwrap();
+    assert_eq!(glb.status(), 200);
+    let glb = glb.bytes().await.unwrap();
+    assert_eq!(
+        &glb[..],
+        &std::fs::read(out.join("latest.glb")).unwrap()[..]
+    );
+    let status: serde_json::Value = reqwest::get(at("/status"))
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let m = &status["monitor"];
+    assert_eq!(m["epochs"], report["monitor"]["epochs"], "{m}");
+    assert_eq!(m["reference_ready"], true, "{m}");
+    let layout = std::fs::read_to_string(root().join("config/riser.toml")).unwrap();
+    let placed = layout.matches("\nsensor = ").count();
+    let sensors = m["sensors"].as_array().unwrap();
+    assert_eq!(sensors.len(), placed, "{m}");
+    assert!(sensors.iter().all(|s| s["health"] == "ok"), "{m}");
+    assert_eq!(m["last"], report["monitor"]["last"]);
+    let alarms = m["alarms"].as_array().unwrap();
+    assert_eq!(
+        alarms.len(),
+        layout.matches("[[monitor.alarm]]").count(),
+        "{m}"
+    );
+    assert!(
+        alarms
+            .iter()
+            .all(|a| a["metric"].is_string() && a["raised"].is_boolean()),
+        "{m}"
+    );
+    let shape: serde_json::Value = reqwest::get(at("/monitor.json"))
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let curves = shape["curves"].as_array().unwrap();
+    assert!(!curves.is_empty());
+    assert_eq!(shape["reference"].as_array().unwrap().len(), curves.len());
+    let mut largest = 0f64;
+    for c in curves {
+        let d = c["displacement_m"]
+            .as_array()
+            .expect("displacement per point");
+        assert_eq!(d.len(), c["points"].as_array().unwrap().len());
+        for v in d {
+            let v = v.as_f64().unwrap();
+            assert!(v.is_finite() && v >= 0.0);
+            largest = largest.max(v);
+        }
+    }
+    // The shape drawn is the last epoch's: its largest displacement is the report's (to f32).
+    let max = report["monitor"]["last"]["max_displacement"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        (largest - max).abs() <= 1e-6 + 1e-5 * max,
+        "{largest} vs {max}"
+    );
+    interrupt(&mut served);
+}

@@ -133,6 +133,53 @@ pub struct MonitorReport {
     pub surface_factorisations: usize,
 }
 
+/// What the live view shows of a monitoring session (`/status` `monitor`).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct MonitorStatus {
+    /// Session time of the latest epoch, s.
+    pub epoch_t_s: Option<f64>,
+    pub epochs: u64,
+    pub failed: u64,
+    /// Why epochs fail, while they do.
+    pub failing: Option<String>,
+    /// Epochs in the reference so far, of how many (`ready` once complete or from a file).
+    pub reference_epochs: usize,
+    pub reference_of: usize,
+    pub reference_ready: bool,
+    /// The latest epoch's metrics against the reference.
+    pub last: Option<Metrics>,
+    pub alarms: Vec<AlarmStatus>,
+    /// Every sensor of the layout: `ok`, or why it is left out (missing, saturated,
+    /// disturbed).
+    pub sensors: Vec<SensorStatus>,
+    /// Sensors streaming that the layout does not place.
+    pub unknown_sensors: Vec<u16>,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct AlarmStatus {
+    pub metric: &'static str,
+    pub threshold: f64,
+    pub raised: bool,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct SensorStatus {
+    pub sensor: u16,
+    pub health: &'static str,
+}
+
+/// The latest shape for the view: `latest.glb`'s bytes, and the shape and its reference as
+/// JSON (`GET /monitor.json`): `{ "t_s", "curves": [{ "curve", "points": [[x, y, z]…],
+/// "displacement_m": [d…] | null }], "reference": [{ "curve", "points" }] }`, points in the
+/// glTF frame with the anchor node at the origin.
+#[derive(Debug, Clone)]
+pub struct LatestShape {
+    pub t_s: f64,
+    pub glb: Vec<u8>,
+    pub json: String,
+}
+
 /// How a monitor starts in its directory.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Begin {
@@ -190,6 +237,11 @@ pub struct Monitor {
     pub report: MonitorReport,
     /// The Prometheus metrics of the latest epoch (served by the view's server).
     pub metrics: crate::metrics::MonitorMetrics,
+    /// Session time of the latest epoch reconstructed.
+    last_t: Option<f64>,
+    /// Whether a view is shown (the latest shape is kept for it), and the shape not yet taken.
+    for_view: bool,
+    latest: Option<LatestShape>,
 }
 
 impl Monitor {
@@ -229,6 +281,9 @@ impl Monitor {
             csv_bytes: 0,
             report: MonitorReport::default(),
             metrics: Default::default(),
+            last_t: None,
+            for_view: false,
+            latest: None,
             cfg,
         };
         match begin {
@@ -259,6 +314,87 @@ impl Monitor {
         }
         m.open_csv()?;
         Ok(m)
+    }
+
+    /// Keeps the latest shape for a view ([`take_latest`](Self::take_latest)).
+    pub fn show(&mut self) {
+        self.for_view = true;
+    }
+
+    /// The latest shape written to `latest.glb` since the last call, for the view.
+    pub fn take_latest(&mut self) -> Option<LatestShape> {
+        self.latest.take()
+    }
+
+    /// What the view shows now.
+    pub fn status(&self) -> MonitorStatus {
+        let ready = self.fixed.is_some();
+        MonitorStatus {
+            epoch_t_s: self.last_t,
+            epochs: self.report.epochs,
+            failed: self.report.failed,
+            failing: self
+                .failing
+                .as_ref()
+                .map(|(since, why)| format!("since t = {since:.2} s: {why}")),
+            reference_epochs: if ready {
+                self.report.reference_epochs
+            } else {
+                self.reference.count()
+            },
+            reference_of: self.reference_epochs,
+            reference_ready: ready,
+            last: self.report.last,
+            alarms: self
+                .alarms
+                .iter()
+                .map(|a| AlarmStatus {
+                    metric: a.metric.name(),
+                    threshold: a.threshold,
+                    raised: a.is_raised(),
+                })
+                .collect(),
+            sensors: self
+                .known
+                .iter()
+                .map(|&sensor| SensorStatus {
+                    sensor,
+                    health: self.health.get(&sensor).copied().unwrap_or("ok"),
+                })
+                .collect(),
+            unknown_sensors: self.report.unknown_sensors.clone(),
+        }
+    }
+
+    /// The JSON of [`LatestShape`]: `now` and the reference (the fixed one, or the mean so far).
+    fn shape_json(&self, t: f64, now: &Shape) -> String {
+        let reference = self.fixed.clone().or_else(|| self.reference.reference());
+        let pts = |p: &[nalgebra::Vector3<f64>]| -> Vec<[f32; 3]> {
+            p.iter().map(crate::gltf_out::to_gltf).collect()
+        };
+        let curves: Vec<serde_json::Value> = now
+            .curves
+            .iter()
+            .map(|(index, p)| {
+                let r = reference
+                    .as_ref()
+                    .and_then(|r| r.curves.iter().find(|(i, _)| i == index))
+                    .filter(|(_, r)| r.len() == p.len());
+                let d = r.map(|(_, r)| {
+                    p.iter()
+                        .zip(r)
+                        .map(|(a, b)| (a - b).norm() as f32)
+                        .collect::<Vec<f32>>()
+                });
+                serde_json::json!({ "curve": index, "points": pts(p), "displacement_m": d })
+            })
+            .collect();
+        let reference: Vec<serde_json::Value> = reference
+            .iter()
+            .flat_map(|r| &r.curves)
+            .map(|(index, p)| serde_json::json!({ "curve": index, "points": pts(p) }))
+            .collect();
+        serde_json::json!({ "t_s": t, "curves": curves, "reference": reference }).to_string()
     }
 
     /// Resume: the session time from which the capture must be fed again to rebuild the
@@ -364,10 +500,16 @@ impl Monitor {
     pub fn feed(&mut self, e: &ArrayEpoch) {
         if !self.known.contains(&e.sensor) {
             if let Err(k) = self.report.unknown_sensors.binary_search(&e.sensor) {
-                tracing::warn!(
-                    "monitor: sensor {} streams but the layout does not place it; ignored",
-                    e.sensor
-                );
+                // Once, for the first: a wrong layout would say it for every sensor. The end
+                // of the session says which (one warning for all, in the report too).
+                if self.report.unknown_sensors.is_empty() {
+                    tracing::warn!(
+                        "monitor: sensor {} streams but the layout does not place it; ignored (any other such sensor is listed when the session ends)",
+                        e.sensor
+                    );
+                } else {
+                    tracing::debug!("monitor: sensor {} not in the layout either", e.sensor);
+                }
                 self.report.unknown_sensors.insert(k, e.sensor);
             }
             return;
@@ -412,6 +554,15 @@ impl Monitor {
             self.closed = Some(k);
             self.close(k as f64 / self.cfg.epoch_hz, window);
         }
+    }
+
+    /// The one warning for every sensor that streamed and that the layout does not place.
+    pub fn unknown_sensors(&self) -> Option<crate::warning::Warning> {
+        (!self.report.unknown_sensors.is_empty()).then(|| crate::warning::Warning::UnknownSensors {
+            sensors: self.report.unknown_sensors.clone(),
+            placed: self.known.iter().copied().collect(),
+            none_placed: self.report.epochs == 0,
+        })
     }
 
     /// Closes the windows still open (end of the session).
@@ -586,6 +737,7 @@ impl Monitor {
             tracing::info!("monitor: epochs reconstructed again from t = {t:.2} s (failing since {since:.2} s)");
         }
         let metrics = self.measure(&now);
+        self.last_t = Some(t);
         let raised = self.update_alarms(t, &metrics, quiet);
         let line = format!(
             "{t:.3},{:.6},{:.6},{:.6},{},{saturated},{disturbed},{}\n",
@@ -606,7 +758,12 @@ impl Monitor {
             .epochs
             .is_multiple_of(self.cfg.latest_every as u64)
         {
-            self.write_latest(t, &shape.positions);
+            if let Some(glb) = self.write_latest(t, &shape.positions) {
+                if self.for_view {
+                    let json = self.shape_json(t, &now);
+                    self.latest = Some(LatestShape { t_s: t, glb, json });
+                }
+            }
         }
         self.metrics
             .epoch_latency
@@ -772,8 +929,12 @@ impl Monitor {
         self.output(METRICS_FILE, written);
     }
 
-    /// Replaces `latest.glb` with the shape (and its surface when configured).
-    fn write_latest(&mut self, t: f64, positions: &sfs_geometry::network::poisson::Positions) {
+    /// Replaces `latest.glb` with the shape (and its surface when configured); its bytes.
+    fn write_latest(
+        &mut self,
+        t: f64,
+        positions: &sfs_geometry::network::poisson::Positions,
+    ) -> Option<Vec<u8>> {
         let surface = self.cfg.surface.as_ref().and_then(|sp| {
             let (result, ms) = crate::pipeline::surface_of(positions, sp, &mut self.surfacer);
             match result {
@@ -797,9 +958,12 @@ impl Monitor {
             self.output("the surface", Ok::<(), String>(()));
         }
         let path = self.dir.join(LATEST_FILE);
+        let glb = glb.map_err(|e| e.to_string());
         let written = glb
-            .map_err(|e| e.to_string())
-            .and_then(|b| crate::atomic::write_atomic(&path, &b).map_err(|e| e.to_string()));
+            .as_ref()
+            .map_err(Clone::clone)
+            .and_then(|b| crate::atomic::write_atomic(&path, b).map_err(|e| e.to_string()));
         self.output(LATEST_FILE, written);
+        glb.ok()
     }
 }

@@ -130,6 +130,10 @@ pub struct Status {
     /// The latest reconstruction's verdict, expected error and suspects (`report.json`
     /// `quality`; issue 49).
     pub quality: Option<crate::report::Quality>,
+    /// A monitoring session (`[monitor]`): the latest epoch, the reference, the alarms and
+    /// each sensor's health. The page then shows the structure, not the scanning interface.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub monitor: Option<crate::monitor::run::MonitorStatus>,
 }
 
 /// The phone page as every client of the view sees it.
@@ -403,6 +407,8 @@ struct Shared {
     suspected: Mutex<HashSet<(usize, Option<usize>, &'static str)>>,
     preview: Mutex<Option<Arc<str>>>,
     preview_generation: AtomicU64,
+    /// A monitoring session's latest shape and reference ([`View::monitor_json`]).
+    monitor_json: Mutex<Option<Arc<str>>>,
     /// Node positions of the latest network, world frame (where a preview starts).
     nodes: Mutex<std::collections::BTreeMap<u32, nalgebra::Vector3<f64>>>,
     /// The phone page's address with its token (kept out of [`Status`]: see
@@ -432,6 +438,7 @@ impl View {
                 suspected: Mutex::new(HashSet::new()),
                 preview: Mutex::new(None),
                 preview_generation: AtomicU64::new(0),
+                monitor_json: Mutex::new(None),
                 nodes: Mutex::new(Default::default()),
                 phone_url: Mutex::new(None),
             }),
@@ -646,6 +653,27 @@ impl View {
             serde_json::json!({ "update": live.updates, "curves": curves, "ended": ended })
                 .to_string(),
         );
+    }
+
+    /// A monitoring session's state now.
+    pub fn monitor(&self, status: crate::monitor::run::MonitorStatus) {
+        self.update(|s| s.monitor = Some(status));
+    }
+
+    /// A monitoring session wrote `latest.glb`: its bytes are `/network.glb`, the shape and its
+    /// reference `/monitor.json`; a `network` event says so.
+    pub fn monitor_shape(&self, latest: crate::monitor::run::LatestShape) {
+        *lock(&self.shared.glb) = Some(axum::body::Bytes::from(latest.glb));
+        *lock(&self.shared.monitor_json) = Some(latest.json.into());
+        self.send(
+            "network",
+            serde_json::json!({ "monitor_t_s": latest.t_s }).to_string(),
+        );
+    }
+
+    /// The latest shape of a monitoring session and its reference, JSON.
+    pub fn monitor_json(&self) -> Option<Arc<str>> {
+        lock(&self.shared.monitor_json).clone()
     }
 
     /// The latest `network.glb` bytes.

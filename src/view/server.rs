@@ -85,6 +85,7 @@ pub fn serve(
         .route("/", get(index))
         .route("/assets/{*path}", get(asset))
         .route("/network.glb", get(glb))
+        .route("/monitor.json", get(monitor_json))
         .route("/phone-qr.svg", get(phone_qr))
         .route("/status", get(status))
         .route("/metrics", get(metrics))
@@ -216,6 +217,24 @@ async fn glb(State(app): State<App>) -> Response {
         )
             .into_response(),
         None => (StatusCode::NOT_FOUND, "no network yet\n").into_response(),
+    }
+}
+
+async fn monitor_json(State(app): State<App>) -> Response {
+    match app.view.monitor_json() {
+        Some(json) => (
+            [
+                (header::CONTENT_TYPE, "application/json"),
+                (header::CACHE_CONTROL, "no-store"),
+            ],
+            json.to_string(),
+        )
+            .into_response(),
+        None => (
+            StatusCode::NOT_FOUND,
+            "no shape yet (a monitoring session shows its first after its first epochs)\n",
+        )
+            .into_response(),
     }
 }
 

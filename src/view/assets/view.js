@@ -12,6 +12,8 @@ const state = {
   ready: false, errors: [], updates: 0, curves: [], nodes: [], surfaceTriangles: 0,
   lastCurve: null, warnings: 0, events: { status: 0, curve: 0, curves: 0, network: 0, warning: 0, preview: 0 },
   status: null, previewPoints: 0, closure: [], marked: [],
+  // A monitoring session: the shape drawn (monitor) and the side panel (monitorStatus).
+  monitor: null, monitorStatus: null,
   // The latest network's joins (issue 34): joined nodes and proposed crossings, as drawn.
   joins: { joined: [], proposed: [], refused: [] }, joinMarks: 0,
   // Per curve brought in by a `network` event: from its E packet to the new network drawn
@@ -66,7 +68,10 @@ const marks = new THREE.Group();
 let surface = null;
 let preview = null;
 let framed = false;
-scene.add(network, labels, marks);
+const structure = new THREE.Group();
+scene.add(network, labels, marks, structure);
+// A monitoring session (the status carries `monitor`): the page shows the structure.
+let monitorMode = false;
 
 function resize() {
   const w = canvas.clientWidth, h = canvas.clientHeight;
@@ -204,6 +209,9 @@ const MATERIALS = {
   guide: new THREE.LineBasicMaterial({ color: COLOURS.guide }),
   latest: new THREE.LineBasicMaterial({ color: COLOURS.latest }),
   sigma: new THREE.LineBasicMaterial({ vertexColors: true }),
+  // A monitored structure: its reference shape, and its latest coloured by displacement.
+  reference: new THREE.LineBasicMaterial({ color: COLOURS.guide, transparent: true, opacity: 0.7 }),
+  displacement: new THREE.LineBasicMaterial({ vertexColors: true }),
   node: new THREE.PointsMaterial({ color: COLOURS.node, size: 6, sizeAttenuation: false }),
   preview: new THREE.LineDashedMaterial({ color: COLOURS.preview, dashSize: 0.01, gapSize: 0.006 }),
   surface: new THREE.MeshStandardMaterial({
@@ -386,6 +394,7 @@ let loading = null;
 // Curves announced by `network` events whose network is not drawn yet.
 const pendingEnded = [];
 async function loadNetwork() {
+  if (monitorMode) { loadShape(); return; }
   if (loading) { loading.again = true; return; }
   loading = { again: false };
   const ended = pendingEnded.splice(0);
@@ -409,6 +418,123 @@ async function loadNetwork() {
   const again = loading.again;
   loading = null;
   if (again) loadNetwork();
+}
+
+// The structure's latest shape and its reference (/monitor.json), fetched at each `network`
+// event of a monitoring session.
+let shapeLoading = null;
+async function loadShape() {
+  if (shapeLoading) { shapeLoading.again = true; return; }
+  shapeLoading = { again: false };
+  try {
+    const r = await fetch('/monitor.json', { cache: 'no-store' });
+    if (r.ok) drawShape(await r.json());
+  } catch (e) {
+    pageError('monitor.json: ' + e);
+  }
+  const again = shapeLoading.again;
+  shapeLoading = null;
+  if (again) loadShape();
+}
+
+// The colour scale's top, m: the max_displacement alarm's threshold when there is one (red
+// is the alarm), else the largest displacement drawn (at least 1 mm).
+function displacementTop(largest) {
+  const alarm = (state.status?.monitor?.alarms || []).find((a) => a.metric === 'max_displacement');
+  return alarm ? alarm.threshold : Math.max(largest, 1e-3);
+}
+
+function drawShape(d) {
+  clear(network); clear(labels); clear(marks); clear(structure);
+  if (surface) { scene.remove(surface); surface.geometry.dispose(); surface = null; }
+  const line = (points, material) => {
+    const g = new THREE.BufferGeometry().setAttribute('position', new THREE.Float32BufferAttribute(points.flat(), 3));
+    const l = new THREE.Line(g, material);
+    structure.add(l);
+    return l;
+  };
+  for (const c of d.reference) line(c.points, MATERIALS.reference);
+  let largest = 0;
+  for (const c of d.curves) if (c.displacement_m) for (const v of c.displacement_m) largest = Math.max(largest, v);
+  const top = displacementTop(largest);
+  let coloured = 0;
+  const box = new THREE.Box3();
+  for (const c of d.curves) {
+    const l = line(c.points, c.displacement_m ? MATERIALS.displacement : MATERIALS.latest);
+    if (c.displacement_m) {
+      const colours = new Float32Array(c.displacement_m.length * 3);
+      c.displacement_m.forEach((v, i) => sigmaColour(v / top).toArray(colours, 3 * i));
+      l.geometry.setAttribute('color', new THREE.BufferAttribute(colours, 3));
+      coloured += 1;
+    }
+    l.geometry.computeBoundingBox();
+    box.union(l.geometry.boundingBox);
+  }
+  const mm = (v) => String(Number((v * 1000).toPrecision(3)));
+  document.getElementById('displacement-mid').textContent = mm(top / 2);
+  document.getElementById('displacement-top').textContent = mm(top) + ' mm';
+  state.monitor = { t_s: d.t_s, curves: d.curves.length, referenceCurves: d.reference.length, coloured, topMm: top * 1000, largestMm: largest * 1000 };
+  state.updates += 1;
+  if (!framed && !box.isEmpty()) {
+    const size = box.getSize(new THREE.Vector3()).length();
+    const c = box.getCenter(new THREE.Vector3());
+    controls.target.copy(c);
+    camera.position.copy(c).add(new THREE.Vector3(0.8, 0.6, 0.9).multiplyScalar(size));
+    camera.near = size / 1000; camera.far = size * 100;
+    camera.updateProjectionMatrix();
+    controls.update();
+    framed = true;
+  }
+  draw();
+}
+
+// The monitor's side panel: the latest epoch, the reference, the metrics, the alarms and each
+// sensor's health.
+function showMonitor(m) {
+  if (!monitorMode) {
+    monitorMode = true;
+    document.body.classList.add('monitor');
+    glyph.visible = false;
+    framed = false;
+    loadShape();
+  }
+  const mm = (v) => `${(v * 1000).toFixed(1)} mm`;
+  text('monitor-epoch', m.epoch_t_s != null
+    ? `epoch ${m.epochs} at t = ${m.epoch_t_s.toFixed(1)} s${m.failed ? ` · ${m.failed} failed` : ''}`
+    : 'no epoch yet', !!m.failing);
+  if (m.failing) document.getElementById('monitor-epoch').title = m.failing;
+  text('monitor-reference', m.reference_ready
+    ? `reference of ${m.reference_epochs || 'a file\'s'} epochs`
+    : `building the reference: ${m.reference_epochs} of ${m.reference_of} epochs`);
+  text('monitor-metrics', m.last
+    ? `displacement max ${mm(m.last.max_displacement)} · mean ${mm(m.last.mean_displacement)} · curvature change max ${m.last.max_curvature_change.toFixed(3)} rad/m`
+    : '');
+  const alarms = document.getElementById('alarms');
+  alarms.replaceChildren(...(m.alarms.length ? m.alarms.map((a) => {
+    const li = document.createElement('li');
+    li.textContent = `${a.metric} > ${a.threshold}: ${a.raised ? 'RAISED' : 'quiet'}`;
+    li.className = a.raised ? 'raised' : '';
+    return li;
+  }) : [Object.assign(document.createElement('li'), { textContent: 'none configured' })]));
+  const sensors = document.getElementById('sensors');
+  const items = m.sensors.map((x) => {
+    const li = document.createElement('li');
+    li.textContent = `${x.sensor} ${x.health}`;
+    li.className = x.health;
+    return li;
+  });
+  for (const u of m.unknown_sensors) {
+    const li = document.createElement('li');
+    li.textContent = `${u} not in the layout`;
+    li.className = 'unknown';
+    items.push(li);
+  }
+  sensors.replaceChildren(...items);
+  state.monitorStatus = {
+    alarmsRaised: m.alarms.filter((a) => a.raised).length,
+    sensors: Object.fromEntries(m.sensors.map((x) => [x.sensor, x.health])),
+    unknown: m.unknown_sensors,
+  };
 }
 
 function text(id, s, bad) {
@@ -480,6 +606,7 @@ function showStatus(s) {
   }
   redraw();
   showLink(s);
+  if (s.monitor) { showMonitor(s.monitor); return; }
   if (s.curve) {
     const d = s.curve.distance_m != null ? `, ${s.curve.distance_m.toFixed(2)} m` : '';
     text('curve', `curve ${s.curve.index} (${s.curve.kind}): nodes ${s.curve.nodes.join(' → ') || '—'}, ${s.curve.samples} samples${d}`);
