@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The scaling plot of BENCHMARKS.md (issue 19, point 4): the CSV written by
+"""The scaling plot of the README and BENCHMARKS.md: the CSV written by
 `cargo run --release -p sfs-geometry --example scaling -- target/scaling.csv` drawn as two
 log-log panels (update time against surface vertices, against network curves), one line per
 timing column (cold, warm, and any added later), and a third (issue 35, point 3): the two
@@ -13,6 +13,19 @@ import math
 import sys
 
 COLOURS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd"]
+
+# What each column of the CSV is, for a reader of the README (BENCHMARKS.md has the details).
+LABELS = {
+    "cold": "a surface from scratch",
+    "warm": "the same, factorisation patterns kept",
+    "exact": "one more curve, surfaced exactly",
+    "provisional": "one more curve, faces it did not touch kept",
+    "again": "the same network again (a monitored epoch)",
+    "curves": "E to the new curves shown (the network)",
+    "surface": "then its surface",
+    "update": "E to the new surface shown (the whole update)",
+    "settle": "the exact update that follows while idle",
+}
 
 
 def panel(rows, series, x0, y0, w, h, title, xlabel):
@@ -48,7 +61,8 @@ def panel(rows, series, x0, y0, w, h, title, xlabel):
         out.append(f'<polyline points="{path}" fill="none" stroke="{colour}" stroke-width="2"/>')
         for x, y in line:
             out.append(f'<circle cx="{x:.1f}" cy="{y:.1f}" r="3" fill="{colour}"/>')
-        out.append(f'<text x="{x0 + 10}" y="{y0 + 18 + 16 * k}" font-size="12" fill="{colour}">{c[:-3]}</text>')
+        label = LABELS.get(c[:-3], c[:-3])
+        out.append(f'<text x="{x0 + 10}" y="{y0 + 18 + 16 * k}" font-size="12" fill="{colour}">{label}</text>')
     return out
 
 
@@ -56,9 +70,9 @@ def main():
     src, dst = sys.argv[1], sys.argv[2]
     with open(src, newline="") as f:
         rows = list(csv.DictReader(f))
-    body = panel(rows, "vertices", 70, 40, 380, 300, "surface size", "vertices")
-    body += panel(rows, "curves", 560, 40, 380, 300, "network size (about 20 k vertices)", "curves")
-    body += panel(rows, "session", 1050, 40, 380, 300, "a live update's two phases", "curves")
+    body = panel(rows, "vertices", 70, 40, 380, 300, "time (ms) against the surface's size", "surface vertices")
+    body += panel(rows, "curves", 560, 40, 380, 300, "time (ms) against the network's curves (20 k vertices)", "curves in the network")
+    body += panel(rows, "session", 1050, 40, 380, 300, "after E: what the operator waits for (ms)", "curves in the network")
     svg = (
         '<svg xmlns="http://www.w3.org/2000/svg" width="1470" height="400" font-family="sans-serif">'
         '<rect width="100%" height="100%" fill="white"/>' + "".join(body) + "</svg>\n"

@@ -192,6 +192,10 @@ async fn issue_50_an_unplugged_device_is_seen_while_it_is_away() {
         )
     })
     .await;
+    eprintln!(
+        "/status said the device was lost {:?} after the unplug",
+        unplugged.elapsed()
+    );
     assert_eq!(s["link"]["disconnects"], 1, "{}", s["link"]);
     assert!(
         s["link"]["since_unix_ms"].as_u64().is_some(),
