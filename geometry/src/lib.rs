@@ -14,12 +14,14 @@
 //!   its steps: assembly, energy, system, curvature guide, output; the faces kept between
 //!   surfaces, [`surface::faces`]); [`surface::SurfaceMesh`] is the output mesh.
 //! - Shared tools: [`sparse_llt`], the sparse Cholesky with a cached symbolic factorisation
-//!   ([`sparse_llt::SpdPattern`]) reused while only values change; [`union_find`], connected
+//!   ([`sparse_llt::SpdPattern`]) reused while only values change, and its candidate
+//!   fill-reducing order for networks of crossing curves, [`nested_dissection`]; [`union_find`], connected
 //!   components; [`rng`], the seeded random numbers of the tests and the simulator.
 //!
 //! Feature `serde`: `Serialize`/`Deserialize` for the input curves and the reports.
 
 pub mod curve;
+pub mod nested_dissection;
 pub mod network;
 pub mod qmethod;
 pub mod rng;

@@ -325,6 +325,9 @@ fn land_ratio(c: &Candidate) -> f64 {
     c.lands.map_or(f64::INFINITY, |(_, r)| r / c.offset)
 }
 
+/// Right-hand sides solved at once by the loop test's per-tag solves.
+const BATCH: usize = 8;
+
 fn drops(curves: &[UniformCurve]) -> Option<Drops> {
     let mut var: BTreeMap<u32, usize> = BTreeMap::new();
     let mut ids = Vec::new();
@@ -408,82 +411,112 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
         at.entry((s.curve, s.tags.0)).or_default().push((si, false));
         at.entry((s.curve, s.tags.1)).or_default().push((si, true));
     }
+    // Each tag's coupling: δ moves the curve's end(s) at the tag: e_s gains +δ where the tag
+    // is the end b, −δ where it is the end a. Solved for in batches of [`BATCH`] right-hand
+    // sides (one pass over the factor for each batch).
+    struct AtTag {
+        ci: usize,
+        tag: usize,
+        g: Vector3<f64>,
+        hdd: f64,
+        u: BTreeMap<usize, f64>,
+    }
+    let prepared: Vec<AtTag> = at
+        .iter()
+        .map(|(&(ci, tag), list)| {
+            let mut g = Vector3::zeros();
+            let mut hdd = 0.0;
+            let mut u: BTreeMap<usize, f64> = BTreeMap::new();
+            for &(si, is_b) in list {
+                let s = &segs[si];
+                let sign = if is_b { 1.0 } else { -1.0 };
+                g += resid(s) * (sign * s.c);
+                hdd += s.c;
+                // Coupling of δ with the nodes in e_s = x_b − x_a − d: ∂e/∂δ = sign.
+                *u.entry(s.b).or_default() += sign * s.c;
+                *u.entry(s.a).or_default() -= sign * s.c;
+            }
+            AtTag { ci, tag, g, hdd, u }
+        })
+        .collect();
     let mut tags = Vec::with_capacity(at.len());
-    for (&(ci, tag), list) in &at {
-        // δ moves the curve's end(s) at the tag: e_s gains +δ where the tag is the end b, −δ
-        // where it is the end a.
-        let mut g = Vector3::zeros();
-        let mut hdd = 0.0;
-        let mut u: BTreeMap<usize, f64> = BTreeMap::new();
-        for &(si, is_b) in list {
-            let s = &segs[si];
-            let sign = if is_b { 1.0 } else { -1.0 };
-            g += resid(s) * (sign * s.c);
-            hdd += s.c;
-            // Coupling of δ with the nodes in e_s = x_b − x_a − d: ∂e/∂δ = sign.
-            *u.entry(s.b).or_default() += sign * s.c;
-            *u.entry(s.a).or_default() -= sign * s.c;
+    for chunk in prepared.chunks(BATCH) {
+        let mut ys = vec![[0.0; BATCH]; n];
+        for (k, t) in chunk.iter().enumerate() {
+            for (&i, &ui) in &t.u {
+                ys[i][k] = ui;
+            }
         }
-        let mut y = vec![[0.0]; n];
-        for (&i, &ui) in &u {
-            y[i][0] = ui;
+        f.solve(&mut ys);
+        for (k, t) in chunk.iter().enumerate() {
+            let (ci, tag, g, hdd) = (t.ci, t.tag, t.g, t.hdd);
+            let y = |i: usize| ys[i][k];
+            let uy: f64 = t.u.iter().map(|(&i, &ui)| ui * y(i)).sum();
+            let sigma = hdd - uy;
+            if sigma.is_nan() || sigma <= 1e-9 * hdd {
+                continue; // detaching the tag frees nothing (the node holds only this curve)
+            }
+            let drop = g.norm_squared() / sigma;
+            // Let go, the tag's end moves by δ = −g/σ off its node, and the nodes by −y δ: it
+            // lands at x_v + (1 − y_v) δ. Only for the tags that stand out (one pass over the
+            // nodes each).
+            let lands = if explains(drop, energy, dof, SHARE, RATIO) {
+                // Not on a node of its own curve: one close along it is no other place.
+                let own: Vec<usize> = curves[ci].nodes.iter().map(|m| var[&m.1]).collect();
+                let v = var[&curves[ci].nodes[tag].1];
+                let shift = g / sigma;
+                let landing = x[v] - shift * (1.0 - y(v));
+                (0..n)
+                    .filter(|j| !own.contains(j))
+                    .map(|j| (ids[j], (x[j] + shift * y(j) - landing).norm()))
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+            } else {
+                None
+            };
+            tags.push(Candidate {
+                curve: ci,
+                tag,
+                drop,
+                offset: g.norm() / sigma,
+                lands,
+            });
         }
-        f.solve(&mut y);
-        let uy: f64 = u.iter().map(|(&i, &ui)| ui * y[i][0]).sum();
-        let sigma = hdd - uy;
-        if sigma.is_nan() || sigma <= 1e-9 * hdd {
-            continue; // detaching the tag frees nothing (the node holds only this curve)
-        }
-        let drop = g.norm_squared() / sigma;
-        // Let go, the tag's end moves by δ = −g/σ off its node, and the nodes by −y δ: it
-        // lands at x_v + (1 − y_v) δ. Only for the tags that stand out (one pass over the
-        // nodes each).
-        let lands = if explains(drop, energy, dof, SHARE, RATIO) {
-            // Not on a node of its own curve: one close along it is no other place.
-            let own: Vec<usize> = curves[ci].nodes.iter().map(|m| var[&m.1]).collect();
-            let v = var[&curves[ci].nodes[tag].1];
-            let shift = g / sigma;
-            let landing = x[v] - shift * (1.0 - y[v][0]);
-            (0..n)
-                .filter(|j| !own.contains(j))
-                .map(|j| (ids[j], (x[j] + shift * y[j][0] - landing).norm()))
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-        } else {
-            None
-        };
-        tags.push(Candidate {
-            curve: ci,
-            tag,
-            drop,
-            offset: g.norm() / sigma,
-            lands,
-        });
     }
     // Each segment with its length free: e_s(κ) = x_b − x_a − (1 + κ) d_s; the drop is
     // (c d·e)² / σ, σ = c |d|² − uᵀ L⁻¹ u with u = ± c d at its nodes (the Schur complement
-    // of κ), κ = c d·e / σ.
+    // of κ), κ = c d·e / σ. Four segments (their three columns each) a batch.
     let mut stretches = Vec::new();
-    for (si, s) in segs.iter().enumerate() {
-        let dd = s.d.norm_squared();
-        if s.a == s.b || dd <= 0.0 {
-            continue;
+    let checked: Vec<usize> = (0..segs.len())
+        .filter(|&si| segs[si].a != segs[si].b && segs[si].d.norm_squared() > 0.0)
+        .collect();
+    for chunk in checked.chunks(BATCH / 2) {
+        let mut ys = vec![[0.0; 3 * BATCH / 2]; n];
+        for (k, &si) in chunk.iter().enumerate() {
+            let s = &segs[si];
+            let u = s.d * s.c;
+            for d in 0..3 {
+                ys[s.b][3 * k + d] = u[d];
+                ys[s.a][3 * k + d] = -u[d];
+            }
         }
-        let mut y = vec![[0.0; 3]; n];
-        let u = s.d * s.c;
-        y[s.b] = [u.x, u.y, u.z];
-        y[s.a] = [-u.x, -u.y, -u.z];
-        f.solve(&mut y);
-        let uy: f64 = (0..3).map(|k| s.c * s.d[k] * (y[s.b][k] - y[s.a][k])).sum();
-        let sigma = s.c * dd - uy;
-        if sigma.is_nan() || sigma <= 1e-9 * s.c * dd {
-            continue; // its length is not checked by any loop
+        f.solve(&mut ys);
+        for (k, &si) in chunk.iter().enumerate() {
+            let s = &segs[si];
+            let dd = s.d.norm_squared();
+            let uy: f64 = (0..3)
+                .map(|d| s.c * s.d[d] * (ys[s.b][3 * k + d] - ys[s.a][3 * k + d]))
+                .sum();
+            let sigma = s.c * dd - uy;
+            if sigma.is_nan() || sigma <= 1e-9 * s.c * dd {
+                continue; // its length is not checked by any loop
+            }
+            let g = s.c * s.d.dot(&resid(s));
+            stretches.push(Stretch {
+                seg: si,
+                drop: g * g / sigma,
+                kappa: g / sigma,
+            });
         }
-        let g = s.c * s.d.dot(&resid(s));
-        stretches.push(Stretch {
-            seg: si,
-            drop: g * g / sigma,
-            kappa: g / sigma,
-        });
     }
     let segments = segs
         .iter()

@@ -508,7 +508,7 @@ fn optimise(
         return (x, report);
     }
     let (normal, entries) = NormalPattern::of(pb, p);
-    let symbolic = match pattern.pattern(3 * n, entries) {
+    let symbolic = match pattern.pattern_ordered(3 * n, entries, || Some(normal.order(n))) {
         Ok((s, _)) => s,
         Err(e) => {
             tracing::error!("regression: {e}");
@@ -695,6 +695,22 @@ impl NormalPattern {
             entries: entries.len(),
         };
         (pattern, entries)
+    }
+
+    /// A nested-dissection order of the `n` frames' blocks (the chains of the curves, tied at
+    /// the nodes), expanded to their 3 rows each: a candidate beside minimum degree.
+    fn order(&self, n: usize) -> Vec<usize> {
+        let mut adj = vec![Vec::new(); n];
+        for &(i, j) in &self.block_keys {
+            if i != j {
+                adj[i].push(j);
+                adj[j].push(i);
+            }
+        }
+        crate::nested_dissection::order(&adj)
+            .into_iter()
+            .flat_map(|b| [3 * b, 3 * b + 1, 3 * b + 2])
+            .collect()
     }
 
     /// The block of every (term, variable pair) of `t`: the terms keep their order and
