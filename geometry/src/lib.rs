@@ -25,6 +25,7 @@ pub mod nested_dissection;
 pub mod network;
 pub mod qmethod;
 pub mod rng;
+pub mod selected_inverse;
 pub mod sparse_llt;
 pub mod surface;
 pub mod union_find;

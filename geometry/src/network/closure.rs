@@ -35,6 +35,7 @@
 
 use super::prefilter::UniformCurve;
 use crate::curve::ANONYMOUS_NODE_BASE;
+use crate::selected_inverse::SelectedInverse;
 use crate::sparse_llt::SpdPattern;
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
@@ -325,9 +326,6 @@ fn land_ratio(c: &Candidate) -> f64 {
     c.lands.map_or(f64::INFINITY, |(_, r)| r / c.offset)
 }
 
-/// Right-hand sides solved at once by the loop test's per-tag solves.
-const BATCH: usize = 8;
-
 fn drops(curves: &[UniformCurve]) -> Option<Drops> {
     let mut var: BTreeMap<u32, usize> = BTreeMap::new();
     let mut ids = Vec::new();
@@ -397,6 +395,30 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
         vals[root] += mean_c;
     }
     let f = SpdPattern::new(n, &entries).ok()?.factor(&vals).ok()?;
+    // The inverse's entries the tests below need (σ of a tag: between the nodes at its
+    // segments' ends; of a stretch: across its segment), on the factor's pattern with the
+    // pairs of a tag's nodes added as explicit zeros: one selected inversion, not a solve
+    // per tag and per segment.
+    let mut at_nodes: BTreeMap<(usize, usize), Vec<usize>> = BTreeMap::new();
+    for s in &segs {
+        for (tag, _) in [(s.tags.0, ()), (s.tags.1, ())] {
+            let v = at_nodes.entry((s.curve, tag)).or_default();
+            v.extend([s.a, s.b]);
+        }
+    }
+    let (mut z_entries, mut z_vals) = (entries.clone(), vals.clone());
+    for nodes in at_nodes.values_mut() {
+        nodes.sort_unstable();
+        nodes.dedup();
+        for (k, &i) in nodes.iter().enumerate() {
+            for &j in &nodes[..k] {
+                z_entries.push((i, j));
+                z_vals.push(0.0);
+            }
+        }
+    }
+    let z = SelectedInverse::new(n, &z_entries, &z_vals).ok()?;
+    let zij = |i: usize, j: usize| z.get(i, j).expect("on the pattern: an entry of the matrix");
     f.solve(&mut rhs);
     let x: Vec<Vector3<f64>> = rhs.iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
     let resid = |s: &Segment| x[s.b] - x[s.a] - s.d;
@@ -412,8 +434,7 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
         at.entry((s.curve, s.tags.1)).or_default().push((si, true));
     }
     // Each tag's coupling: δ moves the curve's end(s) at the tag: e_s gains +δ where the tag
-    // is the end b, −δ where it is the end a. Solved for in batches of [`BATCH`] right-hand
-    // sides (one pass over the factor for each batch).
+    // is the end b, −δ where it is the end a.
     struct AtTag {
         ci: usize,
         tag: usize,
@@ -440,83 +461,66 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
         })
         .collect();
     let mut tags = Vec::with_capacity(at.len());
-    for chunk in prepared.chunks(BATCH) {
-        let mut ys = vec![[0.0; BATCH]; n];
-        for (k, t) in chunk.iter().enumerate() {
+    for t in &prepared {
+        let (ci, tag, g, hdd) = (t.ci, t.tag, t.g, t.hdd);
+        let uy: f64 =
+            t.u.iter()
+                .map(|(&i, &ui)| t.u.iter().map(|(&j, &uj)| ui * uj * zij(i, j)).sum::<f64>())
+                .sum();
+        let sigma = hdd - uy;
+        if sigma.is_nan() || sigma <= 1e-9 * hdd {
+            continue; // detaching the tag frees nothing (the node holds only this curve)
+        }
+        let drop = g.norm_squared() / sigma;
+        // Let go, the tag's end moves by δ = −g/σ off its node, and the nodes by −y δ
+        // (y = L⁻¹u): it lands at x_v + (1 − y_v) δ. Only for the tags that stand out (a
+        // solve and a pass over the nodes each).
+        let lands = if explains(drop, energy, dof, SHARE, RATIO) {
+            let mut y = vec![[0.0]; n];
             for (&i, &ui) in &t.u {
-                ys[i][k] = ui;
+                y[i][0] = ui;
             }
-        }
-        f.solve(&mut ys);
-        for (k, t) in chunk.iter().enumerate() {
-            let (ci, tag, g, hdd) = (t.ci, t.tag, t.g, t.hdd);
-            let y = |i: usize| ys[i][k];
-            let uy: f64 = t.u.iter().map(|(&i, &ui)| ui * y(i)).sum();
-            let sigma = hdd - uy;
-            if sigma.is_nan() || sigma <= 1e-9 * hdd {
-                continue; // detaching the tag frees nothing (the node holds only this curve)
-            }
-            let drop = g.norm_squared() / sigma;
-            // Let go, the tag's end moves by δ = −g/σ off its node, and the nodes by −y δ: it
-            // lands at x_v + (1 − y_v) δ. Only for the tags that stand out (one pass over the
-            // nodes each).
-            let lands = if explains(drop, energy, dof, SHARE, RATIO) {
-                // Not on a node of its own curve: one close along it is no other place.
-                let own: Vec<usize> = curves[ci].nodes.iter().map(|m| var[&m.1]).collect();
-                let v = var[&curves[ci].nodes[tag].1];
-                let shift = g / sigma;
-                let landing = x[v] - shift * (1.0 - y(v));
-                (0..n)
-                    .filter(|j| !own.contains(j))
-                    .map(|j| (ids[j], (x[j] + shift * y(j) - landing).norm()))
-                    .min_by(|a, b| a.1.total_cmp(&b.1))
-            } else {
-                None
-            };
-            tags.push(Candidate {
-                curve: ci,
-                tag,
-                drop,
-                offset: g.norm() / sigma,
-                lands,
-            });
-        }
+            f.solve(&mut y);
+            // Not on a node of its own curve: one close along it is no other place.
+            let own: Vec<usize> = curves[ci].nodes.iter().map(|m| var[&m.1]).collect();
+            let v = var[&curves[ci].nodes[tag].1];
+            let shift = g / sigma;
+            let landing = x[v] - shift * (1.0 - y[v][0]);
+            (0..n)
+                .filter(|j| !own.contains(j))
+                .map(|j| (ids[j], (x[j] + shift * y[j][0] - landing).norm()))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+        } else {
+            None
+        };
+        tags.push(Candidate {
+            curve: ci,
+            tag,
+            drop,
+            offset: g.norm() / sigma,
+            lands,
+        });
     }
     // Each segment with its length free: e_s(κ) = x_b − x_a − (1 + κ) d_s; the drop is
     // (c d·e)² / σ, σ = c |d|² − uᵀ L⁻¹ u with u = ± c d at its nodes (the Schur complement
-    // of κ), κ = c d·e / σ. Four segments (their three columns each) a batch.
+    // of κ), κ = c d·e / σ: uᵀ L⁻¹ u = c² |d|² r_ab, r_ab the resistance across the segment.
     let mut stretches = Vec::new();
-    let checked: Vec<usize> = (0..segs.len())
-        .filter(|&si| segs[si].a != segs[si].b && segs[si].d.norm_squared() > 0.0)
-        .collect();
-    for chunk in checked.chunks(BATCH / 2) {
-        let mut ys = vec![[0.0; 3 * BATCH / 2]; n];
-        for (k, &si) in chunk.iter().enumerate() {
-            let s = &segs[si];
-            let u = s.d * s.c;
-            for d in 0..3 {
-                ys[s.b][3 * k + d] = u[d];
-                ys[s.a][3 * k + d] = -u[d];
-            }
+    for (si, s) in segs.iter().enumerate() {
+        let dd = s.d.norm_squared();
+        if s.a == s.b || dd <= 0.0 {
+            continue;
         }
-        f.solve(&mut ys);
-        for (k, &si) in chunk.iter().enumerate() {
-            let s = &segs[si];
-            let dd = s.d.norm_squared();
-            let uy: f64 = (0..3)
-                .map(|d| s.c * s.d[d] * (ys[s.b][3 * k + d] - ys[s.a][3 * k + d]))
-                .sum();
-            let sigma = s.c * dd - uy;
-            if sigma.is_nan() || sigma <= 1e-9 * s.c * dd {
-                continue; // its length is not checked by any loop
-            }
-            let g = s.c * s.d.dot(&resid(s));
-            stretches.push(Stretch {
-                seg: si,
-                drop: g * g / sigma,
-                kappa: g / sigma,
-            });
+        let r_ab = zij(s.a, s.a) + zij(s.b, s.b) - 2.0 * zij(s.a, s.b);
+        let sigma = s.c * dd - s.c * s.c * dd * r_ab;
+        if sigma.is_nan() || sigma <= 1e-9 * s.c * dd {
+            continue; // its length is not checked by any loop
         }
+        let g = s.c * s.d.dot(&resid(s));
+        stretches.push(Stretch {
+            seg: si,
+            drop: g * g / sigma,
+            kappa: g / sigma,
+        });
     }
     let segments = segs
         .iter()
