@@ -8,10 +8,12 @@
 //! factorised with its symbolic factorisation kept. Each segment's drift `δ_s` (its
 //! displacement's error, variance `v_s = s_s² R_s` per axis, independent between segments)
 //! reaches the nodes through `L⁻¹`: the nodes' covariance is `Σ = K (Σ_s v_s g_s g_sᵀ) K`,
-//! `K = L⁻¹`, `g_s = (e_b − e_a)/R_s`, per axis. `K` is read one column per node (one sparse
-//! solve each, in batches; of each column only its differences across the segments are kept,
-//! #nodes by #segments, nothing #nodes²), which also gives every segment's redundancy
-//! `1 − R_eff/R`: the share of its drift the loops leave in the residual. A point between two
+//! `K = L⁻¹`, `g_s = (e_b − e_a)/R_s`, per axis. Every segment's redundancy `1 − R_eff/R`
+//! (the share of its drift the loops leave in the residual) comes from the entries of `K` on
+//! the factor's pattern ([`crate::selected_inverse`]); `Σ` is read a batch of columns at a
+//! time (`K e_i`, then `Σ e_i = K Gᵀ V G K e_i`: two sparse solves), of each column only its
+//! diagonal and its entries across the segments kept (memory #nodes, never #nodes × #segments
+//! nor #nodes²). A point between two
 //! tags is the bridge between their nodes: its covariance is theirs weighted by where it lies
 //! (`α = r_b/R`, `β = r_a/R`, `r_a`, `r_b` its resistances to each) plus `s_s² r_a r_b / R`.
 //!
@@ -253,45 +255,24 @@ impl MarginalsSolver {
                 vals[i] += mean_g.max(1.0);
             }
         }
+        // Each segment's redundancy, 1 − R_eff/R: the share of its drift the loops leave in
+        // the residual (Σ over the network: its loops). R_eff is the resistance across the
+        // segment, from the inverse's entries on the factor's pattern (a selected inversion).
+        let z = crate::selected_inverse::SelectedInverse::new(n, &entries, &vals)?;
         let f = self.pattern.factor(n, entries, &vals)?;
-        // Each segment's drift δ_s (variance s_s² R_s per axis) reaches the normal equations
-        // as g_s = (e_b − e_a)/R_s: Σ = K (Σ_s v_s g_s g_sᵀ) K, K = L⁻¹. Of each column of K
-        // only its differences across the segments are kept: kg[j][s] = (K g_s)_j.
-        let ns = segments.len();
-        let mut kg = vec![0.0; n * ns];
-        const BATCH: usize = 8;
-        for start in (0..n).step_by(BATCH) {
-            let mut cols = vec![[0.0; BATCH]; n];
-            let width = BATCH.min(n - start);
-            for (k, col) in cols[start..start + width].iter_mut().enumerate() {
-                col[k] = 1.0;
-            }
-            f.solve(&mut cols);
-            for (k, row) in kg[start * ns..(start + width) * ns]
-                .chunks_mut(ns.max(1))
-                .enumerate()
-            {
-                for (si, sg) in segments.iter().enumerate() {
-                    if sg.spans() {
-                        row[si] = (cols[sg.b][k] - cols[sg.a][k]) / sg.r;
-                    }
-                }
-            }
-        }
-        // Each segment's redundancy, 1 − R_eff/R (R_eff = R² g_sᵀ K g_s): the share of its
-        // drift the loops leave in the residual. Σ over the network: its loops.
         let red: Vec<f64> = segments
             .iter()
-            .enumerate()
-            .map(|(si, sg)| {
+            .map(|sg| {
                 if !sg.spans() {
                     // A loop of its own (a closed curve back to its node): all residual.
                     return if sg.r > 0.0 { 1.0 } else { 0.0 };
                 }
-                let gkg = (kg[sg.b * ns + si] - kg[sg.a * ns + si]) / sg.r;
-                (1.0 - gkg * sg.r).clamp(0.0, 1.0)
+                let k = |i: usize, j: usize| z.get(i, j).expect("an entry of the Laplacian");
+                let r_eff = k(sg.a, sg.a) + k(sg.b, sg.b) - 2.0 * k(sg.a, sg.b);
+                (1.0 - r_eff / sg.r).clamp(0.0, 1.0)
             })
             .collect();
+        drop(z);
         let loops: f64 = red.iter().sum();
         let chi2_of = |sg: &Segment| {
             positions
@@ -330,24 +311,59 @@ impl MarginalsSolver {
         out.noise.ratio = own.map(|o| o / s2_prior.max(f64::MIN_POSITIVE));
         out.noise.tau2 = prior.loop_share * s2_net * mean_h;
         out.noise.peak = peak(&segments, &red, &chi2_of, curves);
-        // u_j[s] = √v_s (K g_s)_j: Σ_ij = u_i · u_j per axis.
-        let whiten: Vec<f64> = segments
+        // Σ = K (Σ_s v_s g_s g_sᵀ) K per axis, v_s = s_s² R_s, g_s = (e_b − e_a)/R_s: read a
+        // batch of columns at a time (K e_i, then Σ e_i = K Gᵀ V G K e_i: two solves), of each
+        // only the diagonal and the entries across the segments kept (memory #nodes, not
+        // #nodes × #segments).
+        let weight_of: Vec<f64> = segments
             .iter()
             .zip(&s2_seg)
-            .map(|(sg, s2)| if sg.spans() { (s2 * sg.r).sqrt() } else { 0.0 })
+            .map(|(sg, s2)| {
+                if sg.spans() {
+                    s2 * sg.r / (sg.r * sg.r)
+                } else {
+                    0.0
+                }
+            })
             .collect();
-        let u: Vec<f64> = kg
-            .chunks(ns.max(1))
-            .flat_map(|c| c.iter().zip(&whiten).map(|(d, w)| d * w))
-            .collect();
-        drop(kg);
-        let sigma = |i: usize, k: usize| -> f64 {
-            u[i * ns..(i + 1) * ns]
-                .iter()
-                .zip(&u[k * ns..(k + 1) * ns])
-                .map(|(a, b)| a * b)
-                .sum()
-        };
+        let mut sigma_diag = vec![0.0; n];
+        let mut sigma_seg = vec![0.0; segments.len()];
+        // The segments at each node, to read the entries across them from its column.
+        let mut at_node: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for (si, sg) in segments.iter().enumerate() {
+            if sg.spans() && sg.a != sg.b {
+                at_node[sg.a].push(si);
+            }
+        }
+        const BATCH: usize = 8;
+        for start in (0..n).step_by(BATCH) {
+            let width = BATCH.min(n - start);
+            let mut cols = vec![[0.0; BATCH]; n];
+            for k in 0..width {
+                cols[start + k][k] = 1.0;
+            }
+            f.solve(&mut cols);
+            let mut q = vec![[0.0; BATCH]; n];
+            for (sg, w) in segments.iter().zip(&weight_of) {
+                if *w == 0.0 {
+                    continue;
+                }
+                for k in 0..width {
+                    let d = w * (cols[sg.b][k] - cols[sg.a][k]);
+                    q[sg.b][k] += d;
+                    q[sg.a][k] -= d;
+                }
+            }
+            f.solve(&mut q);
+            for k in 0..width {
+                let i = start + k;
+                sigma_diag[i] = q[i][k];
+                for &si in &at_node[i] {
+                    sigma_seg[si] = q[segments[si].b][k];
+                }
+            }
+        }
+        let sigma = |i: usize| sigma_diag[i];
         // The rigid fit per part: B_i = [I | −[p_i − c]×], weights m_i; Σ m and Σ (m ⊙ d)
         // (the fit's covariance with each node) as K (Σ_s v_s g_s g_sᵀ) K v.
         let pos: Vec<Vector3<f64>> = node_ids.iter().map(|k| positions.nodes[k]).collect();
@@ -360,12 +376,11 @@ impl MarginalsSolver {
         // Parts do not couple (L is block diagonal), so one solve serves them all.
         f.solve(&mut v);
         let mut lv = vec![[0.0; 4]; n];
-        for (sg, w) in segments.iter().zip(&whiten) {
+        for (sg, &c) in segments.iter().zip(&weight_of) {
             if !sg.spans() {
                 continue;
             }
-            // v_s g_s g_sᵀ v = (w² / R²)(v_b − v_a) at b, minus at a.
-            let c = w * w / (sg.r * sg.r);
+            // v_s g_s g_sᵀ v = (v_s / R²)(v_b − v_a) at b, minus at a.
             for d in 0..4 {
                 let x = c * (v[sg.b][d] - v[sg.a][d]);
                 lv[sg.b][d] += x;
@@ -375,18 +390,20 @@ impl MarginalsSolver {
         f.solve(&mut lv);
         rigid.finish(&lv);
         for (i, &id) in node_ids.iter().enumerate() {
-            let var = rigid.cov(i, i, sigma(i, i)).trace().max(0.0);
+            let var = rigid.cov(i, i, sigma(i)).trace().max(0.0);
             out.nodes.insert(id, var.sqrt());
         }
         out.noise.sigma_rms_m = rms(out.nodes.values().copied());
         // The points between two tags: the bridge between their nodes.
-        for (sg, s2) in segments.iter().zip(&s2_seg) {
+        for ((sg, s2), &kab) in segments.iter().zip(&s2_seg).zip(&sigma_seg) {
             let c = &curves[sg.curve];
-            let caa = rigid.cov(sg.a, sg.a, sigma(sg.a, sg.a)).trace();
-            let cbb = rigid.cov(sg.b, sg.b, sigma(sg.b, sg.b)).trace();
+            let caa = rigid.cov(sg.a, sg.a, sigma(sg.a)).trace();
+            let cbb = rigid.cov(sg.b, sg.b, sigma(sg.b)).trace();
             // Nodes joined by a segment of no length are in different parts: apart.
             let cab = if part[sg.a] == part[sg.b] {
-                rigid.cov(sg.a, sg.b, sigma(sg.a, sg.b)).trace()
+                rigid
+                    .cov(sg.a, sg.b, if sg.a == sg.b { sigma(sg.a) } else { kab })
+                    .trace()
             } else {
                 0.0
             };
