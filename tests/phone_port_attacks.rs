@@ -239,8 +239,7 @@ async fn issue_48_the_token_stays_with_the_phone() {
 
     // Another host reads the view: no token anywhere.
     let other = host(3, 1);
-    let (st, body) = view_get(other, view_port, "/status").await;
-    assert_eq!(st, 200);
+    let body = status_once_the_phone_is_up(other, view_port, "/status").await;
     assert!(!body.contains(&token), "{body}");
     assert!(body.contains("\"phone\":{\"page\":\"https://"), "{body}");
     let (st, body) = view_get(other, view_port, "/phone-qr.svg").await;
@@ -620,6 +619,21 @@ fn issue_48_sigint_stops_the_phone_daemon_at_any_moment() {
     }
 }
 
+/// `/status` (at `path`) from `from` once it carries the phone page: the view serves from the
+/// start, and is told the page's address a moment after `phone.url` is written (which
+/// `Daemon::start` waits for).
+async fn status_once_the_phone_is_up(from: std::net::IpAddr, port: u16, path: &str) -> String {
+    let t0 = Instant::now();
+    loop {
+        let (st, body) = view_get(from, port, path).await;
+        assert_eq!(st, 200, "{body}");
+        if body.contains("\"phone\":") || t0.elapsed() > Duration::from_secs(10) {
+            return body;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
 /// Point 2, the other way to the QR code: with `[view] token`, a client on another host that
 /// gives the view's token may write, and gets the phone's address; one without it gets 403 for
 /// every route.
@@ -644,8 +658,8 @@ async fn issue_48_the_views_token_shows_the_phone_address_to_another_host() {
     let other = host(4, 1);
     let (st, _) = view_get(other, view_port, "/status").await;
     assert_eq!(st, 403);
-    let (st, body) = view_get(other, view_port, &format!("/status?token={view_token}")).await;
-    assert_eq!(st, 200);
+    let body =
+        status_once_the_phone_is_up(other, view_port, &format!("/status?token={view_token}")).await;
     assert!(
         body.contains(&format!("\"phone_url\":\"{}\"", d.url)),
         "{body}"

@@ -226,13 +226,14 @@ mod tests {
     }
 
     /// A grid of `k` chains along x and `k` along y, each of `m` vertices between crossings.
+    #[allow(clippy::needless_range_loop)] // rows and columns of the crossings alike
     fn chain_grid(k: usize, m: usize) -> Vec<Vec<usize>> {
         let mut adj: Vec<Vec<usize>> = Vec::new();
-        let mut vertex = |adj: &mut Vec<Vec<usize>>| {
+        let vertex = |adj: &mut Vec<Vec<usize>>| {
             adj.push(Vec::new());
             adj.len() - 1
         };
-        let mut link = |adj: &mut Vec<Vec<usize>>, a: usize, b: usize| {
+        let link = |adj: &mut Vec<Vec<usize>>, a: usize, b: usize| {
             adj[a].push(b);
             adj[b].push(a);
         };

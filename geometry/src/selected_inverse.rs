@@ -120,7 +120,7 @@ impl SelectedInverse {
             }
             let dj = x[j];
             x[j] = 0.0;
-            if !(dj > 0.0) || !dj.is_finite() {
+            if dj.is_nan() || dj <= 0.0 || !dj.is_finite() {
                 return Err(SolveError::NonPositivePivot { index: order[j] });
             }
             d[j] = dj;
@@ -185,8 +185,11 @@ mod tests {
     use super::*;
     use crate::sparse_llt::SpdPattern;
 
+    /// A matrix's size, lower-triangle entries, their values, and its explicit zeros.
+    type Matrix = (usize, Vec<(usize, usize)>, Vec<f64>, Vec<(usize, usize)>);
+
     /// A grid Laplacian with a gauge, and explicit zeros between some far pairs.
-    fn grid(k: usize) -> (usize, Vec<(usize, usize)>, Vec<f64>, Vec<(usize, usize)>) {
+    fn grid(k: usize) -> Matrix {
         let n = k * k;
         let mut entries: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
         let mut values = vec![0.0; n];

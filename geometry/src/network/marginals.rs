@@ -355,8 +355,7 @@ impl MarginalsSolver {
                 }
             }
             f.solve(&mut q);
-            for k in 0..width {
-                let i = start + k;
+            for (k, i) in (start..start + width).enumerate() {
                 sigma_diag[i] = q[i][k];
                 for &si in &at_node[i] {
                     sigma_seg[si] = q[segments[si].b][k];
