@@ -335,15 +335,21 @@ function drawNetwork(lines, positions) {
   state.nodes = nodes;
   state.nodePositions = positions || {};
   drawMarks();
-  if (!framed && !box.isEmpty()) {
-    const c = box.getCenter(new THREE.Vector3());
-    controls.target.copy(c);
-    camera.position.copy(c).add(new THREE.Vector3(0.8, 0.6, 0.9).multiplyScalar(size));
-    camera.near = size / 1000; camera.far = size * 100;
-    camera.updateProjectionMatrix();
-    controls.update();
-    framed = true;
-  }
+  frame(box);
+}
+
+// Frames the first network (or structure) drawn in view: the camera on the box's centre, from
+// a corner, at its size.
+function frame(box) {
+  if (framed || box.isEmpty()) return;
+  const size = box.getSize(new THREE.Vector3()).length();
+  const c = box.getCenter(new THREE.Vector3());
+  controls.target.copy(c);
+  camera.position.copy(c).add(new THREE.Vector3(0.8, 0.6, 0.9).multiplyScalar(size));
+  camera.near = size / 1000; camera.far = size * 100;
+  camera.updateProjectionMatrix();
+  controls.update();
+  framed = true;
 }
 
 // Rebuilds the scene from a glb (the output contract: a `network` node whose mesh has a
@@ -475,16 +481,7 @@ function drawShape(d) {
   document.getElementById('displacement-top').textContent = mm(top) + ' mm';
   state.monitor = { t_s: d.t_s, curves: d.curves.length, referenceCurves: d.reference.length, coloured, topMm: top * 1000, largestMm: largest * 1000 };
   state.updates += 1;
-  if (!framed && !box.isEmpty()) {
-    const size = box.getSize(new THREE.Vector3()).length();
-    const c = box.getCenter(new THREE.Vector3());
-    controls.target.copy(c);
-    camera.position.copy(c).add(new THREE.Vector3(0.8, 0.6, 0.9).multiplyScalar(size));
-    camera.near = size / 1000; camera.far = size * 100;
-    camera.updateProjectionMatrix();
-    controls.update();
-    framed = true;
-  }
+  frame(box);
   draw();
 }
 
