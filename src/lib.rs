@@ -11,7 +11,8 @@
 //! - [`capture`]: lossless capture of live bytes, written before anything decodes them
 //!   (rotated with retention for unattended runs, each piece keeping the session's time);
 //!   [`clock`]: the session time from the device's stamps (wraps and reboots bridged).
-//! - [`link`]: statistics of the decoded link (packets, rejects, gaps, reboots, STATUS).
+//! - [`link`]: statistics of the decoded link (packets, rejects, gaps, reboots, STATUS), and
+//!   what the link does now (connected, silent, lost, reconnecting: [`link::LinkTracker`]).
 //! - [`sensor`]: packets → calibrated samples (HELLO scales, calibration, axis mapping).
 //! - [`orientation`]: samples → orientations of the frame [T B N] (TRIAD, the phone's
 //!   causal filter and its smoother of finished curves, rests from window statistics, the
@@ -32,7 +33,8 @@
 //!   defence against DNS rebinding).
 //! - [`view`]: the operator's live view, a web page served while the session runs (the
 //!   network, surface, curve being scanned, status and warnings, kept current by server-sent
-//!   events), with the Prometheus [`metrics`] on the same server.
+//!   events; for a monitored structure its shape, alarms and sensors), with the Prometheus
+//!   [`metrics`] on the same server.
 //! - [`report`]: `report.json`, assembled in one place; [`warning`]: the typed warnings
 //!   it lists; [`percentiles`]: the distributions it summarises; [`memory`]: resident size;
 //!   [`atomic`]: atomic replacement of output files.
