@@ -26,6 +26,16 @@ impl Shape {
                 .collect(),
         })
     }
+
+    /// Curve `index`'s points, when it has `len` of them (a curve resampled otherwise is not
+    /// compared point by point).
+    pub fn points_like(&self, index: usize, len: usize) -> Option<&[Vector3<f64>]> {
+        self.curves
+            .iter()
+            .find(|(i, _)| *i == index)
+            .map(|(_, p)| p.as_slice())
+            .filter(|p| p.len() == len)
+    }
 }
 
 /// Curvature (angle per length) at the interior points of a polyline.
@@ -62,12 +72,9 @@ pub fn compare(reference: &Shape, now: &Shape) -> Metrics {
     let mut m = Metrics::default();
     let mut sum = 0.0;
     for (index, pts) in &now.curves {
-        let Some((_, r)) = reference.curves.iter().find(|(i, _)| i == index) else {
+        let Some(r) = reference.points_like(*index, pts.len()) else {
             continue;
         };
-        if r.len() != pts.len() {
-            continue;
-        }
         for (a, b) in pts.iter().zip(r) {
             let d = (a - b).norm();
             m.max_displacement = m.max_displacement.max(d);

@@ -378,9 +378,8 @@ impl Monitor {
             .map(|(index, p)| {
                 let r = reference
                     .as_ref()
-                    .and_then(|r| r.curves.iter().find(|(i, _)| i == index))
-                    .filter(|(_, r)| r.len() == p.len());
-                let d = r.map(|(_, r)| {
+                    .and_then(|r| r.points_like(*index, p.len()));
+                let d = r.map(|r| {
                     p.iter()
                         .zip(r)
                         .map(|(a, b)| (a - b).norm() as f32)

@@ -395,30 +395,6 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
         vals[root] += mean_c;
     }
     let f = SpdPattern::new(n, &entries).ok()?.factor(&vals).ok()?;
-    // The inverse's entries the tests below need (σ of a tag: between the nodes at its
-    // segments' ends; of a stretch: across its segment), on the factor's pattern with the
-    // pairs of a tag's nodes added as explicit zeros: one selected inversion, not a solve
-    // per tag and per segment.
-    let mut at_nodes: BTreeMap<(usize, usize), Vec<usize>> = BTreeMap::new();
-    for s in &segs {
-        for (tag, _) in [(s.tags.0, ()), (s.tags.1, ())] {
-            let v = at_nodes.entry((s.curve, tag)).or_default();
-            v.extend([s.a, s.b]);
-        }
-    }
-    let (mut z_entries, mut z_vals) = (entries.clone(), vals.clone());
-    for nodes in at_nodes.values_mut() {
-        nodes.sort_unstable();
-        nodes.dedup();
-        for (k, &i) in nodes.iter().enumerate() {
-            for &j in &nodes[..k] {
-                z_entries.push((i, j));
-                z_vals.push(0.0);
-            }
-        }
-    }
-    let z = SelectedInverse::new(n, &z_entries, &z_vals).ok()?;
-    let zij = |i: usize, j: usize| z.get(i, j).expect("on the pattern: an entry of the matrix");
     f.solve(&mut rhs);
     let x: Vec<Vector3<f64>> = rhs.iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
     let resid = |s: &Segment| x[s.b] - x[s.a] - s.d;
@@ -460,6 +436,21 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
             AtTag { ci, tag, g, hdd, u }
         })
         .collect();
+    // The inverse's entries the tests below need (σ of a tag: between the nodes its coupling
+    // touches; of a stretch: across its segment), on the factor's pattern with the pairs of a
+    // tag's nodes added as explicit zeros: one selected inversion, not a solve per tag and per
+    // segment.
+    for t in &prepared {
+        let nodes: Vec<usize> = t.u.keys().copied().collect();
+        for (k, &i) in nodes.iter().enumerate() {
+            for &j in &nodes[..k] {
+                entries.push((i, j));
+                vals.push(0.0);
+            }
+        }
+    }
+    let z = SelectedInverse::new(n, &entries, &vals).ok()?;
+    let zij = |i: usize, j: usize| z.get(i, j).expect("on the pattern: an entry of the matrix");
     let mut tags = Vec::with_capacity(at.len());
     for t in &prepared {
         let (ci, tag, g, hdd) = (t.ci, t.tag, t.g, t.hdd);

@@ -328,12 +328,10 @@ impl MarginalsSolver {
             .collect();
         let mut sigma_diag = vec![0.0; n];
         let mut sigma_seg = vec![0.0; segments.len()];
-        // The segments at each node, to read the entries across them from its column.
+        // The segments from each node, to read the entries across them from its column.
         let mut at_node: Vec<Vec<usize>> = vec![Vec::new(); n];
         for (si, sg) in segments.iter().enumerate() {
-            if sg.spans() && sg.a != sg.b {
-                at_node[sg.a].push(si);
-            }
+            at_node[sg.a].push(si);
         }
         const BATCH: usize = 8;
         for start in (0..n).step_by(BATCH) {
@@ -362,7 +360,6 @@ impl MarginalsSolver {
                 }
             }
         }
-        let sigma = |i: usize| sigma_diag[i];
         // The rigid fit per part: B_i = [I | −[p_i − c]×], weights m_i; Σ m and Σ (m ⊙ d)
         // (the fit's covariance with each node) as K (Σ_s v_s g_s g_sᵀ) K v.
         let pos: Vec<Vector3<f64>> = node_ids.iter().map(|k| positions.nodes[k]).collect();
@@ -389,20 +386,18 @@ impl MarginalsSolver {
         f.solve(&mut lv);
         rigid.finish(&lv);
         for (i, &id) in node_ids.iter().enumerate() {
-            let var = rigid.cov(i, i, sigma(i)).trace().max(0.0);
+            let var = rigid.cov(i, i, sigma_diag[i]).trace().max(0.0);
             out.nodes.insert(id, var.sqrt());
         }
         out.noise.sigma_rms_m = rms(out.nodes.values().copied());
         // The points between two tags: the bridge between their nodes.
         for ((sg, s2), &kab) in segments.iter().zip(&s2_seg).zip(&sigma_seg) {
             let c = &curves[sg.curve];
-            let caa = rigid.cov(sg.a, sg.a, sigma(sg.a)).trace();
-            let cbb = rigid.cov(sg.b, sg.b, sigma(sg.b)).trace();
+            let caa = rigid.cov(sg.a, sg.a, sigma_diag[sg.a]).trace();
+            let cbb = rigid.cov(sg.b, sg.b, sigma_diag[sg.b]).trace();
             // Nodes joined by a segment of no length are in different parts: apart.
             let cab = if part[sg.a] == part[sg.b] {
-                rigid
-                    .cov(sg.a, sg.b, if sg.a == sg.b { sigma(sg.a) } else { kab })
-                    .trace()
+                rigid.cov(sg.a, sg.b, kab).trace()
             } else {
                 0.0
             };
