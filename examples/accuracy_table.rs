@@ -89,9 +89,13 @@ fn variant(
             );
         }
     }
-    let net = Reconstructor::new()
-        .run_joined(&scan.curves, &settings.1, &Default::default())
-        .map_err(|e| format!("{:?}", e.warnings))?;
+    let net = sfs_geometry::network::join::run_joined(
+        &mut Reconstructor::new(),
+        &scan.curves,
+        &settings.1,
+        &Default::default(),
+    )
+    .map_err(|e| format!("{:?}", e.warnings))?;
     let e = sfs::eval::evaluate(&sim.truth, &sfs::gltf_out::as_read_network(&net.positions))
         .map_err(|e| e.to_string())?;
     Ok((e.curves.mean_pct, e.curves.max_pct))

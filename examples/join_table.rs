@@ -106,9 +106,13 @@ fn cell(
             }
             sfs_geometry::network::join::apply_joins(&mut scan.curves, &joins);
         }
-        let net = Reconstructor::new()
-            .run_joined(&scan.curves, &NetworkParams::default(), js)
-            .map_err(|e| e.to_string())?;
+        let net = sfs_geometry::network::join::run_joined(
+            &mut Reconstructor::new(),
+            &scan.curves,
+            &NetworkParams::default(),
+            js,
+        )
+        .map_err(|e| e.to_string())?;
         let e = sfs::eval::evaluate(&sim.truth, &sfs::gltf_out::as_read_network(&net.positions))
             .map_err(|e| e.to_string())?;
         Ok::<_, String>((e.curves.mean_pct, net))

@@ -238,9 +238,13 @@ fn load_truth(path: &Path) -> Result<Truth, String> {
 /// The curve mean error of `curves` reconstructed (with the daemon's default joins, issue 34),
 /// % of the diagonal, or why there is none.
 fn score_curves(curves: &[Curve], truth: &Truth, network: &NetworkParams) -> Result<f64, String> {
-    let net = Reconstructor::new()
-        .run_joined(curves, network, &Default::default())
-        .map_err(|e| format!("{:?}", e.warnings))?;
+    let net = sfs_geometry::network::join::run_joined(
+        &mut Reconstructor::new(),
+        curves,
+        network,
+        &Default::default(),
+    )
+    .map_err(|e| format!("{:?}", e.warnings))?;
     let e = sfs::eval::evaluate(truth, &sfs::gltf_out::as_read_network(&net.positions))
         .map_err(|e| e.to_string())?;
     Ok(e.curves.mean_pct)

@@ -112,7 +112,7 @@ pub fn log_final(p: &Products) {
 #[derive(Debug, Default)]
 pub struct Pipeline {
     reconstructor: Reconstructor,
-    /// Nodes joined after the fact ([`Reconstructor::run_joined`]).
+    /// Nodes joined after the fact ([`sfs_geometry::network::join::run_joined`]).
     joins: JoinSettings,
     surfacer: Surfacer,
     /// The log's rate limit for the warnings of every run (the geometry logs none itself).
@@ -159,7 +159,12 @@ impl Pipeline {
     /// [`run`](Self::run), what the live view draws before the surface comes.
     pub fn reconstruct(&mut self, curves: &[Curve], network: &NetworkParams) -> Products {
         let t0 = Instant::now();
-        let net = self.reconstructor.run_joined(curves, network, &self.joins);
+        let net = sfs_geometry::network::join::run_joined(
+            &mut self.reconstructor,
+            curves,
+            network,
+            &self.joins,
+        );
         let mut out = Products {
             network_ms: t0.elapsed().as_secs_f64() * 1e3,
             ..Default::default()

@@ -4,7 +4,9 @@
 mod common;
 use common::*;
 use sfs::simulate::{self, scene};
-use sfs_geometry::network::join::{apply_joins, find_joins, Join, JoinParams, JoinSettings};
+use sfs_geometry::network::join::{
+    apply_joins, find_joins, run_joined, Join, JoinParams, JoinSettings,
+};
 use sfs_geometry::network::{NetworkParams, Reconstructor};
 use std::io::Write;
 use std::time::Duration;
@@ -89,9 +91,13 @@ fn issue_34_joins_settle_where_the_crossings_are() {
         ("ellipsoid-dense", 1.0 / 3.0),
     ] {
         let (curves, removed) = untagged_exact(name, fraction);
-        let net = Reconstructor::new()
-            .run_joined(&curves, &NetworkParams::default(), &JoinSettings::default())
-            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let net = run_joined(
+            &mut Reconstructor::new(),
+            &curves,
+            &NetworkParams::default(),
+            &JoinSettings::default(),
+        )
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
         let r = &net.report;
         assert!(
             r.joins_refused.is_empty(),
@@ -245,7 +251,7 @@ closed = true
         ..JoinSettings::default()
     };
     let p = NetworkParams::default();
-    let net = Reconstructor::new().run_joined(&curves, &p, &js).unwrap();
+    let net = run_joined(&mut Reconstructor::new(), &curves, &p, &js).unwrap();
     let r = &net.report;
     assert!(r.joined.is_empty(), "{:?}", r.joined);
     assert_eq!(r.joins_refused.len(), 1, "{:?}", r.joins_refused);
@@ -266,9 +272,13 @@ closed = true
     let plain = Reconstructor::new().run(&curves, &p).unwrap();
     assert_eq!(net.positions, plain.positions);
     // The default reach (15 mm) tries it too, and refuses it the same.
-    let net = Reconstructor::new()
-        .run_joined(&curves, &p, &JoinSettings::default())
-        .unwrap();
+    let net = run_joined(
+        &mut Reconstructor::new(),
+        &curves,
+        &p,
+        &JoinSettings::default(),
+    )
+    .unwrap();
     assert!(net.report.joined.is_empty(), "{:?}", net.report.joined);
     assert_eq!(net.report.joins_refused.len(), 1);
 }
@@ -297,13 +307,13 @@ fn issue_34_parallel_curves_20_mm_apart_get_no_join() {
                 };
                 let sim = simulate::run_with(&s, device, profile, seed, &m);
                 let scan = Acquisition::scan_bytes(&sim.bytes, AcquisitionConfig::default());
-                let net = Reconstructor::new()
-                    .run_joined(
-                        &scan.curves,
-                        &NetworkParams::default(),
-                        &JoinSettings::default(),
-                    )
-                    .unwrap();
+                let net = run_joined(
+                    &mut Reconstructor::new(),
+                    &scan.curves,
+                    &NetworkParams::default(),
+                    &JoinSettings::default(),
+                )
+                .unwrap();
                 let what = format!("{} {} seed {seed}", device.name(), profile.name());
                 for j in &net.report.joined {
                     assert!(on(j.node, j.curve), "{what}: false join {j:?}");
@@ -438,9 +448,13 @@ fn issue_34_crossings_nobody_tagged_are_proposed_or_joined() {
             truth.push((*node, where_));
         }
         let p = NetworkParams::default();
-        let proposed = Reconstructor::new()
-            .run_joined(&curves, &p, &JoinSettings::default())
-            .unwrap();
+        let proposed = run_joined(
+            &mut Reconstructor::new(),
+            &curves,
+            &p,
+            &JoinSettings::default(),
+        )
+        .unwrap();
         let r = &proposed.report;
         assert!(r.joined.is_empty(), "{name}: {:?}", r.joined);
         assert_eq!(r.proposed.len(), 2, "{name}: {:?}", r.proposed);
@@ -458,7 +472,7 @@ fn issue_34_crossings_nobody_tagged_are_proposed_or_joined() {
             untagged: true,
             ..JoinSettings::default()
         };
-        let joined = Reconstructor::new().run_joined(&curves, &p, &js).unwrap();
+        let joined = run_joined(&mut Reconstructor::new(), &curves, &p, &js).unwrap();
         let r = &joined.report;
         assert!(r.proposed.is_empty(), "{name}: {:?}", r.proposed);
         assert_eq!(r.joined.len(), 4, "{name}: {:?}", r.joined);

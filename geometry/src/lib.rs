@@ -8,7 +8,10 @@
 //!   weight; node tags).
 //! - [`qmethod`]: the weighted mean of orientations on SO(3) (Davenport's q-method).
 //! - [`network`]: tagged curves → filtered frames (pre-filter, loop-closure test of the tags,
-//!   regression on SO(3)) → positions of the network (Poisson), nodes shared.
+//!   regression on SO(3)) → positions of the network (Poisson), nodes shared
+//!   ([`network::Reconstructor`]); above it, the join passes ([`network::join::run_joined`]:
+//!   nodes joined after the fact, each pass a reconstruction; the reconstructor knows
+//!   nothing of joins).
 //! - [`surface`]: network → surface (cycles from normals, tessellation per cycle, cotangent
 //!   Laplacian, biharmonic propagation, the mean-curvature-guided fit, [`surface::fit`], in
 //!   its steps: assembly, energy, system, curvature guide, output; the faces kept between

@@ -6,10 +6,15 @@
 //! - [`regression`]: the frames regressed on SO(3)ᴺ over the whole network.
 //! - [`poisson`]: positions of the whole network from its tangents, nodes shared.
 //! - [`crease`]: the other face of each crease curve, from the curves at its nodes.
-//! - [`join`]: nodes tagged on one curve only, joined to a curve that passes them (issue 34).
 //!
 //! [`Reconstructor::run`] runs them over a scan, leaving out (with a warning) what cannot be
 //! used, and keeps the symbolic factorisations between runs.
+//!
+//! Above it, and unknown to it: [`join`], nodes tagged on one curve only joined to a curve
+//! that passes them (issue 34). [`join::run_joined`] drives a [`Reconstructor`] pass by pass
+//! (the joins' tags put into the scan, reconstructed with those tags free to slide,
+//! [`Reconstructor::run_sliding`], then moved where the loops put them), so a settle's data
+//! flows one way: scan → joins → reconstructor → network.
 
 pub mod closure;
 pub mod crease;
@@ -20,7 +25,6 @@ pub mod prefilter;
 pub mod regression;
 
 use crate::curve::Curve;
-use join::JoinSettings;
 use nalgebra::UnitQuaternion;
 use poisson::{PoissonSolver, Positions};
 use prefilter::{prefilter_with_kinks, PrefilterParams, UniformCurve};
@@ -74,7 +78,7 @@ pub struct NetworkReport {
     /// ([`marginals::Noise`]).
     pub noise: marginals::Noise,
     /// Nodes tagged on one curve joined to another curve that passes them, and crossings
-    /// nobody tagged joined under fresh nodes (issue 34; [`Reconstructor::run_joined`]).
+    /// nobody tagged joined under fresh nodes (issue 34; [`join::run_joined`]).
     pub joined: Vec<join::JoinReport>,
     /// Crossings nobody tagged, not joined (`join_untagged` off), for the operator to tag or
     /// refuse.
@@ -322,93 +326,10 @@ impl Reconstructor {
         self.run_inner(curves, p, true, &[]).map(|(n, _)| n)
     }
 
-    /// As [`run`](Self::run), with nodes joined after the fact (issue 34, [`join`]): a node
-    /// tagged on one curve only joins a curve that passes it ([`join::find_joins`]), and with
-    /// [`JoinSettings::untagged`] two curves that cross with no node there share a fresh one
-    /// ([`join::find_crossings`]); the others are proposed.
-    ///
-    /// The joins settle in passes, one reconstruction each: every joined tag slides along
-    /// its curve where the Poisson solve puts it ([`poisson::PoissonSolver::solve_sliding`],
-    /// the slides solved together), until none moves more than [`join::SETTLED_M`] (at most
-    /// [`join::MAX_PASSES`]); joins found in the moved network join in the next pass. Once
-    /// settled, the join whose loops misfit worst is refused when beyond
-    /// [`join::REFUSE_RATIO`] × the network's other loops, and the passes go on without it.
-    /// A refused join is never proposed again, so the passes end. Without any join the result
-    /// is [`run`](Self::run)'s, to the bit.
-    pub fn run_joined(
-        &mut self,
-        curves: &[Curve],
-        p: &NetworkParams,
-        js: &JoinSettings,
-    ) -> Result<Network, Unreconstructed> {
-        let (mut net, _) = self.run_inner(curves, p, false, &[])?;
-        if !js.enabled() {
-            return Ok(net);
-        }
-        let t0 = Instant::now();
-        // The reach of the joins: at least the set distance, and beyond the network's noise.
-        let lonely_reach = js
-            .params
-            .distance_m
-            .max(js.params.noise_factor * net.report.closure_misfit_m.unwrap_or(0.0));
-        let mut state = join::passes::Passes::new(curves, js, lonely_reach);
-        let mut moved = 0.0_f64;
-        loop {
-            let fresh = state.fresh(&net.positions);
-            let mut refusing = false;
-            if fresh.is_empty() && moved <= join::SETTLED_M {
-                // Settled: the join whose loops misfit worst, if beyond the others' noise.
-                if !state.refuse_worst() {
-                    break;
-                }
-                refusing = true;
-            } else if state.passes >= join::MAX_PASSES {
-                net.warnings
-                    .push(NetworkWarning::JoinsUnsettled { moved_m: moved });
-                break;
-            }
-            state.joins.extend(fresh);
-            state.passes += 1;
-            if state.joins.is_empty() {
-                net = self.run_inner(curves, p, false, &[])?.0;
-                break;
-            }
-            let (work, slides) = state.joined_scan(curves);
-            match self.run_inner(&work, p, false, &slides) {
-                Ok((n, slid)) => {
-                    net = n;
-                    moved = state.slide(&work, &slid);
-                    if refusing {
-                        moved = moved.max(1.0);
-                    }
-                }
-                // The joined network cannot be reconstructed: keep the last that could.
-                Err(e) => {
-                    state.drop_all(&format!(
-                        "the joined network could not be reconstructed: {e}"
-                    ));
-                    break;
-                }
-            }
-        }
-        let (joined, refused) = state.finish(curves);
-        net.report.joined = joined;
-        net.report.proposed = join::find_crossings(&net.positions, &js.params)
-            .into_iter()
-            .filter(|pr| !js.refuses(pr.curves[0], pr.curves[1]))
-            .collect();
-        net.warnings
-            .extend(refused.iter().cloned().map(NetworkWarning::JoinRefused));
-        net.report.joins_refused = refused;
-        net.report.join_passes = state.passes;
-        net.report.timings_ms.join = t0.elapsed().as_secs_f64() * 1e3;
-        Ok(net)
-    }
-
     /// The reconstruction with the tags `slides` (`(scan index of the curve, node)`) free to
     /// slide along their curve: for each, the slide the Poisson solve gives it (m, one
     /// Gauss–Newton step towards where the loops put the node), `None` for a tag not found.
-    /// What [`run_joined`](Self::run_joined) iterates.
+    /// What the join passes ([`join::run_joined`]) iterate.
     pub fn run_sliding(
         &mut self,
         curves: &[Curve],
@@ -417,6 +338,17 @@ impl Reconstructor {
     ) -> Result<(Network, Vec<Option<f64>>), Unreconstructed> {
         let (net, s) = self.run_inner(curves, p, false, slides)?;
         Ok((net, s.iter().map(|x| x.map(|x| x.sigma)).collect()))
+    }
+
+    /// As [`run_sliding`](Self::run_sliding), with each tag's [`Slide`]: where the loops put
+    /// it and how its loops fit (what the join passes above, [`join::run_joined`], iterate).
+    pub(crate) fn run_slides(
+        &mut self,
+        curves: &[Curve],
+        p: &NetworkParams,
+        slides: &[(usize, u32)],
+    ) -> Result<(Network, Vec<Option<Slide>>), Unreconstructed> {
+        self.run_inner(curves, p, false, slides)
     }
 
     /// The reconstruction, with the tags `slides` (`(scan index of the curve, node)`, issue
@@ -510,7 +442,7 @@ impl Reconstructor {
                 uncertainty: (t4 - t3).as_secs_f64() * 1e3,
                 ..Default::default()
             },
-            // The joins are run_joined's.
+            // The joins are the join passes' (join::run_joined).
             ..Default::default()
         };
         // The slides found, in order, back to the slides asked for.

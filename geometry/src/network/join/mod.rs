@@ -25,7 +25,7 @@
 //!   already there).
 //!
 //! [`apply_joins`] then puts the tag into the scan. The passes that make the joins settle,
-//! the parts put together and the refusals are [`super::Reconstructor::run_joined`]'s.
+//! the parts put together and the refusals are [`run_joined`]'s.
 //!
 //! ```
 //! use sfs_geometry::network::join::{find_joins, JoinParams};
@@ -67,6 +67,7 @@ pub(crate) mod passes;
 
 pub use crossings::{find_crossings, CROSSING_DEG};
 pub use parts::place_parts;
+pub use passes::run_joined;
 
 use super::poisson::{CurvePositions, Positions};
 use crate::curve::{Curve, CurveKind, Tag, ANONYMOUS_NODE_BASE};
@@ -80,7 +81,7 @@ pub struct JoinParams {
     pub distance_m: f64,
     /// Largest angle between the node's normal and the curve's there, degrees. Default 15.
     pub normal_deg: f64,
-    /// [`Reconstructor::run_joined`](super::Reconstructor::run_joined) reaches this many
+    /// [`run_joined`] reaches this many
     /// times the network's closure misfit ([`super::NetworkReport::closure_misfit_m`]) when
     /// that is more than `distance_m`: a noisy network's curves miss their crossings by more.
     /// Default 2; 0 when `[network] join_distance` is set (the distance is then the operator's).
@@ -372,7 +373,7 @@ pub fn find_joins(net: &Positions, p: &JoinParams) -> Vec<Join> {
 }
 
 /// As [`find_joins`], a node tagged on one curve only reaching `lonely_reach` (at least
-/// [`JoinParams::distance_m`]; [`Reconstructor::run_joined`](super::Reconstructor::run_joined)
+/// [`JoinParams::distance_m`]; [`run_joined`]
 /// scales it with the network's noise). A node two curves or more already share (a third
 /// curve passes it untagged) reaches [`JoinParams::distance_m`] only: a complete crossing
 /// with a third curve near is the rarer event, and it wants the stronger evidence.

@@ -78,7 +78,7 @@ fn meets(grid: &Grid, net: &Positions, l: &Lonely, t: &Vector3<f64>, normal_deg:
 /// incidence leaves the part free to slide along a curve). Candidates come from each
 /// incidence along every sample of the curve; each is checked in a grid, so the cost is the
 /// lonely nodes squared times the samples. Returns the parts moved; the joins
-/// ([`find_joins`]) are then found in the moved network.
+/// ([`find_joins`](super::find_joins)) are then found in the moved network.
 pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
     let reach = p.distance_m;
     if net.components < 2 || reach <= 0.0 || !reach.is_finite() {

@@ -1,15 +1,104 @@
-//! The passes of [`Reconstructor::run_joined`](crate::network::Reconstructor::run_joined)
-//! (issue 34): which joins are in, where their tags go next, which are refused and why.
+//! The join passes (issue 34, [`run_joined`]): a layer above the reconstructor, which knows
+//! nothing of joins. Each pass puts the joins' tags into the scan, has the
+//! [`Reconstructor`] reconstruct it with those tags free to slide, and reads back where the
+//! loops put each tag and how they fit: which joins are in, where their tags go next, which
+//! are refused and why.
 
 use super::{
     apply_joins, find_crossings, find_joins_within, place_parts, Join, JoinReport, JoinSettings,
-    RefusedJoin, MISFIT_FLOOR_M, REFUSE_RATIO, SLIDE_MARGIN_M,
+    RefusedJoin, MAX_PASSES, MISFIT_FLOOR_M, REFUSE_RATIO, SETTLED_M, SLIDE_MARGIN_M,
 };
 use crate::curve::{Curve, ANONYMOUS_NODE_BASE};
 use crate::network::closure::LoopFit;
 use crate::network::poisson::Positions;
-use crate::network::Slide;
+use crate::network::{
+    Network, NetworkParams, NetworkWarning, Reconstructor, Slide, Unreconstructed,
+};
 use std::collections::HashMap;
+use std::time::Instant;
+
+/// As [`Reconstructor::run`], with nodes joined after the fact (issue 34, [`super`]): a node
+/// tagged on one curve only joins a curve that passes it ([`super::find_joins`]), and with
+/// [`JoinSettings::untagged`](super::JoinSettings::untagged) two curves that cross with no node there share a fresh one
+/// ([`find_crossings`]); the others are proposed.
+///
+/// The joins settle in passes, one reconstruction each: every joined tag slides along
+/// its curve where the Poisson solve puts it ([`crate::network::poisson::PoissonSolver::solve_sliding`],
+/// the slides solved together), until none moves more than [`SETTLED_M`] (at most
+/// [`MAX_PASSES`]); joins found in the moved network join in the next pass. Once
+/// settled, the join whose loops misfit worst is refused when beyond
+/// [`super::REFUSE_RATIO`] × the network's other loops, and the passes go on without it.
+/// A refused join is never proposed again, so the passes end. Without any join the result
+/// is [`Reconstructor::run`]'s, to the bit.
+pub fn run_joined(
+    r: &mut Reconstructor,
+    curves: &[Curve],
+    p: &NetworkParams,
+    js: &JoinSettings,
+) -> Result<Network, Unreconstructed> {
+    let mut net = r.run(curves, p)?;
+    if !js.enabled() {
+        return Ok(net);
+    }
+    let t0 = Instant::now();
+    // The reach of the joins: at least the set distance, and beyond the network's noise.
+    let lonely_reach = js
+        .params
+        .distance_m
+        .max(js.params.noise_factor * net.report.closure_misfit_m.unwrap_or(0.0));
+    let mut state = Passes::new(curves, js, lonely_reach);
+    let mut moved = 0.0_f64;
+    loop {
+        let fresh = state.fresh(&net.positions);
+        let mut refusing = false;
+        if fresh.is_empty() && moved <= SETTLED_M {
+            // Settled: the join whose loops misfit worst, if beyond the others' noise.
+            if !state.refuse_worst() {
+                break;
+            }
+            refusing = true;
+        } else if state.passes >= MAX_PASSES {
+            net.warnings
+                .push(NetworkWarning::JoinsUnsettled { moved_m: moved });
+            break;
+        }
+        state.joins.extend(fresh);
+        state.passes += 1;
+        if state.joins.is_empty() {
+            net = r.run(curves, p)?;
+            break;
+        }
+        let (work, slides) = state.joined_scan(curves);
+        match r.run_slides(&work, p, &slides) {
+            Ok((n, slid)) => {
+                net = n;
+                moved = state.slide(&work, &slid);
+                if refusing {
+                    moved = moved.max(1.0);
+                }
+            }
+            // The joined network cannot be reconstructed: keep the last that could.
+            Err(e) => {
+                state.drop_all(&format!(
+                    "the joined network could not be reconstructed: {e}"
+                ));
+                break;
+            }
+        }
+    }
+    let (joined, refused) = state.finish(curves);
+    net.report.joined = joined;
+    net.report.proposed = find_crossings(&net.positions, &js.params)
+        .into_iter()
+        .filter(|pr| !js.refuses(pr.curves[0], pr.curves[1]))
+        .collect();
+    net.warnings
+        .extend(refused.iter().cloned().map(NetworkWarning::JoinRefused));
+    net.report.joins_refused = refused;
+    net.report.join_passes = state.passes;
+    net.report.timings_ms.join = t0.elapsed().as_secs_f64() * 1e3;
+    Ok(net)
+}
 
 /// A join in the passes.
 #[derive(Debug, Clone)]
