@@ -297,6 +297,11 @@ impl CachedPattern {
 }
 
 impl SpdFactor {
+    /// Dimension.
+    pub fn n(&self) -> usize {
+        self.n
+    }
+
     /// Stored values of the Cholesky factor.
     pub fn fill(&self) -> usize {
         self.values.len()

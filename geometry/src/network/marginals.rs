@@ -10,10 +10,11 @@
 //! reaches the nodes through `L⁻¹`: the nodes' covariance is `Σ = K (Σ_s v_s g_s g_sᵀ) K`,
 //! `K = L⁻¹`, `g_s = (e_b − e_a)/R_s`, per axis. Every segment's redundancy `1 − R_eff/R`
 //! (the share of its drift the loops leave in the residual) comes from the entries of `K` on
-//! the factor's pattern ([`crate::selected_inverse`]); `Σ` is read a batch of columns at a
-//! time (`K e_i`, then `Σ e_i = K Gᵀ V G K e_i`: two sparse solves), of each column only its
-//! diagonal and its entries across the segments kept (memory #nodes, never #nodes × #segments
-//! nor #nodes²). A point between two
+//! the factor's pattern ([`crate::selected_inverse`]); so do `Σ`'s diagonal and its entries
+//! across the segments: `Σ = K M K` with `M = Gᵀ V G` a Laplacian on the same segments is
+//! `−d/dt (L + tM)⁻¹`, one selected inversion on dual numbers
+//! ([`crate::selected_inverse::SelectedPattern::sandwich`]; memory the factor's fill, never
+//! #nodes × #segments nor #nodes², and no solve per node). A point between two
 //! tags is the bridge between their nodes: its covariance is theirs weighted by where it lies
 //! (`α = r_b/R`, `β = r_a/R`, `r_a`, `r_b` its resistances to each) plus `s_s² r_a r_b / R`.
 //!
@@ -154,6 +155,30 @@ pub struct Peak {
     pub ratio: f64,
 }
 
+/// Column `i` of `Σ = K M K` (`K e_i`, then `K M K e_i`: two solves), for a pair off the
+/// selected pattern (the ends of a segment of no length).
+fn column(
+    f: &crate::sparse_llt::SpdFactor,
+    segments: &[Segment],
+    weight_of: &[f64],
+    i: usize,
+) -> Vec<f64> {
+    let n = f.n();
+    let mut col = vec![[0.0]; n];
+    col[i][0] = 1.0;
+    f.solve(&mut col);
+    let mut q = vec![[0.0]; n];
+    for (sg, &w) in segments.iter().zip(weight_of) {
+        if sg.spans() {
+            let d = w * (col[sg.b][0] - col[sg.a][0]);
+            q[sg.b][0] += d;
+            q[sg.a][0] -= d;
+        }
+    }
+    f.solve(&mut q);
+    q.into_iter().map(|x| x[0]).collect()
+}
+
 /// Where a point lies on a chain: `r_a`, `r_b` its resistances to the two ends. Returns the
 /// ends' weights `(α, β)` in its conditional mean and its bridge variance `r_a r_b / R` (per
 /// unit `s²`).
@@ -258,8 +283,9 @@ impl MarginalsSolver {
         // Each segment's redundancy, 1 − R_eff/R: the share of its drift the loops leave in
         // the residual (Σ over the network: its loops). R_eff is the resistance across the
         // segment, from the inverse's entries on the factor's pattern (a selected inversion).
-        let z = crate::selected_inverse::SelectedInverse::new(n, &entries, &vals)?;
-        let f = self.pattern.factor(n, entries, &vals)?;
+        let selected = crate::selected_inverse::SelectedPattern::new(n, &entries)?;
+        let z = selected.inverse(&vals)?;
+        let f = self.pattern.factor(n, entries.clone(), &vals)?;
         let red: Vec<f64> = segments
             .iter()
             .map(|sg| {
@@ -311,10 +337,10 @@ impl MarginalsSolver {
         out.noise.ratio = own.map(|o| o / s2_prior.max(f64::MIN_POSITIVE));
         out.noise.tau2 = prior.loop_share * s2_net * mean_h;
         out.noise.peak = peak(&segments, &red, &chi2_of, curves);
-        // Σ = K (Σ_s v_s g_s g_sᵀ) K per axis, v_s = s_s² R_s, g_s = (e_b − e_a)/R_s: read a
-        // batch of columns at a time (K e_i, then Σ e_i = K Gᵀ V G K e_i: two solves), of each
-        // only the diagonal and the entries across the segments kept (memory #nodes, not
-        // #nodes × #segments).
+        // Σ = K M K per axis, M = Σ_s v_s g_s g_sᵀ (v_s = s_s² R_s, g_s = (e_b − e_a)/R_s: a
+        // Laplacian on the segments, weights v_s / R_s²): its entries on the factor's
+        // pattern, the diagonal and those across the segments, from one selected inversion
+        // on dual numbers (never a solve per node, nor #nodes × #segments).
         let weight_of: Vec<f64> = segments
             .iter()
             .zip(&s2_seg)
@@ -326,40 +352,31 @@ impl MarginalsSolver {
                 }
             })
             .collect();
-        let mut sigma_diag = vec![0.0; n];
-        let mut sigma_seg = vec![0.0; segments.len()];
-        // The segments from each node, to read the entries across them from its column.
-        let mut at_node: Vec<Vec<usize>> = vec![Vec::new(); n];
-        for (si, sg) in segments.iter().enumerate() {
-            at_node[sg.a].push(si);
+        let mut m_vals = vec![0.0; entries.len()];
+        let mut next = n;
+        for (sg, &w) in segments.iter().zip(&weight_of) {
+            if !sg.spans() {
+                continue;
+            }
+            m_vals[sg.a] += w;
+            m_vals[sg.b] += w;
+            m_vals[next] = -w;
+            next += 1;
         }
-        const BATCH: usize = 8;
-        for start in (0..n).step_by(BATCH) {
-            let width = BATCH.min(n - start);
-            let mut cols = vec![[0.0; BATCH]; n];
-            for k in 0..width {
-                cols[start + k][k] = 1.0;
-            }
-            f.solve(&mut cols);
-            let mut q = vec![[0.0; BATCH]; n];
-            for (sg, w) in segments.iter().zip(&weight_of) {
-                if *w == 0.0 {
-                    continue;
-                }
-                for k in 0..width {
-                    let d = w * (cols[sg.b][k] - cols[sg.a][k]);
-                    q[sg.b][k] += d;
-                    q[sg.a][k] -= d;
-                }
-            }
-            f.solve(&mut q);
-            for (k, i) in (start..start + width).enumerate() {
-                sigma_diag[i] = q[i][k];
-                for &si in &at_node[i] {
-                    sigma_seg[si] = q[segments[si].b][k];
-                }
-            }
-        }
+        let (_, sigma) = selected.sandwich(&vals, &m_vals)?;
+        let sigma_diag: Vec<f64> = (0..n)
+            .map(|i| sigma.get(i, i).expect("the diagonal"))
+            .collect();
+        // Across each segment (a loop back to its node: that node's own; the ends of a
+        // segment of no length are in different parts, where it is not read).
+        let sigma_seg: Vec<f64> = segments
+            .iter()
+            .map(|sg| {
+                sigma
+                    .get(sg.a, sg.b)
+                    .unwrap_or_else(|| column(&f, &segments, &weight_of, sg.a)[sg.b])
+            })
+            .collect();
         // The rigid fit per part: B_i = [I | −[p_i − c]×], weights m_i; Σ m and Σ (m ⊙ d)
         // (the fit's covariance with each node) as K (Σ_s v_s g_s g_sᵀ) K v.
         let pos: Vec<Vector3<f64>> = node_ids.iter().map(|k| positions.nodes[k]).collect();
