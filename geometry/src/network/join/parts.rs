@@ -6,6 +6,7 @@ use super::{curves_at_nodes, face_angle, faces, normals_fit, JoinParams};
 use crate::curve::{CurveKind, ANONYMOUS_NODE_BASE};
 use crate::network::poisson::Positions;
 use nalgebra::Vector3;
+use std::collections::HashMap;
 
 /// A node tagged by one curve only: its position and faces.
 struct Lonely {
@@ -69,6 +70,129 @@ fn meets(grid: &Grid, net: &Positions, l: &Lonely, t: &Vector3<f64>, normal_deg:
     })
 }
 
+impl Lonely {
+    /// A crease node with two faces: its normals are judged against a crease curve's near
+    /// samples together ([`normals_fit`]), not one sample at a time.
+    fn two_faced_crease(&self) -> bool {
+        self.kind == CurveKind::Crease && self.faces.len() >= 2
+    }
+}
+
+/// The incidences of a part's lonely nodes (`ours`, on the placed curves) and of the placed
+/// parts' (`theirs`, on the part's curves): every sample whose normals fit the node's, in a
+/// grid by the translation that puts the node on it, so that a translation's score is a
+/// look-up around it, not every lonely node against every curve.
+struct Votes {
+    /// `(lonely node: ours then theirs, sample, curve)` in the order the candidates are
+    /// considered.
+    candidates: Vec<(usize, usize, usize)>,
+    /// The same by translation (`x − node` for ours, `node − x` for theirs), in cells a
+    /// little wider than the reach; crease nodes with two faces left out (they are judged
+    /// by [`meets`], see [`Lonely::two_faced_crease`]).
+    cells: HashMap<[i64; 3], Vec<u32>>,
+    cell: f64,
+    reach: f64,
+}
+
+impl Votes {
+    #[allow(clippy::too_many_arguments)]
+    fn of(
+        net: &Positions,
+        ours: &[&Lonely],
+        theirs: &[&Lonely],
+        in_placed: &impl Fn(usize) -> bool,
+        in_part: &impl Fn(usize) -> bool,
+        normal_deg: f64,
+        reach: f64,
+    ) -> Votes {
+        let mut v = Votes {
+            candidates: Vec::new(),
+            cells: HashMap::default(),
+            // Wider by a hair: a translation within the reach of another by the exact test
+            // below is always in the 27 cells around it, whatever the rounding.
+            cell: reach * (1.0 + 1e-9),
+            reach,
+        };
+        let sides = [(ours, true), (theirs, false)];
+        let mut k0 = 0;
+        for (side, is_ours) in sides {
+            for (k, l) in side.iter().enumerate() {
+                for (ci, c) in net.curves.iter().enumerate() {
+                    let on = if is_ours { in_placed(ci) } else { in_part(ci) };
+                    if !on {
+                        continue;
+                    }
+                    for (j, x) in c.points.iter().enumerate() {
+                        // As `normals_fit` reads it: an angle that is not a number fits not.
+                        let fits = face_angle(&l.faces, &faces(c, j, 0.0)) <= normal_deg;
+                        if !fits {
+                            continue;
+                        }
+                        v.candidates.push((k0 + k, j, ci));
+                        if l.two_faced_crease() {
+                            continue;
+                        }
+                        let t = if is_ours { x - l.x } else { l.x - x };
+                        if let Some(key) = v.key(&t) {
+                            v.cells
+                                .entry(key)
+                                .or_default()
+                                .push((v.candidates.len() - 1) as u32);
+                        }
+                    }
+                }
+            }
+            k0 += side.len();
+        }
+        v
+    }
+
+    fn key(&self, t: &Vector3<f64>) -> Option<[i64; 3]> {
+        let k = t / self.cell;
+        k.iter()
+            .all(|v| v.is_finite() && v.abs() < 1e12)
+            .then(|| [k.x.floor() as i64, k.y.floor() as i64, k.z.floor() as i64])
+    }
+
+    /// The lonely nodes (crease nodes with two faces aside) that `t` puts within the reach
+    /// of a sample they fit: ours moved by `t`, theirs by `−t` ([`meets`]'s test).
+    fn count(
+        &self,
+        net: &Positions,
+        ours: &[&Lonely],
+        theirs: &[&Lonely],
+        t: &Vector3<f64>,
+    ) -> usize {
+        let Some(key) = self.key(t) else { return 0 };
+        let mut met: Vec<usize> = Vec::new();
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let Some(list) = self.cells.get(&[key[0] + dx, key[1] + dy, key[2] + dz])
+                    else {
+                        continue;
+                    };
+                    for &c in list {
+                        let (k, j, ci) = self.candidates[c as usize];
+                        if met.contains(&k) {
+                            continue;
+                        }
+                        let x = if k < ours.len() {
+                            ours[k].x + t
+                        } else {
+                            theirs[k - ours.len()].x + (-t)
+                        };
+                        if (net.curves[ci].points[j] - x).norm() <= self.reach {
+                            met.push(k);
+                        }
+                    }
+                }
+            }
+        }
+        met.len()
+    }
+}
+
 /// A network in parts (a crossing left untagged can cut it) has no relative placement of its
 /// parts: the Poisson solve gives each its own gauge. The orientations are absolute, so each
 /// part's shape is right and only its translation is unknown. This moves each part, greedily
@@ -117,12 +241,20 @@ pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
             if ours.len() + theirs.len() < 2 {
                 continue;
             }
+            // Each lonely node's incidences (the samples its normals fit, on the curves it
+            // may meet) by translation, for counting; a crease node with two faces is judged
+            // by `meets`, on a crease curve's near samples at once.
+            let votes = Votes::of(net, &ours, &theirs, &in_placed, &in_p, p.normal_deg, reach);
             let score = |t: &Vector3<f64>| -> usize {
-                ours.iter()
-                    .filter(|l| meets(&g_placed, net, l, t, p.normal_deg))
-                    .count()
+                votes.count(net, &ours, &theirs, t)
+                    + ours
+                        .iter()
+                        .filter(|l| l.two_faced_crease())
+                        .filter(|l| meets(&g_placed, net, l, t, p.normal_deg))
+                        .count()
                     + theirs
                         .iter()
+                        .filter(|l| l.two_faced_crease())
                         .filter(|l| meets(&g_part, net, l, &-t, p.normal_deg))
                         .count()
             };
@@ -133,34 +265,12 @@ pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
                     top.push((s, t));
                 }
             };
-            for l in &ours {
-                for (ci, c) in net
-                    .curves
-                    .iter()
-                    .enumerate()
-                    .filter(|(ci, _)| in_placed(*ci))
-                {
-                    for (j, x) in c.points.iter().enumerate() {
-                        if face_angle(&l.faces, &faces(c, j, 0.0)) <= p.normal_deg {
-                            consider(x - l.x);
-                        }
-                    }
-                    let _ = ci;
-                }
-            }
-            for l in &theirs {
-                for c in net
-                    .curves
-                    .iter()
-                    .enumerate()
-                    .filter(|(ci, _)| in_p(*ci))
-                    .map(|x| x.1)
-                {
-                    for (j, x) in c.points.iter().enumerate() {
-                        if face_angle(&l.faces, &faces(c, j, 0.0)) <= p.normal_deg {
-                            consider(l.x - x);
-                        }
-                    }
+            for &(k, j, ci) in &votes.candidates {
+                let x = net.curves[ci].points[j];
+                if k < ours.len() {
+                    consider(x - ours[k].x);
+                } else {
+                    consider(theirs[k - ours.len()].x - x);
                 }
             }
             let Some(&(s, t)) = top.iter().max_by_key(|x| x.0) else {
