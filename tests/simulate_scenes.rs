@@ -41,6 +41,36 @@ fn shipped_scenes_build_the_expected_networks() {
     ]);
 }
 
+/// Issue 51, point 4: the 100-curve grid is built in (`sfs simulate --scene ellipsoid-grid`),
+/// and its exact scan reconstructs as one network whose nodes lie where the scene's do
+/// (the distances between nodes one segment apart).
+#[test]
+fn issue_51_the_100_curve_grid_is_built_in_and_reconstructs() {
+    check_scenes(&[("ellipsoid-grid", 4432, 100, 100, 0)]);
+    let s = scene::builtin("ellipsoid-grid").unwrap();
+    let scan = s.exact_scan();
+    let net = sfs_geometry::network::Reconstructor::new()
+        .run(&scan.curves, &Default::default())
+        .unwrap();
+    assert_eq!(net.report.curves_used, 100);
+    assert_eq!(net.positions.components, 1);
+    let (mut sum, mut count, mut worst) = (0.0, 0, 0.0_f64);
+    for c in &s.curves {
+        for w in c.tags.windows(2) {
+            let (a, b) = (w[0].1, w[1].1);
+            let truth = (s.nodes[a as usize] - s.nodes[b as usize]).norm();
+            let got = (net.positions.nodes[&a] - net.positions.nodes[&b]).norm();
+            let e = (got - truth).abs();
+            sum += e * e;
+            count += 1;
+            worst = worst.max(e);
+        }
+    }
+    let rms = (sum / count as f64).sqrt();
+    assert!(count >= 8_000, "{count} segments");
+    assert!(rms < 1e-3 && worst < 5e-3, "rms {rms} m, worst {worst} m");
+}
+
 #[test]
 #[cfg_attr(
     not(sfs_paper_data),

@@ -81,6 +81,10 @@ pub const BUILTIN: &[(&str, &str)] = &[
         "ellipsoid-dense",
         include_str!("../../../config/scenes/ellipsoid-dense.toml"),
     ),
+    (
+        "ellipsoid-grid",
+        include_str!("../../../config/scenes/ellipsoid-grid.toml"),
+    ),
     ("lilium", include_str!("../../../config/scenes/lilium.toml")),
     (
         "parallel",
@@ -109,6 +113,11 @@ pub const BUILTIN: &[(&str, &str)] = &[
 
 /// The built-in scenes whose meshes are the paper's (not shipped: [`PAPER_DATA_ENV`]).
 pub const PAPER_SCENES: [&str; 2] = ["bumpy-cube", "lilium"];
+
+/// The built-in scenes of a size for the scaling benchmarks (BENCHMARKS.md, issue 51): the
+/// 100-curve grid, 6 h of scanning. The tests that take every scene curve by curve, settling
+/// each, leave them out (minutes each); their own tests are lighter.
+pub const LARGE_SCENES: [&str; 1] = ["ellipsoid-grid"];
 
 /// The environment variable naming the directory that holds the paper's meshes
 /// (`lilium.obj`, `bumpy-cube.obj`: libigl's tutorial data), which a scene names with
