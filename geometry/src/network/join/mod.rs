@@ -379,6 +379,15 @@ pub fn find_joins(net: &Positions, p: &JoinParams) -> Vec<Join> {
 /// with a third curve near is the rarer event, and it wants the stronger evidence.
 pub fn find_joins_within(net: &Positions, p: &JoinParams, lonely_reach: f64) -> Vec<Join> {
     let mut out = Vec::new();
+    // The curves that may come within a node's reach: those with a sample within the reach
+    // and a step of it (the closest point lies on a step whose nearer end is that close), in
+    // a grid of cells that size; the closest approach of each is then found as before.
+    let steps = net.curves.iter().flat_map(|c| {
+        let n = c.points.len().min(c.normals.len()).min(c.d.len());
+        c.points[..n].windows(2).map(|w| (w[1] - w[0]).norm())
+    });
+    let cell = lonely_reach.max(p.distance_m) + steps.fold(0.0, f64::max);
+    let grid = (cell > 0.0 && cell.is_finite()).then(|| grid::Grid::of(net, cell, |_| true));
     for (node, curves) in &curves_at_nodes(net) {
         let node = *node;
         if node >= ANONYMOUS_NODE_BASE {
@@ -412,11 +421,18 @@ pub fn find_joins_within(net: &Positions, p: &JoinParams, lonely_reach: f64) -> 
         let Some(pos) = net.nodes.get(&node).filter(|_| !own.is_empty()) else {
             continue;
         };
+        let near: Option<Vec<usize>> = grid.as_ref().map(|g| {
+            let mut v: Vec<usize> = g.around(pos).map(|(ci, _)| ci).collect();
+            v.sort_unstable();
+            v.dedup();
+            v
+        });
         let best = net
             .curves
             .iter()
             .enumerate()
             .filter(|&(ci, _)| !curves.contains(&ci))
+            .filter(|&(ci, _)| near.as_ref().is_none_or(|v| v.binary_search(&ci).is_ok()))
             .filter_map(|(_, c)| {
                 let Approach {
                     distance: dist,
