@@ -10,6 +10,7 @@ use std::collections::HashMap;
 
 /// A node tagged by one curve only: its position and faces.
 struct Lonely {
+    node: u32,
     curve: usize,
     kind: CurveKind,
     x: Vector3<f64>,
@@ -26,6 +27,7 @@ fn lonely_nodes(net: &Positions) -> Vec<Lonely> {
             let i = c.nodes.iter().find(|x| x.1 == node)?.0;
             let x = *net.nodes.get(&node)?;
             (i < c.normals.len()).then(|| Lonely {
+                node,
                 curve: curves[0],
                 kind: c.kind,
                 x,
@@ -89,9 +91,34 @@ struct Votes {
     /// The same by translation (`x − node` for ours, `node − x` for theirs), in cells a
     /// little wider than the reach; crease nodes with two faces left out (they are judged
     /// by [`meets`], see [`Lonely::two_faced_crease`]).
-    cells: HashMap<[i64; 3], Vec<u32>>,
+    /// Each cell's candidates sorted by lonely node, with the runs of each node (start, end):
+    /// a node met once is skipped whole.
+    cells: HashMap<[i64; 3], (Vec<u32>, Vec<(u32, u32)>)>,
     cell: f64,
     reach: f64,
+    /// Per lonely node, the last count that met it.
+    stamp: std::cell::RefCell<(Vec<u32>, u32)>,
+}
+
+/// The samples of each curve whose normals fit each lonely node's ([`normals_fit`] one
+/// sample at a time), found once for every part placed: translating parts moves no normal.
+struct Fits {
+    normal_deg: f64,
+    by: HashMap<(u32, usize), Vec<u32>>,
+}
+
+impl Fits {
+    fn of(&mut self, net: &Positions, l: &Lonely, ci: usize) -> &[u32] {
+        let normal_deg = self.normal_deg;
+        self.by.entry((l.node, ci)).or_insert_with(|| {
+            let c = &net.curves[ci];
+            (0..c.points.len())
+                // As `normals_fit` reads it: an angle that is not a number fits not.
+                .filter(|&j| face_angle(&l.faces, &faces(c, j, 0.0)) <= normal_deg)
+                .map(|j| j as u32)
+                .collect()
+        })
+    }
 }
 
 impl Votes {
@@ -102,7 +129,7 @@ impl Votes {
         theirs: &[&Lonely],
         in_placed: &impl Fn(usize) -> bool,
         in_part: &impl Fn(usize) -> bool,
-        normal_deg: f64,
+        fits: &mut Fits,
         reach: f64,
     ) -> Votes {
         let mut v = Votes {
@@ -112,6 +139,7 @@ impl Votes {
             // below is always in the 27 cells around it, whatever the rounding.
             cell: reach * (1.0 + 1e-9),
             reach,
+            stamp: std::cell::RefCell::new((vec![0; ours.len() + theirs.len()], 0)),
         };
         let sides = [(ours, true), (theirs, false)];
         let mut k0 = 0;
@@ -122,12 +150,8 @@ impl Votes {
                     if !on {
                         continue;
                     }
-                    for (j, x) in c.points.iter().enumerate() {
-                        // As `normals_fit` reads it: an angle that is not a number fits not.
-                        let fits = face_angle(&l.faces, &faces(c, j, 0.0)) <= normal_deg;
-                        if !fits {
-                            continue;
-                        }
+                    for &j in fits.of(net, l, ci) {
+                        let (j, x) = (j as usize, &c.points[j as usize]);
                         v.candidates.push((k0 + k, j, ci));
                         if l.two_faced_crease() {
                             continue;
@@ -137,12 +161,24 @@ impl Votes {
                             v.cells
                                 .entry(key)
                                 .or_default()
+                                .0
                                 .push((v.candidates.len() - 1) as u32);
                         }
                     }
                 }
             }
             k0 += side.len();
+        }
+        for (list, runs) in v.cells.values_mut() {
+            list.sort_by_key(|&c| v.candidates[c as usize].0);
+            let mut start = 0;
+            for i in 1..=list.len() {
+                let node = |i: usize| v.candidates[list[i] as usize].0;
+                if i == list.len() || node(i) != node(start) {
+                    runs.push((start as u32, i as u32));
+                    start = i;
+                }
+            }
         }
         v
     }
@@ -164,17 +200,21 @@ impl Votes {
         t: &Vector3<f64>,
     ) -> usize {
         let Some(key) = self.key(t) else { return 0 };
-        let mut met: Vec<usize> = Vec::new();
+        let mut stamp = self.stamp.borrow_mut();
+        let (seen, query) = &mut *stamp;
+        *query += 1;
+        let mut met = 0;
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    let Some(list) = self.cells.get(&[key[0] + dx, key[1] + dy, key[2] + dz])
+                    let Some((list, runs)) =
+                        self.cells.get(&[key[0] + dx, key[1] + dy, key[2] + dz])
                     else {
                         continue;
                     };
-                    for &c in list {
-                        let (k, j, ci) = self.candidates[c as usize];
-                        if met.contains(&k) {
+                    for &(start, end) in runs {
+                        let k = self.candidates[list[start as usize] as usize].0;
+                        if seen[k] == *query {
                             continue;
                         }
                         let x = if k < ours.len() {
@@ -182,14 +222,19 @@ impl Votes {
                         } else {
                             theirs[k - ours.len()].x + (-t)
                         };
-                        if (net.curves[ci].points[j] - x).norm() <= self.reach {
-                            met.push(k);
+                        let hit = list[start as usize..end as usize].iter().any(|&c| {
+                            let (_, j, ci) = self.candidates[c as usize];
+                            (net.curves[ci].points[j] - x).norm() <= self.reach
+                        });
+                        if hit {
+                            seen[k] = *query;
+                            met += 1;
                         }
                     }
                 }
             }
         }
-        met.len()
+        met
     }
 }
 
@@ -225,6 +270,10 @@ pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
     };
     roots.sort_by_key(|&r| std::cmp::Reverse(size(r)));
     let mut placed = vec![roots[0]];
+    let mut fits = Fits {
+        normal_deg: p.normal_deg,
+        by: HashMap::new(),
+    };
     let mut moved = 0;
     loop {
         let lonely = lonely_nodes(net);
@@ -244,7 +293,7 @@ pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
             // Each lonely node's incidences (the samples its normals fit, on the curves it
             // may meet) by translation, for counting; a crease node with two faces is judged
             // by `meets`, on a crease curve's near samples at once.
-            let votes = Votes::of(net, &ours, &theirs, &in_placed, &in_p, p.normal_deg, reach);
+            let votes = Votes::of(net, &ours, &theirs, &in_placed, &in_p, &mut fits, reach);
             let score = |t: &Vector3<f64>| -> usize {
                 votes.count(net, &ours, &theirs, t)
                     + ours
