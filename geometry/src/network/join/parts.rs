@@ -80,6 +80,10 @@ impl Lonely {
     }
 }
 
+/// A cell's incidences (indices into [`Votes::candidates`]) sorted by lonely node, and the
+/// runs `(start, end)` of each node among them.
+type Incidences = (Vec<u32>, Vec<(u32, u32)>);
+
 /// The incidences of a part's lonely nodes (`ours`, on the placed curves) and of the placed
 /// parts' (`theirs`, on the part's curves): every sample whose normals fit the node's, in a
 /// grid by the translation that puts the node on it, so that a translation's score is a
@@ -93,7 +97,7 @@ struct Votes {
     /// by [`meets`], see [`Lonely::two_faced_crease`]).
     /// Each cell's candidates sorted by lonely node, with the runs of each node (start, end):
     /// a node met once is skipped whole.
-    cells: HashMap<[i64; 3], (Vec<u32>, Vec<(u32, u32)>)>,
+    cells: HashMap<[i64; 3], Incidences>,
     cell: f64,
     reach: f64,
     /// Per lonely node, the last count that met it.
