@@ -17,8 +17,8 @@
 //! - `again`: the same network once more with the tolerance (the system unchanged: the
 //!   factorisation kept, back-substitutions only: a monitored structure's epochs).
 //!
-//! And the two phases of a live update against the network's size (issue 35, point 3): the
-//! same grids' curves sampled as a device would give them (distance along, frames whose x is
+//! And the two phases of a live update against the network's size (issue 35, point 3; 150
+//! and 200 curves added for issue 51): the same grids' curves sampled as a device would give them (distance along, frames whose x is
 //! the tangent and z the surface normal, exact), then, after the network without meridian 1,
 //! the update that adds it as the live worker runs it:
 //! - `curves`: the network reconstructed (pre-filter, the regression local to 10 samples
@@ -319,9 +319,12 @@ fn main() {
         first: COLUMNS.len(),
         rows: Vec::new(),
     };
-    for curves in [5usize, 10, 20, 50, 100] {
+    // Rows of 150 and 200 curves (issue 51, point 6), one run each: sessions of hundreds of
+    // curves.
+    for curves in [5usize, 10, 20, 50, 100, 150, 200] {
         let meridians = curves.div_ceil(2);
-        let (nv, t) = phases(&sphere_grid(meridians, curves - meridians, 0.01), 3);
+        let runs = if curves > 100 { 1 } else { 3 };
+        let (nv, t) = phases(&sphere_grid(meridians, curves - meridians, 0.01), runs);
         println!("| {curves} | {nv} | {} |", cells(&t));
         by_phase.rows.push((curves as f64, nv, t.to_vec()));
     }
