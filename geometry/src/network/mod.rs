@@ -329,14 +329,13 @@ impl Reconstructor {
     /// The reconstruction with the tags `slides` (`(scan index of the curve, node)`) free to
     /// slide along their curve: for each, the slide the Poisson solve gives it (m, one
     /// Gauss–Newton step towards where the loops put the node), `None` for a tag not found.
-    /// What the join passes ([`join::run_joined`]) iterate.
     pub fn run_sliding(
         &mut self,
         curves: &[Curve],
         p: &NetworkParams,
         slides: &[(usize, u32)],
     ) -> Result<(Network, Vec<Option<f64>>), Unreconstructed> {
-        let (net, s) = self.run_inner(curves, p, false, slides)?;
+        let (net, s) = self.run_slides(curves, p, slides)?;
         Ok((net, s.iter().map(|x| x.map(|x| x.sigma)).collect()))
     }
 

@@ -11,12 +11,25 @@ pub(super) struct Grid {
     cells: std::collections::HashMap<[i64; 3], Vec<(usize, usize)>>,
 }
 
+/// The cell of size `size` that holds `x` (none for a point not finite, or too far).
+pub(super) fn cell_of(x: &Vector3<f64>, size: f64) -> Option<[i64; 3]> {
+    let k = x / size;
+    k.iter()
+        .all(|v| v.is_finite() && v.abs() < 1e12)
+        .then(|| [k.x.floor() as i64, k.y.floor() as i64, k.z.floor() as i64])
+}
+
+/// The 27 cells around cell `k`, itself included: all that lies within one cell's size of a
+/// point in `k` is in them.
+pub(super) fn cells_around(k: [i64; 3]) -> impl Iterator<Item = [i64; 3]> {
+    (-1..=1).flat_map(move |dx| {
+        (-1..=1).flat_map(move |dy| (-1..=1).map(move |dz| [k[0] + dx, k[1] + dy, k[2] + dz]))
+    })
+}
+
 impl Grid {
     fn key(&self, x: &Vector3<f64>) -> Option<[i64; 3]> {
-        let k = x / self.reach;
-        k.iter()
-            .all(|v| v.is_finite() && v.abs() < 1e12)
-            .then(|| [k.x.floor() as i64, k.y.floor() as i64, k.z.floor() as i64])
+        cell_of(x, self.reach)
     }
 
     /// The samples of the curves `take` of `net`, in cells of size `reach`.
@@ -37,15 +50,9 @@ impl Grid {
 
     /// The samples in the 27 cells around `x` (none for a point not finite).
     pub(super) fn around(&self, x: &Vector3<f64>) -> impl Iterator<Item = (usize, usize)> + '_ {
-        let k = self.key(x);
-        k.into_iter()
-            .flat_map(|k| {
-                (-1..=1).flat_map(move |dx| {
-                    (-1..=1).flat_map(move |dy| {
-                        (-1..=1).map(move |dz| [k[0] + dx, k[1] + dy, k[2] + dz])
-                    })
-                })
-            })
+        self.key(x)
+            .into_iter()
+            .flat_map(cells_around)
             .filter_map(|c| self.cells.get(&c))
             .flatten()
             .copied()

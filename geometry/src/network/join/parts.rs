@@ -1,7 +1,7 @@
 //! A network in parts put together (issue 34): where the parts' lonely nodes lie on each
 //! other's curves ([`place_parts`]).
 
-use super::grid::Grid;
+use super::grid::{cell_of, cells_around, Grid};
 use super::{curves_at_nodes, face_angle, faces, normals_fit, JoinParams};
 use crate::curve::{CurveKind, ANONYMOUS_NODE_BASE};
 use crate::network::poisson::Positions;
@@ -93,10 +93,9 @@ struct Votes {
     /// considered.
     candidates: Vec<(usize, usize, usize)>,
     /// The same by translation (`x − node` for ours, `node − x` for theirs), in cells a
-    /// little wider than the reach; crease nodes with two faces left out (they are judged
-    /// by [`meets`], see [`Lonely::two_faced_crease`]).
-    /// Each cell's candidates sorted by lonely node, with the runs of each node (start, end):
-    /// a node met once is skipped whole.
+    /// little wider than the reach, each cell's runs by node ([`Incidences`]: a node met
+    /// once is skipped whole); crease nodes with two faces left out (they are judged by
+    /// [`meets`], see [`Lonely::two_faced_crease`]).
     cells: HashMap<[i64; 3], Incidences>,
     cell: f64,
     reach: f64,
@@ -188,10 +187,7 @@ impl Votes {
     }
 
     fn key(&self, t: &Vector3<f64>) -> Option<[i64; 3]> {
-        let k = t / self.cell;
-        k.iter()
-            .all(|v| v.is_finite() && v.abs() < 1e12)
-            .then(|| [k.x.floor() as i64, k.y.floor() as i64, k.z.floor() as i64])
+        cell_of(t, self.cell)
     }
 
     /// The lonely nodes (crease nodes with two faces aside) that `t` puts within the reach
@@ -208,33 +204,27 @@ impl Votes {
         let (seen, query) = &mut *stamp;
         *query += 1;
         let mut met = 0;
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for dz in -1..=1 {
-                    let Some((list, runs)) =
-                        self.cells.get(&[key[0] + dx, key[1] + dy, key[2] + dz])
-                    else {
-                        continue;
-                    };
-                    for &(start, end) in runs {
-                        let k = self.candidates[list[start as usize] as usize].0;
-                        if seen[k] == *query {
-                            continue;
-                        }
-                        let x = if k < ours.len() {
-                            ours[k].x + t
-                        } else {
-                            theirs[k - ours.len()].x + (-t)
-                        };
-                        let hit = list[start as usize..end as usize].iter().any(|&c| {
-                            let (_, j, ci) = self.candidates[c as usize];
-                            (net.curves[ci].points[j] - x).norm() <= self.reach
-                        });
-                        if hit {
-                            seen[k] = *query;
-                            met += 1;
-                        }
-                    }
+        for c in cells_around(key) {
+            let Some((list, runs)) = self.cells.get(&c) else {
+                continue;
+            };
+            for &(start, end) in runs {
+                let k = self.candidates[list[start as usize] as usize].0;
+                if seen[k] == *query {
+                    continue;
+                }
+                let x = if k < ours.len() {
+                    ours[k].x + t
+                } else {
+                    theirs[k - ours.len()].x + (-t)
+                };
+                let hit = list[start as usize..end as usize].iter().any(|&c| {
+                    let (_, j, ci) = self.candidates[c as usize];
+                    (net.curves[ci].points[j] - x).norm() <= self.reach
+                });
+                if hit {
+                    seen[k] = *query;
+                    met += 1;
                 }
             }
         }
@@ -249,8 +239,8 @@ impl Votes {
 /// parts' curves and the placed parts' lonely nodes on its curves (at least two such
 /// incidences, and no other translation as good farther than twice the join distance: one
 /// incidence leaves the part free to slide along a curve). Candidates come from each
-/// incidence along every sample of the curve; each is checked in a grid, so the cost is the
-/// lonely nodes squared times the samples. Returns the parts moved; the joins
+/// incidence along every sample of the curve; each is scored by the incidences around it in
+/// a grid of them by translation. Returns the parts moved; the joins
 /// ([`find_joins`](super::find_joins)) are then found in the moved network.
 pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
     let reach = p.distance_m;
@@ -285,8 +275,6 @@ pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
         for &r in roots.iter().filter(|r| !placed.contains(r)) {
             let in_p = |ci: usize| part[ci] == r;
             let in_placed = |ci: usize| placed.contains(&part[ci]);
-            let g_placed = Grid::of(net, reach, in_placed);
-            let g_part = Grid::of(net, reach, in_p);
             // Incidences: a lonely node of the part on a placed curve (t = curve − node), and
             // a lonely node of a placed part on the part's curves (t = node − curve).
             let ours: Vec<&Lonely> = lonely.iter().filter(|l| in_p(l.curve)).collect();
@@ -294,22 +282,29 @@ pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
             if ours.len() + theirs.len() < 2 {
                 continue;
             }
+            // The samples by position, for the crease nodes with two faces (`meets`) only.
+            let crease = |side: &[&Lonely]| side.iter().any(|l| l.two_faced_crease());
+            let g_placed = crease(&ours).then(|| Grid::of(net, reach, in_placed));
+            let g_part = crease(&theirs).then(|| Grid::of(net, reach, in_p));
             // Each lonely node's incidences (the samples its normals fit, on the curves it
             // may meet) by translation, for counting; a crease node with two faces is judged
             // by `meets`, on a crease curve's near samples at once.
             let votes = Votes::of(net, &ours, &theirs, &in_placed, &in_p, &mut fits, reach);
             let score = |t: &Vector3<f64>| -> usize {
                 votes.count(net, &ours, &theirs, t)
-                    + ours
-                        .iter()
-                        .filter(|l| l.two_faced_crease())
-                        .filter(|l| meets(&g_placed, net, l, t, p.normal_deg))
-                        .count()
-                    + theirs
-                        .iter()
-                        .filter(|l| l.two_faced_crease())
-                        .filter(|l| meets(&g_part, net, l, &-t, p.normal_deg))
-                        .count()
+                    + g_placed.as_ref().map_or(0, |g| {
+                        ours.iter()
+                            .filter(|l| l.two_faced_crease())
+                            .filter(|l| meets(g, net, l, t, p.normal_deg))
+                            .count()
+                    })
+                    + g_part.as_ref().map_or(0, |g| {
+                        theirs
+                            .iter()
+                            .filter(|l| l.two_faced_crease())
+                            .filter(|l| meets(g, net, l, &-t, p.normal_deg))
+                            .count()
+                    })
             };
             let mut top: Vec<(usize, Vector3<f64>)> = Vec::new();
             let mut consider = |t: Vector3<f64>| {

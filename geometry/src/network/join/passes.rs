@@ -19,17 +19,17 @@ use std::time::Instant;
 
 /// As [`Reconstructor::run`], with nodes joined after the fact (issue 34, [`super`]): a node
 /// tagged on one curve only joins a curve that passes it ([`super::find_joins`]), and with
-/// [`JoinSettings::untagged`](super::JoinSettings::untagged) two curves that cross with no node there share a fresh one
+/// [`JoinSettings::untagged`] two curves that cross with no node there share a fresh one
 /// ([`find_crossings`]); the others are proposed.
 ///
-/// The joins settle in passes, one reconstruction each: every joined tag slides along
-/// its curve where the Poisson solve puts it ([`crate::network::poisson::PoissonSolver::solve_sliding`],
-/// the slides solved together), until none moves more than [`SETTLED_M`] (at most
-/// [`MAX_PASSES`]); joins found in the moved network join in the next pass. Once
-/// settled, the join whose loops misfit worst is refused when beyond
-/// [`super::REFUSE_RATIO`] × the network's other loops, and the passes go on without it.
-/// A refused join is never proposed again, so the passes end. Without any join the result
-/// is [`Reconstructor::run`]'s, to the bit.
+/// The joins settle in passes, one reconstruction each: every joined tag slides along its
+/// curve where the Poisson solve puts it
+/// ([`crate::network::poisson::PoissonSolver::solve_sliding`], the slides solved together),
+/// until none moves more than [`SETTLED_M`] (at most [`MAX_PASSES`]); joins found in the
+/// moved network join in the next pass. Once settled, the join whose loops misfit worst is
+/// refused when beyond [`REFUSE_RATIO`] × the network's other loops, and the passes go on
+/// without it. A refused join is never proposed again, so the passes end. Without any join
+/// the result is [`Reconstructor::run`]'s, to the bit.
 pub fn run_joined(
     r: &mut Reconstructor,
     curves: &[Curve],
