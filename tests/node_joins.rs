@@ -486,3 +486,111 @@ fn issue_34_crossings_nobody_tagged_are_proposed_or_joined() {
         }
     }
 }
+
+/// Issue 51: a session that scans parallel sections first (a hull's frames, then the curves
+/// across them) is a network in parts whose lonely nodes lie on curves not yet scanned. Laid
+/// on top of each other, sections of a sphere a few centimetres apart meet at every one of
+/// those nodes (within the join distance, normals within its angle), but along each other,
+/// never across: no part is placed. A curve that does cross a section at its nodes is placed
+/// where it belongs.
+#[test]
+fn issue_51_parallel_sections_are_not_laid_on_each_other() {
+    use nalgebra::Vector3;
+    use sfs_geometry::curve::CurveKind;
+    use sfs_geometry::network::join::place_parts;
+    use sfs_geometry::network::poisson::{CurvePositions, Positions};
+    let r = 0.3;
+    // A closed curve of 360 samples through `at(s)` (s from 0 to 1) on the sphere, its nodes
+    // at the samples `tagged`, numbered from `first`, the whole moved by `shift` (each part's
+    // gauge).
+    let curve = |index: usize,
+                 at: &dyn Fn(f64) -> Vector3<f64>,
+                 tagged: &[usize],
+                 first: u32,
+                 shift: Vector3<f64>| {
+        let n = 360;
+        let truth: Vec<Vector3<f64>> = (0..=n).map(|k| at(k as f64 / n as f64)).collect();
+        let tangents: Vec<Vector3<f64>> = (0..=n)
+            .map(|k| (truth[(k + 1).min(n)] - truth[k.saturating_sub(1)]).normalize())
+            .collect();
+        let mut d = vec![0.0];
+        for w in truth.windows(2) {
+            d.push(d.last().unwrap() + (w[1] - w[0]).norm());
+        }
+        CurvePositions {
+            index,
+            kind: CurveKind::Interior,
+            normals: truth.iter().map(|x| x.normalize()).collect(),
+            tangents,
+            across: Vec::new(),
+            d,
+            points: truth.iter().map(|x| x + shift).collect(),
+            nodes: tagged
+                .iter()
+                .enumerate()
+                .map(|(k, &j)| (j, first + k as u32))
+                .collect(),
+            sigma_m: Vec::new(),
+        }
+    };
+    let section = |z: f64| {
+        let rho = (r * r - z * z).sqrt();
+        move |s: f64| {
+            let a = std::f64::consts::TAU * s;
+            Vector3::new(rho * a.cos(), rho * a.sin(), z)
+        }
+    };
+    let net_of = |curves: Vec<CurvePositions>| {
+        let mut nodes = std::collections::BTreeMap::new();
+        for c in &curves {
+            for &(j, node) in &c.nodes {
+                nodes.insert(node, c.points[j]);
+            }
+        }
+        Positions {
+            components: curves.len(),
+            curves,
+            nodes,
+            misfit: Default::default(),
+        }
+    };
+    let tagged: Vec<usize> = (0..12).map(|k| 15 + 30 * k).collect();
+    // Three sections 2 cm apart, each in its own gauge (centred on the origin).
+    let sections: Vec<CurvePositions> = [0.0, 0.02, 0.04]
+        .iter()
+        .enumerate()
+        .map(|(i, &z)| {
+            let at = section(z);
+            curve(i, &at, &tagged, 100 * i as u32, Vector3::new(0.0, 0.0, -z))
+        })
+        .collect();
+    let mut parallel = net_of(sections.clone());
+    let before = parallel.clone();
+    assert_eq!(place_parts(&mut parallel, &JoinParams::default()), 0);
+    assert_eq!(parallel, before, "nothing moves");
+    // A circle across the equator, cut by a tilted plane: it crosses the equator at ±33° of
+    // longitude, where the equator has its two nodes, at right angles to itself there (two
+    // incidences pin a translation: along parallel tangents they would leave it free); its
+    // own gauge is 10 cm off. It is placed there.
+    let lon = 33f64.to_radians();
+    let (x0, y0) = (r * lon.cos(), r * lon.sin());
+    let m = Vector3::new(1.0, 0.0, (y0 * y0 / (x0 * x0 - y0 * y0)).sqrt()).normalize();
+    let c = m.x * x0;
+    let (u, v) = (Vector3::y(), m.cross(&Vector3::y()));
+    let rho = (r * r - c * c).sqrt();
+    let circle = move |s: f64| {
+        let a = std::f64::consts::TAU * s;
+        m * c + (u * a.cos() + v * a.sin()) * rho
+    };
+    let equator = curve(0, &section(0.0), &[33, 327], 0, Vector3::zeros());
+    let across = curve(3, &circle, &[], 900, Vector3::new(0.1, 0.0, 0.0));
+    let mut crossed = net_of(vec![equator, across]);
+    assert_eq!(place_parts(&mut crossed, &JoinParams::default()), 1);
+    let moved = crossed.curves[1].points[0] - circle(0.0);
+    let home = crossed.curves[0].points[0] - section(0.0)(0.0);
+    assert!(
+        (moved - home).norm() < 0.003,
+        "the circle lands on the equator: off by {:.1} mm",
+        (moved - home).norm() * 1e3
+    );
+}

@@ -66,7 +66,7 @@ mod parts;
 pub(crate) mod passes;
 
 pub use crossings::{find_crossings, CROSSING_DEG};
-pub use parts::place_parts;
+pub use parts::{place_parts, DISTINCT_RATIO};
 pub use passes::run_joined;
 
 use super::poisson::{CurvePositions, Positions};

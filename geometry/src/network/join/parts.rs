@@ -2,9 +2,11 @@
 //! other's curves ([`place_parts`]).
 
 use super::grid::{cell_of, cells_around, Grid};
-use super::{curves_at_nodes, face_angle, faces, normals_fit, JoinParams};
+use super::{
+    curves_at_nodes, face_angle, faces, line_angle, normals_fit, JoinParams, ALONGSIDE_DEG,
+};
 use crate::curve::{CurveKind, ANONYMOUS_NODE_BASE};
-use crate::network::poisson::Positions;
+use crate::network::poisson::{CurvePositions, Positions};
 use nalgebra::Vector3;
 use std::collections::HashMap;
 
@@ -15,6 +17,8 @@ struct Lonely {
     kind: CurveKind,
     x: Vector3<f64>,
     faces: Vec<Vector3<f64>>,
+    /// Its curve's tangent there, where known.
+    tangent: Option<Vector3<f64>>,
 }
 
 /// The lonely nodes of `net` (see the module docs), with the curve (position) that tags each.
@@ -32,6 +36,7 @@ fn lonely_nodes(net: &Positions) -> Vec<Lonely> {
                 kind: c.kind,
                 x,
                 faces: faces(c, i, 0.0),
+                tangent: c.tangents.get(i).copied(),
             })
         })
         .collect()
@@ -61,18 +66,24 @@ fn meets(grid: &Grid, net: &Positions, l: &Lonely, t: &Vector3<f64>, normal_deg:
         }
     }
     near.into_iter().any(|(ci, js)| {
-        normals_fit(
-            &l.faces,
-            l.kind,
-            &net.curves[ci],
-            js.into_iter(),
-            normal_deg,
-        )
-        .is_some()
+        let c = &net.curves[ci];
+        let js = js.into_iter().filter(|&j| l.crosses(c, j));
+        normals_fit(&l.faces, l.kind, c, js, normal_deg).is_some()
     })
 }
 
 impl Lonely {
+    /// Whether curve `c` at its sample `j` would cross the node's curve, not run alongside it
+    /// (their tangents more than [`ALONGSIDE_DEG`] apart as lines): the joins' own test, so
+    /// that a part is placed only by incidences that can be joins. Parallel sections, which
+    /// a translation lays one over another, meet nowhere.
+    fn crosses(&self, c: &CurvePositions, j: usize) -> bool {
+        match (&self.tangent, c.tangents.get(j)) {
+            (Some(a), Some(b)) => line_angle(a, b) >= ALONGSIDE_DEG,
+            _ => true,
+        }
+    }
+
     /// A crease node with two faces: its normals are judged against a crease curve's near
     /// samples together ([`normals_fit`]), not one sample at a time.
     fn two_faced_crease(&self) -> bool {
@@ -104,7 +115,8 @@ struct Votes {
 }
 
 /// The samples of each curve whose normals fit each lonely node's ([`normals_fit`] one
-/// sample at a time), found once for every part placed: translating parts moves no normal.
+/// sample at a time) and that cross its curve ([`Lonely::crosses`]), found once for every
+/// part placed: translating parts turns no normal and no tangent.
 struct Fits {
     normal_deg: f64,
     by: HashMap<(u32, usize), Vec<u32>>,
@@ -118,6 +130,7 @@ impl Fits {
             (0..c.points.len())
                 // As `normals_fit` reads it: an angle that is not a number fits not.
                 .filter(|&j| face_angle(&l.faces, &faces(c, j, 0.0)) <= normal_deg)
+                .filter(|&j| l.crosses(c, j))
                 .map(|j| j as u32)
                 .collect()
         })
@@ -232,27 +245,63 @@ impl Votes {
     }
 }
 
+/// How much better the placement of a part scores than any placement away from it: at least
+/// this many times the incidences ([`place_parts`]).
+pub const DISTINCT_RATIO: usize = 2;
+
 /// A network in parts (a crossing left untagged can cut it) has no relative placement of its
 /// parts: the Poisson solve gives each its own gauge. The orientations are absolute, so each
 /// part's shape is right and only its translation is unknown. This moves each part, greedily
 /// from the largest, by the translation that puts the most of its lonely nodes on the placed
 /// parts' curves and the placed parts' lonely nodes on its curves (at least two such
-/// incidences, and no other translation as good farther than twice the join distance: one
-/// incidence leaves the part free to slide along a curve). Candidates come from each
-/// incidence along every sample of the curve; each is scored by the incidences around it in
-/// a grid of them by translation. Returns the parts moved; the joins
+/// incidences, and no translation farther than twice the join distance with more than half
+/// as many, [`DISTINCT_RATIO`]: one incidence leaves the part free to slide along a curve,
+/// and a part that fits nearly as well elsewhere is not placed by chance). An incidence is
+/// what a join could be: normals that fit, and a curve that crosses the node's, not one
+/// alongside it. Candidates come from each incidence along every sample of the curve; each
+/// is scored by the incidences around it in a grid of them by translation. Returns the parts
+/// moved; the joins
 /// ([`find_joins`](super::find_joins)) are then found in the moved network.
 pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
+    placement(net, p).len()
+}
+
+/// The parts of `net` (each the scan indices of its curves, sorted; the parts in order):
+/// what a [`placement`] was found for.
+pub(crate) fn partition(net: &Positions) -> Vec<Vec<usize>> {
+    let part = parts(net);
+    let mut by: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for (ci, c) in net.curves.iter().enumerate() {
+        by.entry(part[ci]).or_default().push(c.index);
+    }
+    let mut out: Vec<Vec<usize>> = by
+        .into_values()
+        .map(|mut v| {
+            v.sort_unstable();
+            v
+        })
+        .collect();
+    out.sort();
+    out
+}
+
+/// A part moved: the scan indices of its curves and the translation, m.
+pub(crate) type Move = (Vec<usize>, Vector3<f64>);
+
+/// Moves the parts of `net` as [`place_parts`] does, and returns the moves, in order, for
+/// [`apply_moves`].
+pub(crate) fn placement(net: &mut Positions, p: &JoinParams) -> Vec<Move> {
     let reach = p.distance_m;
+    let mut moves = Vec::new();
     if net.components < 2 || reach <= 0.0 || !reach.is_finite() {
-        return 0;
+        return moves;
     }
     let part = parts(net);
     let mut roots: Vec<usize> = part.clone();
     roots.sort_unstable();
     roots.dedup();
     if roots.len() < 2 {
-        return 0;
+        return moves;
     }
     let size = |r: usize| -> usize {
         net.curves
@@ -268,7 +317,6 @@ pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
         normal_deg: p.normal_deg,
         by: HashMap::new(),
     };
-    let mut moved = 0;
     loop {
         let lonely = lonely_nodes(net);
         let mut best: Option<(usize, Vector3<f64>, usize)> = None;
@@ -324,11 +372,17 @@ pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
             let Some(&(s, t)) = top.iter().max_by_key(|x| x.0) else {
                 continue;
             };
-            // Unique: every translation as good lies near this one.
-            if top
+            // Distinct: no translation away from this one (beyond twice the reach) meets more
+            // than half as many. Where many do, the part fits as well in other places: parallel
+            // sections of a surface, whose lonely nodes lie on curves not yet scanned, meet
+            // each other's curves by chance wherever they are laid.
+            let runner = top
                 .iter()
-                .any(|x| x.0 == s && (x.1 - t).norm() > 2.0 * reach)
-            {
+                .filter(|x| (x.1 - t).norm() > 2.0 * reach)
+                .map(|x| x.0)
+                .max()
+                .unwrap_or(0);
+            if DISTINCT_RATIO * runner > s {
                 continue;
             }
             // The mean of the best translations near it (they spread along the curves within
@@ -344,9 +398,29 @@ pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
             }
         }
         let Some((r, t, _)) = best else { break };
+        let mut curves: Vec<usize> = net
+            .curves
+            .iter()
+            .enumerate()
+            .filter(|(ci, _)| part[*ci] == r)
+            .map(|(_, c)| c.index)
+            .collect();
+        curves.sort_unstable();
+        let m = (curves, t);
+        apply_moves(net, std::slice::from_ref(&m));
+        moves.push(m);
+        placed.push(r);
+    }
+    moves
+}
+
+/// Each part of `moves` (by its curves' scan indices) moved by its translation: its curves'
+/// points and their nodes.
+pub(crate) fn apply_moves(net: &mut Positions, moves: &[Move]) {
+    for (curves, t) in moves {
         let mut nodes_moved = std::collections::BTreeSet::new();
-        for (ci, c) in net.curves.iter_mut().enumerate() {
-            if part[ci] == r {
+        for c in net.curves.iter_mut() {
+            if curves.binary_search(&c.index).is_ok() {
                 c.points.iter_mut().for_each(|x| *x += t);
                 nodes_moved.extend(c.nodes.iter().map(|x| x.1));
             }
@@ -356,8 +430,5 @@ pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
                 *x += t;
             }
         }
-        placed.push(r);
-        moved += 1;
     }
-    moved
 }

@@ -4,9 +4,10 @@
 //! loops put each tag and how they fit: which joins are in, where their tags go next, which
 //! are refused and why.
 
+use super::parts::{apply_moves, placement};
 use super::{
-    apply_joins, find_crossings, find_joins_within, place_parts, Join, JoinReport, JoinSettings,
-    RefusedJoin, MAX_PASSES, MISFIT_FLOOR_M, REFUSE_RATIO, SETTLED_M, SLIDE_MARGIN_M,
+    apply_joins, find_crossings, find_joins_within, Join, JoinReport, JoinSettings, RefusedJoin,
+    MAX_PASSES, MISFIT_FLOOR_M, REFUSE_RATIO, SETTLED_M, SLIDE_MARGIN_M,
 };
 use crate::curve::{Curve, ANONYMOUS_NODE_BASE};
 use crate::network::closure::LoopFit;
@@ -24,8 +25,9 @@ use std::time::Instant;
 ///
 /// The joins settle in passes, one reconstruction each: every joined tag slides along its
 /// curve where the Poisson solve puts it
-/// ([`crate::network::poisson::PoissonSolver::solve_sliding`], the slides solved together),
-/// until none moves more than [`SETTLED_M`] (at most [`MAX_PASSES`]); joins found in the
+/// ([`crate::network::poisson::PoissonSolver::solve_sliding`], the slides solved together;
+/// at most the join distance a pass, halved each time its slide turns back; a tag that closes
+/// no loop stays put), until none moves more than [`SETTLED_M`] (at most [`MAX_PASSES`]); joins found in the
 /// moved network join in the next pass. Once settled, the join whose loops misfit worst is
 /// refused when beyond [`REFUSE_RATIO`] × the network's other loops, and the passes go on
 /// without it. A refused join is never proposed again, so the passes end. Without any join
@@ -110,15 +112,22 @@ pub(crate) struct Pending {
     fit: Option<LoopFit>,
     /// The distance its tag had in the last reconstruction, m.
     used_d: f64,
+    /// The most its tag moves in a pass, m: the join distance, halved each time its slide
+    /// turns back.
+    step_max: f64,
+    /// Its tag's last move, m.
+    last_step: f64,
 }
 
 impl Pending {
-    fn new(join: Join, untagged: bool) -> Self {
+    fn new(join: Join, untagged: bool, step_max: f64) -> Self {
         Pending {
             used_d: join.d,
             join,
             untagged,
             fit: None,
+            step_max,
+            last_step: 0.0,
         }
     }
 }
@@ -137,6 +146,9 @@ pub(crate) struct Passes<'a> {
     refused_pairs: Vec<(usize, usize)>,
     /// Reconstructions made with joins.
     pub(crate) passes: usize,
+    /// The parts' placement found on the first network in parts, and its partition: the
+    /// passes after it move the same parts the same way while the partition stands.
+    placement: Option<(Vec<Vec<usize>>, Vec<super::parts::Move>)>,
 }
 
 impl<'a> Passes<'a> {
@@ -156,6 +168,7 @@ impl<'a> Passes<'a> {
             refused_at: Vec::new(),
             refused_pairs: Vec::new(),
             passes: 0,
+            placement: None,
         }
     }
 
@@ -165,14 +178,23 @@ impl<'a> Passes<'a> {
         let js = self.js;
         // A network in parts: each part moved to where its lonely nodes fit first, as far as
         // they reach.
+        // The search is the costly part of a pass (every part against the placed ones), and a
+        // pass moves the parts' shapes by its slides only: it is made once per partition.
         let placed;
         let seen = if net.components > 1 {
             let mut moved = net.clone();
-            let reach = super::JoinParams {
-                distance_m: self.lonely_reach,
-                ..js.params
-            };
-            place_parts(&mut moved, &reach);
+            let partition = super::parts::partition(net);
+            match &self.placement {
+                Some((known, moves)) if *known == partition => apply_moves(&mut moved, moves),
+                _ => {
+                    let reach = super::JoinParams {
+                        distance_m: self.lonely_reach,
+                        ..js.params
+                    };
+                    let moves = placement(&mut moved, &reach);
+                    self.placement = Some((partition, moves));
+                }
+            }
             placed = moved;
             &placed
         } else {
@@ -193,7 +215,7 @@ impl<'a> Passes<'a> {
                 self.refused.push(RefusedJoin::configured(&j));
                 continue;
             }
-            fresh.push(Pending::new(j, false));
+            fresh.push(Pending::new(j, false, js.params.distance_m));
         }
         if js.untagged {
             for pr in find_crossings(seen, &js.params) {
@@ -211,7 +233,7 @@ impl<'a> Passes<'a> {
                         distance_m: pr.distance_m,
                         normal_deg: pr.normal_deg,
                     };
-                    fresh.push(Pending::new(j, true));
+                    fresh.push(Pending::new(j, true, js.params.distance_m));
                 }
                 self.fresh_node += 1;
             }
@@ -277,7 +299,6 @@ impl<'a> Passes<'a> {
     /// distance a pass), a join whose tag the reconstruction lost refused; the most a tag
     /// moved, m.
     pub(crate) fn slide(&mut self, work: &[Curve], slid: &[Option<Slide>]) -> f64 {
-        let step_max = self.js.params.distance_m;
         let mut moved = 0.0_f64;
         let mut lost = Vec::new();
         for (k, s) in slid.iter().enumerate() {
@@ -288,11 +309,23 @@ impl<'a> Passes<'a> {
                 continue;
             };
             x.fit = s.fit;
+            // A tag that closes no loop is where nothing tells it to move (its part hangs
+            // from it, free to slide with it): it stays where it was found.
+            if s.fit.is_none() {
+                continue;
+            }
             let (lo, hi) = segment_around(work, &x.join);
             let margin = SLIDE_MARGIN_M.min(0.25 * (hi - lo));
-            let step = s.sigma.clamp(-step_max, step_max);
+            // A slide that turns back halves the tag's steps from then on: two joins of one
+            // loop overshoot each other by the most a pass allows, back and forth, where the
+            // solve's step is larger than the distance left.
+            if s.sigma * x.last_step < 0.0 {
+                x.step_max *= 0.5;
+            }
+            let step = s.sigma.clamp(-x.step_max, x.step_max);
             let d = (x.join.d + step).clamp(lo + margin, (hi - margin).max(lo + margin));
             moved = moved.max((d - x.join.d).abs());
+            x.last_step = d - x.join.d;
             x.join.d = d;
         }
         for &k in lost.iter().rev() {
