@@ -4,7 +4,8 @@
 //! event waits for: the network with the regression local to the new curve's nodes, the join
 //! passes, Poisson, the uncertainty), with the stages' times from the report.
 //!
-//! `cargo run --release --example live_update -- CAPTURE.bin N [N …]` (e.g. the built-in
+//! `cargo run --release --example live_update -- CAPTURE.bin|scan.json N [N …]`, or `M:N` for an update
+//! that brings curves `M … N − 1` at once, as the worker coalesces them (e.g. the built-in
 //! `ellipsoid-grid` scene: `sfs simulate --scene ellipsoid-grid --device morphorider --seed 1
 //! --out E`). With `JOINS=1` in the environment, the update's joins and refusals are listed.
 
@@ -18,11 +19,22 @@ fn main() {
     sfs_geometry::sparse_llt::single_threaded();
     let mut args = std::env::args().skip(1);
     let (Some(path), counts) = (args.next(), args.collect::<Vec<_>>()) else {
-        eprintln!("usage: live_update CAPTURE.bin N [N …]");
+        eprintln!("usage: live_update CAPTURE.bin N|M:N [N|M:N …]");
         std::process::exit(2);
     };
     let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
-    let scan = Acquisition::scan_bytes(&bytes, AcquisitionConfig::default());
+    // A capture, or a session's scan.json (the curves as the daemon had them).
+    #[derive(serde::Deserialize)]
+    struct Curves {
+        curves: Vec<sfs_geometry::curve::Curve>,
+    }
+    let curves = if path.ends_with(".json") {
+        serde_json::from_slice::<Curves>(&bytes)
+            .unwrap_or_else(|e| panic!("{path}: {e}"))
+            .curves
+    } else {
+        Acquisition::scan_bytes(&bytes, AcquisitionConfig::default()).curves
+    };
     let np = for_device(
         &NetworkParams {
             local_window: LIVE_LOCAL_WINDOW,
@@ -30,26 +42,54 @@ fn main() {
         },
         None,
     );
-    println!("{path}: {} curves", scan.curves.len());
-    for n in counts {
-        let n: usize = n.parse().expect("a curve count");
-        let n = n.clamp(2, scan.curves.len());
+    println!("{path}: {} curves", curves.len());
+    for arg in counts {
+        // `a,b,c…`: the updates to a, b, c… curves in a row, none settled (a worker that a
+        // faster source keeps busy), each timed.
+        if arg.contains(',') {
+            let mut p = Pipeline::new().live();
+            for n in arg.split(',').filter_map(|x| x.parse::<usize>().ok()) {
+                let n = n.clamp(1, curves.len());
+                let t0 = Instant::now();
+                let mut out = p.reconstruct(&curves[..n], &np);
+                let ms = t0.elapsed().as_secs_f64() * 1e3;
+                if std::env::var("SETTLE").is_ok() {
+                    p.settle(&curves[..n], &mut out, &np, None, || false);
+                }
+                match &out.network {
+                    Some(net) => println!(
+                        "{n} curves: the update {ms:.0} ms (join passes {:.1} ms; {} passes, {} parts)",
+                        net.report.timings_ms.join, net.report.join_passes, net.report.components
+                    ),
+                    None => println!("{n} curves: no network ({ms:.0} ms)"),
+                }
+            }
+            continue;
+        }
+        // `N`, or `M:N` for an update that brings curves M … N − 1 at once (coalesced).
+        let (m, n) = match arg.split_once(':') {
+            Some((m, n)) => (m.parse().ok(), n.parse().ok()),
+            None => (None, arg.parse().ok()),
+        };
+        let n: usize = n.expect("a curve count");
+        let n = n.clamp(2, curves.len());
+        let m = m.unwrap_or(n - 1).clamp(1, n - 1);
         let mut p = Pipeline::new().live();
-        let before = &scan.curves[..n - 1];
+        let before = &curves[..m];
         let t = Instant::now();
         let mut out = p.reconstruct(before, &np);
         p.settle(before, &mut out, &np, None, || false);
         let ready = t.elapsed().as_secs_f64();
         let t0 = Instant::now();
-        let out = p.reconstruct(&scan.curves[..n], &np);
+        let out = p.reconstruct(&curves[..n], &np);
         let update_ms = t0.elapsed().as_secs_f64() * 1e3;
         let Some(net) = &out.network else {
-            println!("{n} curves: no network ({update_ms:.0} ms)");
+            println!("{m} → {n} curves: no network ({update_ms:.0} ms)");
             continue;
         };
         let (r, tm) = (&net.report, &net.report.timings_ms);
         println!(
-            "{n} curves: the update {update_ms:.0} ms (pre-filter {:.1}, loop closure and regression {:.1}, Poisson {:.1}, uncertainty {:.1}, join passes {:.1} ms; {} passes, {} parts, {} frames moved of {}); the network before it {ready:.1} s",
+            "{m} → {n} curves: the update {update_ms:.0} ms (pre-filter {:.1}, loop closure and regression {:.1}, Poisson {:.1}, uncertainty {:.1}, join passes {:.1} ms; {} passes, {} parts, {} frames moved of {}); the network before it {ready:.1} s",
             tm.prefilter,
             tm.regression,
             tm.poisson,

@@ -75,6 +75,13 @@ pub fn run_joined(
             Ok((n, slid)) => {
                 net = n;
                 moved = state.slide(&work, &slid);
+                tracing::debug!(
+                    pass = state.passes,
+                    joins = state.joins.len(),
+                    moved_mm = moved * 1e3,
+                    placement_ms = state.placement_ms,
+                    "join pass"
+                );
                 if refusing {
                     moved = moved.max(1.0);
                 }
@@ -149,6 +156,8 @@ pub(crate) struct Passes<'a> {
     /// The parts' placement found on the first network in parts, and its partition: the
     /// passes after it move the same parts the same way while the partition stands.
     placement: Option<(Vec<Vec<usize>>, Vec<super::parts::Move>)>,
+    /// The time the placements took so far, ms.
+    placement_ms: f64,
 }
 
 impl<'a> Passes<'a> {
@@ -169,6 +178,7 @@ impl<'a> Passes<'a> {
             refused_pairs: Vec::new(),
             passes: 0,
             placement: None,
+            placement_ms: 0.0,
         }
     }
 
@@ -191,7 +201,9 @@ impl<'a> Passes<'a> {
                         distance_m: self.lonely_reach,
                         ..js.params
                     };
+                    let t0 = Instant::now();
                     let moves = placement(&mut moved, &reach);
+                    self.placement_ms += t0.elapsed().as_secs_f64() * 1e3;
                     self.placement = Some((partition, moves));
                 }
             }
