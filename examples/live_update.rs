@@ -44,8 +44,8 @@ fn main() {
     );
     println!("{path}: {} curves", curves.len());
     for arg in counts {
-        // `a,b,c…`: the updates to a, b, c… curves in a row, none settled (a worker that a
-        // faster source keeps busy), each timed.
+        // `a,b,c…`: the updates to a, b, c… curves in a row, none settled unless SETTLE is set
+        // (a worker that a faster source keeps busy), each timed.
         if arg.contains(',') {
             let mut p = Pipeline::new().live();
             for n in arg.split(',').filter_map(|x| x.parse::<usize>().ok()) {
@@ -53,15 +53,16 @@ fn main() {
                 let t0 = Instant::now();
                 let mut out = p.reconstruct(&curves[..n], &np);
                 let ms = t0.elapsed().as_secs_f64() * 1e3;
-                if std::env::var("SETTLE").is_ok() {
-                    p.settle(&curves[..n], &mut out, &np, None, || false);
-                }
                 match &out.network {
                     Some(net) => println!(
                         "{n} curves: the update {ms:.0} ms (join passes {:.1} ms; {} passes, {} parts)",
                         net.report.timings_ms.join, net.report.join_passes, net.report.components
                     ),
                     None => println!("{n} curves: no network ({ms:.0} ms)"),
+                }
+                // With SETTLE in the environment, each update settled after (an idle worker).
+                if std::env::var("SETTLE").is_ok() {
+                    p.settle(&curves[..n], &mut out, &np, None, || false);
                 }
             }
             continue;
