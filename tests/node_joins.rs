@@ -594,3 +594,72 @@ fn issue_51_parallel_sections_are_not_laid_on_each_other() {
         (moved - home).norm() * 1e3
     );
 }
+
+/// Issue 51: a live update (a regression local to the new curve) runs at most
+/// `LIVE_MAX_PASSES` join passes, and one cut short is provisional, so that the worker
+/// settles it: the settled network is the exact one, whatever the live update left.
+#[test]
+fn issue_51_a_live_update_cuts_the_join_passes_short_and_stays_provisional() {
+    use sfs_geometry::network::join::{LIVE_MAX_PASSES, MAX_PASSES};
+    let mut cut = 0;
+    // The torus on the field profile needs 4 passes to settle; the cone 2.
+    for (name, profile) in [
+        ("cone", sfs::simulate::Profile::Default),
+        ("torus", sfs::simulate::Profile::Field),
+    ] {
+        // A simulated Morphorider scan with a third of the crossings tagged on one curve.
+        let s = scene::builtin(name).expect("shipped scene");
+        let m = sfs::simulate::Mistakes {
+            untagged: simulate::untagged_crossings(&s, 1.0 / 3.0, 1),
+            ..Default::default()
+        };
+        let sim = simulate::run_with(&s, device_protocol::DeviceKind::Morphorider, profile, 1, &m);
+        let curves = sfs::acquisition::Acquisition::scan_bytes(
+            &sim.bytes,
+            sfs::acquisition::AcquisitionConfig::default(),
+        )
+        .curves;
+        let name = format!("{name} ({profile:?})");
+        let exact = run_joined(
+            &mut Reconstructor::new(),
+            &curves,
+            &NetworkParams::default(),
+            &JoinSettings::default(),
+        )
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+        // The live worker's state: the network without its last curve, then the update.
+        let live = NetworkParams {
+            local_window: 10,
+            ..NetworkParams::default()
+        };
+        let mut r = Reconstructor::new();
+        let before = &curves[..curves.len() - 1];
+        run_joined(&mut r, before, &live, &JoinSettings::default()).expect("a network");
+        let update =
+            run_joined(&mut r, &curves, &live, &JoinSettings::default()).expect("a network");
+        let (e, u) = (&exact.report, &update.report);
+        assert!(e.join_passes <= MAX_PASSES, "{name}");
+        assert!(
+            u.join_passes <= LIVE_MAX_PASSES,
+            "{name}: {} passes",
+            u.join_passes
+        );
+        if e.join_passes > LIVE_MAX_PASSES && u.join_passes == LIVE_MAX_PASSES {
+            cut += 1;
+            assert!(u.provisional, "{name}: cut short, yet not provisional");
+        }
+        // Settled as the worker does (the whole regression, every pass): the exact network.
+        let settled = run_joined(
+            &mut r,
+            &curves,
+            &NetworkParams::default(),
+            &JoinSettings::default(),
+        )
+        .expect("a network");
+        assert_eq!(settled.positions, exact.positions, "{name}");
+    }
+    assert!(
+        cut > 0,
+        "no scene needed more passes than a live update runs"
+    );
+}

@@ -67,7 +67,8 @@ pub struct NetworkReport {
     /// The regression's iterations and energies.
     pub regression: RegressionReport,
     /// The regression moved only the frames near what changed since the last run
-    /// ([`NetworkParams::local_window`]): a run with a window of 0 gives the exact network.
+    /// ([`NetworkParams::local_window`]), or the join passes stopped at
+    /// [`join::LIVE_MAX_PASSES`]: a run with a window of 0 gives the exact network.
     pub provisional: bool,
     /// How each curve closes the network's loops (the loop-closure test's misfit, before the
     /// regression), with the tags that explain most of it marked; empty without loops.
@@ -125,8 +126,9 @@ pub enum NetworkWarning {
     CreaseUnknown(crease::CreaseUnknown),
     /// A join undone: its loops do not close, or the operator refused it.
     JoinRefused(join::RefusedJoin),
-    /// The joins still moved after [`join::MAX_PASSES`] reconstructions.
-    JoinsUnsettled { moved_m: f64 },
+    /// The joins still moved after `passes` reconstructions ([`join::MAX_PASSES`], or
+    /// [`join::LIVE_MAX_PASSES`] in a live update).
+    JoinsUnsettled { moved_m: f64, passes: usize },
 }
 
 impl NetworkWarning {
@@ -194,11 +196,11 @@ impl std::fmt::Display for NetworkWarning {
                 r.distance_m * 1e3,
                 r.reason
             ),
-            NetworkWarning::JoinsUnsettled { moved_m } => write!(
+            NetworkWarning::JoinsUnsettled { moved_m, passes } => write!(
                 f,
                 "the joined nodes still moved {:.1} mm along their curves after {} reconstructions: kept where the last one put them",
                 moved_m * 1e3,
-                join::MAX_PASSES
+                passes
             ),
         }
     }

@@ -204,6 +204,13 @@ pub const REFUSE_RATIO: f64 = 3.0;
 pub const MISFIT_FLOOR_M: f64 = 0.001;
 /// Passes of find, join and reconstruct at most (each pass one reconstruction).
 pub const MAX_PASSES: usize = 8;
+/// The same in a live update (a provisional network: [`NetworkParams::local_window`] above
+/// 0), whose settle runs them to [`MAX_PASSES`]: on a noisy network of thousands of nodes
+/// the slides jitter by a millimetre from pass to pass, and eight whole reconstructions per
+/// update were most of a live update's time.
+///
+/// [`NetworkParams::local_window`]: crate::network::NetworkParams::local_window
+pub const LIVE_MAX_PASSES: usize = 3;
 /// A slid tag keeps at least this far from its curve's other tags, m (or a quarter of the
 /// segment, when shorter).
 pub const SLIDE_MARGIN_M: f64 = 0.002;

@@ -7,7 +7,7 @@
 use super::parts::{apply_moves, placement};
 use super::{
     apply_joins, find_crossings, find_joins_within, Join, JoinReport, JoinSettings, RefusedJoin,
-    MAX_PASSES, MISFIT_FLOOR_M, REFUSE_RATIO, SETTLED_M, SLIDE_MARGIN_M,
+    LIVE_MAX_PASSES, MAX_PASSES, MISFIT_FLOOR_M, REFUSE_RATIO, SETTLED_M, SLIDE_MARGIN_M,
 };
 use crate::curve::{Curve, ANONYMOUS_NODE_BASE};
 use crate::network::closure::LoopFit;
@@ -27,8 +27,9 @@ use std::time::Instant;
 /// curve where the Poisson solve puts it
 /// ([`crate::network::poisson::PoissonSolver::solve_sliding`], the slides solved together;
 /// at most the join distance a pass, halved each time its slide turns back; a tag that closes
-/// no loop stays put), until none moves more than [`SETTLED_M`] (at most [`MAX_PASSES`]); joins found in the
-/// moved network join in the next pass. Once settled, the join whose loops misfit worst is
+/// no loop stays put), until none moves more than [`SETTLED_M`] (at most [`MAX_PASSES`], or
+/// [`LIVE_MAX_PASSES`] in a live update); joins found in the moved network join in the next
+/// pass. Once settled, the join whose loops misfit worst is
 /// refused when beyond [`REFUSE_RATIO`] × the network's other loops, and the passes go on
 /// without it. A refused join is never proposed again, so the passes end. Without any join
 /// the result is [`Reconstructor::run`]'s, to the bit.
@@ -49,6 +50,11 @@ pub fn run_joined(
         .distance_m
         .max(js.params.noise_factor * net.report.closure_misfit_m.unwrap_or(0.0));
     let mut state = Passes::new(curves, js, lonely_reach);
+    let max_passes = if p.local_window > 0 {
+        LIVE_MAX_PASSES
+    } else {
+        MAX_PASSES
+    };
     let mut moved = 0.0_f64;
     loop {
         let fresh = state.fresh(&net.positions);
@@ -59,9 +65,16 @@ pub fn run_joined(
                 break;
             }
             refusing = true;
-        } else if state.passes >= MAX_PASSES {
-            net.warnings
-                .push(NetworkWarning::JoinsUnsettled { moved_m: moved });
+        } else if state.passes >= max_passes {
+            net.warnings.push(NetworkWarning::JoinsUnsettled {
+                moved_m: moved,
+                passes: state.passes,
+            });
+            // Cut short in a live update: provisional, whatever the regression did, so that
+            // the worker settles it.
+            if max_passes < MAX_PASSES {
+                net.report.provisional = true;
+            }
             break;
         }
         state.joins.extend(fresh);
