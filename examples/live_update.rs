@@ -4,10 +4,12 @@
 //! event waits for: the network with the regression local to the new curve's nodes, the join
 //! passes, Poisson, the uncertainty), with the stages' times from the report.
 //!
-//! `cargo run --release --example live_update -- CAPTURE.bin|scan.json N [N …]`, or `M:N` for an update
-//! that brings curves `M … N − 1` at once, as the worker coalesces them (e.g. the built-in
-//! `ellipsoid-grid` scene: `sfs simulate --scene ellipsoid-grid --device morphorider --seed 1
-//! --out E`). With `JOINS=1` in the environment, the update's joins and refusals are listed.
+//! `cargo run --release --example live_update -- CAPTURE.bin|scan.json N [N …]`; `M:N` for
+//! an update that brings curves `M … N − 1` at once, as the worker coalesces them; `a,b,c`
+//! for updates to a, b, c curves in a row (settled after each with `SETTLE=1`). E.g. on the
+//! built-in `ellipsoid-grid` scene: `sfs simulate --scene ellipsoid-grid --device
+//! morphorider --seed 1 --out E`. With `JOINS=1` in the environment, the update's joins and
+//! refusals are listed.
 
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
 use sfs::pipeline::{for_device, Pipeline, LIVE_LOCAL_WINDOW};

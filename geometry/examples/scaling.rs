@@ -18,9 +18,10 @@
 //!   factorisation kept, back-substitutions only: a monitored structure's epochs).
 //!
 //! And the two phases of a live update against the network's size (issue 35, point 3; 150
-//! and 200 curves added for issue 51): the same grids' curves sampled as a device would give them (distance along, frames whose x is
-//! the tangent and z the surface normal, exact), then, after the network without meridian 1,
-//! the update that adds it as the live worker runs it:
+//! and 200 curves added for issue 51): the same grids' curves sampled as a device would give
+//! them (distance along, frames whose x is the tangent and z the surface normal, exact),
+//! then, after the network without meridian 1, the update that adds it as the live worker
+//! runs it:
 //! - `curves`: the network reconstructed (pre-filter, the regression local to 10 samples
 //!   either side of the new curve's nodes as the daemon's `LIVE_LOCAL_WINDOW`, Poisson: what
 //!   the view's `curves` event publishes);

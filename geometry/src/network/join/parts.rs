@@ -260,8 +260,7 @@ pub const DISTINCT_RATIO: usize = 2;
 /// what a join could be: normals that fit, and a curve that crosses the node's, not one
 /// alongside it. Candidates come from each incidence along every sample of the curve; each
 /// is scored by the incidences around it in a grid of them by translation. Returns the parts
-/// moved; the joins
-/// ([`find_joins`](super::find_joins)) are then found in the moved network.
+/// moved; the joins ([`find_joins`](super::find_joins)) are then found in the moved network.
 pub fn place_parts(net: &mut Positions, p: &JoinParams) -> usize {
     placement(net, p).len()
 }

@@ -29,10 +29,10 @@ use std::time::Instant;
 /// at most the join distance a pass, halved each time its slide turns back; a tag that closes
 /// no loop stays put), until none moves more than [`SETTLED_M`] (at most [`MAX_PASSES`], or
 /// [`LIVE_MAX_PASSES`] in a live update); joins found in the moved network join in the next
-/// pass. Once settled, the join whose loops misfit worst is
-/// refused when beyond [`REFUSE_RATIO`] × the network's other loops, and the passes go on
-/// without it. A refused join is never proposed again, so the passes end. Without any join
-/// the result is [`Reconstructor::run`]'s, to the bit.
+/// pass. Once settled, the join whose loops misfit worst is refused when beyond
+/// [`REFUSE_RATIO`] × the network's other loops, and the passes go on without it. A refused
+/// join is never proposed again, so the passes end. Without any join the result is
+/// [`Reconstructor::run`]'s, to the bit.
 pub fn run_joined(
     r: &mut Reconstructor,
     curves: &[Curve],
@@ -200,9 +200,9 @@ impl<'a> Passes<'a> {
     pub(crate) fn fresh(&mut self, net: &Positions) -> Vec<Pending> {
         let js = self.js;
         // A network in parts: each part moved to where its lonely nodes fit first, as far as
-        // they reach.
-        // The search is the costly part of a pass (every part against the placed ones), and a
-        // pass moves the parts' shapes by its slides only: it is made once per partition.
+        // they reach. The search is the costly part of a pass (every part against the placed
+        // ones), and a pass changes the parts' shapes by its slides only: it is made once per
+        // partition.
         let placed;
         let seen = if net.components > 1 {
             let mut moved = net.clone();
