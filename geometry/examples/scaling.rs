@@ -31,7 +31,8 @@
 //! - `settle`: what the worker does next while idle: the whole network's regression and the
 //!   exact surface (τ = 0), replacing the provisional update.
 //!
-//! `cargo run --release -p sfs-geometry --example scaling [-- target/scaling.csv]`
+//! `cargo run --release -p sfs-geometry --example scaling [-- [--phases] target/scaling.csv]`
+//! (`--phases`: the live update's table alone, a few minutes instead of a quarter of an hour).
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use sfs_geometry::curve::{Curve, Samples, Tag};
@@ -260,12 +261,16 @@ fn cells(t: &[f64]) -> String {
 fn main() {
     // As the daemon runs (faer's parallel factorisation is slower on this machine's 2 cores).
     sfs_geometry::sparse_llt::single_threaded();
-    let csv_path = std::env::args().nth(1);
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let phases_only = args.iter().any(|a| a == "--phases");
+    let csv_path = args.into_iter().find(|a| !a.starts_with("--"));
     let header = COLUMNS.join(" | ");
     // Surface size: the grid at an edge for each target count. The sizes grow, so each one's
     // peak resident size is the process's peak after it.
-    println!("| vertices | faces touched | {header} | peak resident size per vertex |");
-    println!("|---|---|---|---|---|---|---|---|");
+    if !phases_only {
+        println!("| vertices | faces touched | {header} | peak resident size per vertex |");
+        println!("|---|---|---|---|---|---|---|---|");
+    }
     let mut by_size = Series {
         name: "vertices",
         first: 0,
@@ -279,7 +284,10 @@ fn main() {
         50_000.0,
         100_000.0,
         200_000.0f64,
-    ] {
+    ]
+    .into_iter()
+    .filter(|_| !phases_only)
+    {
         // The unit sphere's area over a lattice of edge e: 4π / (√3/2 e²) vertices.
         let edge = (4.0 * std::f64::consts::PI / (3f64.sqrt() / 2.0 * target)).sqrt();
         let p = SurfaceParams {
@@ -293,26 +301,33 @@ fn main() {
         println!("| {nv} | {touched} | {} | {per_vertex:.1} kB |", cells(&t));
         by_size.rows.push((nv as f64, nv, t.to_vec()));
     }
-    println!("| exponent | | {} | |", by_size.exponents().join(" | "));
-    // Network size: the grid at the default edge and budget.
-    println!();
-    println!("| curves | vertices | faces touched | {header} |");
-    println!("|---|---|---|---|---|---|---|---|");
+    if !phases_only {
+        println!("| exponent | | {} | |", by_size.exponents().join(" | "));
+        // Network size: the grid at the default edge and budget.
+        println!();
+        println!("| curves | vertices | faces touched | {header} |");
+        println!("|---|---|---|---|---|---|---|---|");
+    }
     let mut by_curves = Series {
         name: "curves",
         first: 0,
         rows: Vec::new(),
     };
-    for curves in [5usize, 10, 20, 50, 100] {
+    for curves in [5usize, 10, 20, 50, 100]
+        .into_iter()
+        .filter(|_| !phases_only)
+    {
         let meridians = curves.div_ceil(2);
         let net = sphere_grid(meridians, curves - meridians, 0.01);
         let (nv, touched, t) = row(&net, &SurfaceParams::default(), 3);
         println!("| {curves} | {nv} | {touched} | {} |", cells(&t));
         by_curves.rows.push((curves as f64, nv, t.to_vec()));
     }
-    println!("| exponent | | | {} |", by_curves.exponents().join(" | "));
-    // The two phases of a live update (issue 35), the same grids.
-    println!();
+    if !phases_only {
+        println!("| exponent | | | {} |", by_curves.exponents().join(" | "));
+        // The two phases of a live update (issue 35), the same grids.
+        println!();
+    }
     println!("| curves (a live update) | vertices | E to the curves: network | surface | E to the surface: update | settle |");
     println!("|---|---|---|---|---|---|");
     let mut by_phase = Series {

@@ -520,7 +520,7 @@ fn optimise(
         return (x, report);
     }
     let (normal, entries) = NormalPattern::of(pb, p);
-    let symbolic = match pattern.pattern_ordered(3 * n, entries, || Some(normal.order(n))) {
+    let symbolic = match pattern.pattern_ordered(3 * n, entries, || normal.order(pb)) {
         Ok((s, _)) => s,
         Err(e) => {
             tracing::error!("regression: {e}");
@@ -715,20 +715,48 @@ impl NormalPattern {
         (pattern, entries)
     }
 
-    /// A nested-dissection order of the `n` frames' blocks (the chains of the curves, tied at
-    /// the nodes), expanded to their 3 rows each: a candidate beside minimum degree.
-    fn order(&self, n: usize) -> Vec<usize> {
+    /// The elimination order of the frames' blocks (`n` of them, the movable frames of `pb`),
+    /// expanded to their 3 rows each: of approximate minimum degree and the curves' pieces
+    /// between nodes first, then a nested dissection across the nodes
+    /// ([`crate::nested_dissection::order_interiors_first`]), the one that fills less
+    /// ([`crate::sparse_llt::block_order`]). A frame tied to another curve's at a node, and
+    /// the next frame along its curve (a bending term reaches over one frame), are not
+    /// interior. `None` when the pattern is not one of blocks (not expected).
+    fn order(&self, pb: &Problem) -> Option<Vec<usize>> {
+        let n = pb.movable;
         let mut adj = vec![Vec::new(); n];
+        let mut lower = Vec::with_capacity(self.block_keys.len());
         for &(i, j) in &self.block_keys {
             if i != j {
                 adj[i].push(j);
                 adj[j].push(i);
+                lower.push((i, j));
             }
         }
-        crate::nested_dissection::order(&adj)
-            .into_iter()
-            .flat_map(|b| [3 * b, 3 * b + 1, 3 * b + 2])
-            .collect()
+        let mut tied = vec![false; n];
+        for &(i, j) in &pb.pairs {
+            for v in [i, j] {
+                if v < n {
+                    tied[v] = true;
+                }
+            }
+        }
+        let mut interior: Vec<bool> = tied.iter().map(|t| !t).collect();
+        for vars in &pb.var_of {
+            for w in vars.windows(2) {
+                if w[0] < n && w[1] < n && tied[w[0]] {
+                    interior[w[1]] = false;
+                }
+            }
+        }
+        let candidate = crate::nested_dissection::order_interiors_first(&adj, &interior);
+        let blocks = crate::sparse_llt::block_order(n, &lower, Some(&candidate)).ok()?;
+        Some(
+            blocks
+                .into_iter()
+                .flat_map(|b| [3 * b, 3 * b + 1, 3 * b + 2])
+                .collect(),
+        )
     }
 
     /// The block of every (term, variable pair) of `t`: the terms keep their order and
