@@ -32,7 +32,8 @@
 //!   exact surface (τ = 0), replacing the provisional update.
 //!
 //! `cargo run --release -p sfs-geometry --example scaling [-- [--phases] target/scaling.csv]`
-//! (`--phases`: the live update's table alone, a few minutes instead of a quarter of an hour).
+//! (`--phases`: the live update's table alone, a few minutes instead of a quarter of an hour;
+//! `--curves=N`: its row of N curves alone).
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use sfs_geometry::curve::{Curve, Samples, Tag};
@@ -262,7 +263,11 @@ fn main() {
     // As the daemon runs (faer's parallel factorisation is slower on this machine's 2 cores).
     sfs_geometry::sparse_llt::single_threaded();
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let phases_only = args.iter().any(|a| a == "--phases");
+    let only: Option<usize> = args
+        .iter()
+        .find_map(|a| a.strip_prefix("--curves="))
+        .and_then(|n| n.parse().ok());
+    let phases_only = only.is_some() || args.iter().any(|a| a == "--phases");
     let csv_path = args.into_iter().find(|a| !a.starts_with("--"));
     let header = COLUMNS.join(" | ");
     // Surface size: the grid at an edge for each target count. The sizes grow, so each one's
@@ -337,7 +342,10 @@ fn main() {
     };
     // Rows of 150 and 200 curves (issue 51, point 6), one run each: sessions of hundreds of
     // curves.
-    for curves in [5usize, 10, 20, 50, 100, 150, 200] {
+    for curves in [5usize, 10, 20, 50, 100, 150, 200]
+        .into_iter()
+        .filter(|c| only.is_none_or(|o| o == *c))
+    {
         let meridians = curves.div_ceil(2);
         let runs = if curves > 100 { 1 } else { 3 };
         let (nv, t) = phases(&sphere_grid(meridians, curves - meridians, 0.01), runs);

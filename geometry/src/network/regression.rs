@@ -113,16 +113,67 @@ pub struct RegressionSolver {
     local_pattern: CachedPattern,
 }
 
-/// The Jacobian of a residual block with respect to one variable: one row of 3 per residual.
-type JacobianBlock = (usize, Vec<[f64; 3]>);
+/// One residual block: the movable variables it touches (up to three, in order; constants
+/// have no Jacobian) and where its residuals and Jacobian rows start in [`Terms`].
+#[derive(Clone, Copy)]
+struct Term {
+    vars: [usize; 3],
+    nvars: u8,
+    rows: u8,
+    /// First residual in `Terms::res`.
+    res: usize,
+    /// First Jacobian row in `Terms::jac`: `rows` rows for each variable in turn.
+    jac: usize,
+}
 
-/// Residual blocks, each touching up to three variables: their Jacobians and the residuals;
-/// the data term E₀ in closed form (its Gauss–Newton block is `2w·I`).
+/// Residual blocks, each touching up to three variables: their Jacobians and the residuals,
+/// stored flat (one allocation each for millions of rows); the data term E₀ in closed form
+/// (its Gauss–Newton block is `2w·I`).
 struct Terms {
-    blocks: Vec<(Vec<JacobianBlock>, Vec<f64>)>,
+    terms: Vec<Term>,
+    res: Vec<f64>,
+    /// Rows of 3 (one per residual and variable): ∂r/∂ω of the variable's frame.
+    jac: Vec<[f64; 3]>,
     e0_energy: f64,
     /// Jᵀr of E₀ per variable.
     e0_grad: Vec<Vector3<f64>>,
+}
+
+impl Terms {
+    /// Appends a block with residuals `r` and, for each variable, its Jacobian rows (one per
+    /// residual); variables past `movable` (constants) keep no Jacobian.
+    fn push(&mut self, movable: usize, r: &[f64], vars: &[(usize, &[[f64; 3]])]) {
+        let mut t = Term {
+            vars: [0; 3],
+            nvars: 0,
+            rows: r.len() as u8,
+            res: self.res.len(),
+            jac: self.jac.len(),
+        };
+        self.res.extend_from_slice(r);
+        for &(v, rows) in vars {
+            if v < movable {
+                t.vars[usize::from(t.nvars)] = v;
+                t.nvars += 1;
+                self.jac.extend_from_slice(rows);
+            }
+        }
+        self.terms.push(t);
+    }
+
+    /// The residuals of block `t`.
+    fn residuals(&self, t: &Term) -> &[f64] {
+        &self.res[t.res..t.res + usize::from(t.rows)]
+    }
+
+    /// The variables of block `t` with their Jacobian rows.
+    fn jacobians<'a>(&'a self, t: &'a Term) -> impl Iterator<Item = (usize, &'a [[f64; 3]])> + 'a {
+        let rows = usize::from(t.rows);
+        t.vars[..usize::from(t.nvars)]
+            .iter()
+            .enumerate()
+            .map(move |(k, &v)| (v, &self.jac[t.jac + k * rows..t.jac + (k + 1) * rows]))
+    }
 }
 
 fn hat(w: &Vector3<f64>) -> Matrix3<f64> {
@@ -268,33 +319,40 @@ pub fn bend_length(curves: &[UniformCurve], p: &RegressionParams) -> f64 {
 
 /// Weighted residuals and Jacobians at frames `x`.
 fn terms(pb: &Problem, x: &[Matrix3<f64>], p: &Resolved) -> Terms {
-    let mut blocks =
-        Vec::with_capacity(pb.a.len() + pb.edges.len() + pb.triples.len() + pb.pairs.len());
+    let n = pb.edges.len() + pb.triples.len() + pb.pairs.len();
+    let mut t = Terms {
+        terms: Vec::with_capacity(n),
+        res: Vec::with_capacity(9 * pb.edges.len() + 3 * (pb.triples.len() + pb.pairs.len())),
+        jac: Vec::with_capacity(18 * pb.edges.len() + 9 * pb.triples.len() + 6 * pb.pairs.len()),
+        e0_energy: 0.0,
+        e0_grad: Vec::with_capacity(pb.movable),
+    };
+    let movable = pb.movable;
     let basis = [Vector3::x(), Vector3::y(), Vector3::z()];
     // E0 = Σ w‖X − A‖²_F = Σ w (6 − 2 tr XᵀA); with J_k = √w X ê_k,
     // Jᵀr = −2w vee(skew(XᵀA)) and JᵀJ = 2w I.
-    let mut e0_energy = 0.0;
-    let mut e0_grad = Vec::with_capacity(pb.movable);
     for (i, (xi, ai)) in x.iter().zip(&pb.a).take(pb.movable).enumerate() {
         let w = pb.w[i];
         let m = xi.transpose() * ai;
-        e0_energy += w * (xi - ai).norm_squared();
-        e0_grad.push(-2.0 * w * vee_skew(&m));
+        t.e0_energy += w * (xi - ai).norm_squared();
+        t.e0_grad.push(-2.0 * w * vee_skew(&m));
     }
     // E1.
     if p.stretch_length > 0.0 {
         for &(i, j, h) in &pb.edges {
             let w = (p.stretch_length * p.stretch_length / h / h).sqrt();
             let r = flat(&((x[i] - x[j]) * w));
-            let ji: Vec<[f64; 3]> = (0..9)
-                .map(|e| std::array::from_fn(|k| flat(&(x[i] * hat(&basis[k]) * w))[e]))
-                .collect();
-            let jj: Vec<[f64; 3]> = (0..9)
-                .map(|e| std::array::from_fn(|k| -flat(&(x[j] * hat(&basis[k]) * w))[e]))
-                .collect();
-            blocks.push((vec![(i, ji), (j, jj)], r.to_vec()));
+            // Row e of ∂r/∂ω_k: entry e of X ω̂_k w (negated for the second frame).
+            let di: [[f64; 9]; 3] = std::array::from_fn(|k| flat(&(x[i] * hat(&basis[k]) * w)));
+            let dj: [[f64; 9]; 3] = std::array::from_fn(|k| flat(&(x[j] * hat(&basis[k]) * w)));
+            let ji: [[f64; 3]; 9] = std::array::from_fn(|e| std::array::from_fn(|k| di[k][e]));
+            let jj: [[f64; 3]; 9] = std::array::from_fn(|e| std::array::from_fn(|k| -dj[k][e]));
+            t.push(movable, &r, &[(i, &ji), (j, &jj)]);
         }
     }
+    let rows = |m: Matrix3<f64>| -> [[f64; 3]; 3] {
+        std::array::from_fn(|r| [m[(r, 0)], m[(r, 1)], m[(r, 2)]])
+    };
     // E2: ‖skew(M)‖²_F = 2‖s‖², μ/h³ with μ = ℓ⁴/h.
     if p.bend > 0.0 {
         for &(a, b, c, h) in &pb.triples {
@@ -308,13 +366,10 @@ fn terms(pb: &Problem, x: &[Matrix3<f64>], p: &Resolved) -> Terms {
             // vee(skew(P ω̂)) = ½(tr P · I − Pᵀ) ω and vee(skew(ω̂ M)) = ½(tr M · I − M) ω.
             let g =
                 |pm: &Matrix3<f64>| (Matrix3::identity() * pm.trace() - pm.transpose()) * (0.5 * w);
-            let rows = |m: Matrix3<f64>| -> Vec<[f64; 3]> {
-                (0..3).map(|r| [m[(r, 0)], m[(r, 1)], m[(r, 2)]]).collect()
-            };
             let ja = rows(g(&pa));
             let jc = rows(g(&pc));
             let jb = rows(-(Matrix3::identity() * m.trace() - m) * (0.5 * w));
-            blocks.push((vec![(a, ja), (b, jb), (c, jc)], s.as_slice().to_vec()));
+            t.push(movable, s.as_slice(), &[(a, &ja), (b, &jb), (c, &jc)]);
         }
     }
     // E_N.
@@ -324,31 +379,16 @@ fn terms(pb: &Problem, x: &[Matrix3<f64>], p: &Resolved) -> Terms {
         let r = (x[i] * e3 - x[j] * e3) * sx;
         let ji = -(x[i] * hat(&e3)) * sx;
         let jj = (x[j] * hat(&e3)) * sx;
-        let rows = |m: Matrix3<f64>| -> Vec<[f64; 3]> {
-            (0..3)
-                .map(|rr| [m[(rr, 0)], m[(rr, 1)], m[(rr, 2)]])
-                .collect()
-        };
-        blocks.push((vec![(i, rows(ji)), (j, rows(jj))], r.as_slice().to_vec()));
+        t.push(movable, r.as_slice(), &[(i, &rows(ji)), (j, &rows(jj))]);
     }
-    if pb.movable < pb.a.len() {
-        // Constants have no Jacobian.
-        for (vars, _) in &mut blocks {
-            vars.retain(|(v, _)| *v < pb.movable);
-        }
-    }
-    Terms {
-        blocks,
-        e0_energy,
-        e0_grad,
-    }
+    t
 }
 
 fn energy(t: &Terms) -> f64 {
     t.e0_energy
-        + t.blocks
+        + t.terms
             .iter()
-            .map(|(_, r)| r.iter().map(|x| x * x).sum::<f64>())
+            .map(|b| t.residuals(b).iter().map(|x| x * x).sum::<f64>())
             .sum::<f64>()
 }
 
@@ -761,21 +801,19 @@ impl NormalPattern {
 
     /// The block of every (term, variable pair) of `t`: the terms keep their order and
     /// variables across iterations, so the lookups are done once.
-    fn slots(&self, t: &Terms) -> Vec<Vec<usize>> {
-        t.blocks
-            .iter()
-            .map(|(vars, _)| {
-                let mut v = Vec::new();
-                for (vi, _) in vars {
-                    for (vj, _) in vars {
-                        if vj <= vi {
-                            v.push(self.block_index[&(*vi, *vj)]);
-                        }
+    fn slots(&self, t: &Terms) -> Vec<usize> {
+        let mut v = Vec::new();
+        for b in &t.terms {
+            let vars = &b.vars[..usize::from(b.nvars)];
+            for vi in vars {
+                for vj in vars {
+                    if vj <= vi {
+                        v.push(self.block_index[&(*vi, *vj)]);
                     }
                 }
-                v
-            })
-            .collect()
+            }
+        }
+        v
     }
 
     /// The entries' values of the normal matrix of `blocks` with `damping` added to its
@@ -804,7 +842,7 @@ impl NormalPattern {
 fn normal_equations(
     pb: &Problem,
     t: &Terms,
-    slots: &[Vec<usize>],
+    slots: &[usize],
     pattern: &NormalPattern,
 ) -> (Vec<Matrix3<f64>>, Vec<Vector3<f64>>) {
     let mut blocks = vec![Matrix3::<f64>::zeros(); pattern.block_keys.len()];
@@ -812,15 +850,16 @@ fn normal_equations(
     for (i, w) in pb.w.iter().take(pb.movable).enumerate() {
         blocks[pattern.diag_slot[i]] += Matrix3::identity() * (2.0 * w);
     }
-    for ((vars, r), slot) in t.blocks.iter().zip(slots) {
-        let mut next_slot = slot.iter();
-        for (vi, ji) in vars {
+    let mut next_slot = slots.iter();
+    for b in &t.terms {
+        let r = t.residuals(b);
+        for (vi, ji) in t.jacobians(b) {
             let mut jtr = Vector3::zeros();
             for (row, rv) in ji.iter().zip(r) {
                 jtr += Vector3::from(*row) * *rv;
             }
-            g[*vi] += jtr;
-            for (vj, jj) in vars {
+            g[vi] += jtr;
+            for (vj, jj) in t.jacobians(b) {
                 if vj > vi {
                     continue;
                 }
@@ -1054,14 +1093,16 @@ mod tests {
                 );
             }
         }
-        for (bk, (vars, r)) in t.blocks.iter().enumerate().step_by(37) {
-            for (v, jac) in vars {
+        for (bk, b) in t.terms.iter().enumerate().step_by(37) {
+            let r = t.residuals(b);
+            for (v, jac) in t.jacobians(b) {
                 for k in 0..3 {
                     let mut w = Vector3::zeros();
                     w[k] = eps;
                     let mut xp = x.clone();
-                    xp[*v] = retract(&x[*v], &w);
-                    let rp = &terms(&pb, &xp, &p).blocks[bk].1;
+                    xp[v] = retract(&x[v], &w);
+                    let tp = terms(&pb, &xp, &p);
+                    let rp = tp.residuals(&tp.terms[bk]);
                     for (row, (a, b)) in rp.iter().zip(r).enumerate() {
                         let fd = (a - b) / eps;
                         assert!(
