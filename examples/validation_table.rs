@@ -19,7 +19,11 @@
 //! On phone captures also the true standing mask (phases standing and turning in place) with the
 //! distances made from it as the phone's were before issue 33 (a constant speed between the
 //! stands): what the best standing mask alone could give. `--per-curve` also prints each
-//! curve's segment lengths against the truth and its frames' error.
+//! curve's segment lengths against the truth and its frames' error, and its timeline in 25
+//! stretches of equal sample count: the frames' mean tilt and heading error (°), what the
+//! operator did (`S` standing, `T` turning, `m` moving, `t` transit), whether the stretch's
+//! samples are flagged magnetically disturbed (`*` most, `'` some) and the distance's error
+//! at its end (mm), to see where a curve's error comes from.
 //!
 //! Columns: the error now; the target (Morphorider rough 0.30, phone clean 0.40, phone rough
 //! 0.80); the figure before the field-accuracy work (baa97be) and at 1b493a8, both from the
@@ -313,6 +317,7 @@ fn per_curve(name: &str, curves: &[Curve], truth: &[TruthSample], shifts: &[f64]
                 Some(2.0 * dot.acos().to_degrees())
             })
             .collect();
+        eprintln!("  timeline: {}", timeline(c, truth, *shift));
         angles.sort_by(f64::total_cmp);
         let at = |p: usize| {
             angles
@@ -328,6 +333,65 @@ fn per_curve(name: &str, curves: &[Curve], truth: &[TruthSample], shifts: &[f64]
             at(90)
         );
     }
+}
+
+/// The timeline of `--per-curve` (see the module's documentation): per stretch of a 25th of
+/// the curve's samples, `tilt/heading` error (°), the operator's phase, the disturbance mark
+/// and the distance's error at its end (mm).
+fn timeline(c: &Curve, truth: &[TruthSample], shift: f64) -> String {
+    use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+    let quat =
+        |a: [f64; 4]| UnitQuaternion::from_quaternion(Quaternion::new(a[0], a[1], a[2], a[3]));
+    let n = c.samples.len();
+    let bins = 25;
+    let mut out = Vec::new();
+    for b in 0..bins {
+        let (lo, hi) = (n * b / bins, n * (b + 1) / bins);
+        let (mut tilt, mut heading, mut k, mut phases, mut flagged) = (0.0, 0.0, 0, [0usize; 4], 0);
+        let mut dd = f64::NAN;
+        for i in lo..hi {
+            if c.samples.flags[i] & sfs::orientation::flags::MAG_DISTURBED != 0 {
+                flagged += 1;
+            }
+            let Some(s) = truth_at(truth, c.samples.t[i] + shift) else {
+                continue;
+            };
+            let (qa, qt) = (quat(c.samples.q[i]), quat(s.q));
+            // Tilt: the angle between the vertical as each frame sees it.
+            let up = Vector3::z();
+            tilt += (qa.inverse() * up).angle(&(qt.inverse() * up)).to_degrees();
+            // Heading: the error rotation's twist about the vertical.
+            let e = qa * qt.inverse();
+            heading += 2.0
+                * e.k
+                    .atan2(e.w)
+                    .abs()
+                    .min(std::f64::consts::PI - e.k.atan2(e.w).abs())
+                    .to_degrees();
+            phases[usize::from(s.phase.min(3))] += 1;
+            dd = c.samples.d[i] - s.arc;
+            k += 1;
+        }
+        if k == 0 {
+            continue;
+        }
+        let phase = (0..4).max_by_key(|&p| phases[p]).unwrap_or(0);
+        let mark = if 2 * flagged > hi - lo {
+            "*"
+        } else if flagged > 0 {
+            "'"
+        } else {
+            ""
+        };
+        out.push(format!(
+            "{:.0}/{:.0}{}{mark}{:+.0}",
+            tilt / k as f64,
+            heading / k as f64,
+            ["t", "S", "T", "m"][phase],
+            dd * 1e3
+        ));
+    }
+    out.join(" ")
 }
 
 /// `--study`: as is, true q, true d, both, per capture.
