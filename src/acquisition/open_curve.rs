@@ -7,7 +7,7 @@ use super::preview::PreviewPath;
 use super::{interp, quat_array, quat_of, skid, Acquisition};
 use crate::keypad::CurveKind;
 use crate::orientation::disturbance::{
-    acc_motion, bridge_heading, disturbed_windows, mag_disturbed, norm_dip, END_SAMPLES,
+    acc_motion, bridge_heading, close_gaps, disturbed_windows, mag_disturbed, norm_dip, END_SAMPLES,
 };
 use crate::orientation::flags;
 use crate::orientation::triad::triad;
@@ -325,7 +325,16 @@ impl Acquisition {
             let nd = std::mem::take(&mut rb.nd);
             let windowed = disturbed_windows(&s.t, &nd, field_ref, &th);
             drop(nd);
-            for (f, d) in s.flags.iter_mut().zip(windowed) {
+            let mut disturbed: Vec<bool> = s
+                .flags
+                .iter()
+                .zip(windowed)
+                .map(|(f, w)| w || f & flags::MAG_DISTURBED != 0)
+                .collect();
+            // A few samples inside a magnet's reach can look clean: they would be the
+            // bridges' ends.
+            close_gaps(&mut disturbed, END_SAMPLES);
+            for (f, d) in s.flags.iter_mut().zip(disturbed) {
                 if d {
                     *f |= flags::MAG_DISTURBED;
                 }
