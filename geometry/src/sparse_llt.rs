@@ -135,15 +135,8 @@ impl SpdPattern {
             entries.iter().map(|&(r, c)| Pair::new(r, c)).collect();
         let (symbolic, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
             .map_err(|e| SolveError::Faer(format!("{e:?}")))?;
-        let symbolic_with = |ordering: SymmetricOrdering<'_, usize>| {
-            factorize_symbolic_cholesky(
-                symbolic.as_ref(),
-                Side::Lower,
-                ordering,
-                CholeskySymbolicParams::default(),
-            )
-            .map_err(|e| SolveError::Faer(format!("{e:?}")))
-        };
+        let symbolic_with =
+            |ordering: SymmetricOrdering<'_, usize>| symbolic_cholesky(&symbolic, ordering);
         let inverse = order.and_then(|o| inverse_of(o, n));
         let mut chol = None;
         if let (Some(order), Some(inverse)) = (order, &inverse) {
@@ -424,6 +417,20 @@ pub fn single_threaded() {
     faer::set_global_parallelism(faer::Par::Seq);
 }
 
+/// The symbolic Cholesky factorisation of the lower triangle `symbolic` in `ordering`.
+fn symbolic_cholesky(
+    symbolic: &SymbolicSparseColMat<usize>,
+    ordering: SymmetricOrdering<'_, usize>,
+) -> Result<SymbolicCholesky<usize>, SolveError> {
+    factorize_symbolic_cholesky(
+        symbolic.as_ref(),
+        Side::Lower,
+        ordering,
+        CholeskySymbolicParams::default(),
+    )
+    .map_err(|e| SolveError::Faer(format!("{e:?}")))
+}
+
 /// `inverse[v]`: where `v` is in `order`, when `order` is a permutation of `0..n`.
 fn inverse_of(order: &[usize], n: usize) -> Option<Vec<usize>> {
     if order.len() != n {
@@ -461,15 +468,8 @@ pub fn block_order(
     }
     let (symbolic, _) = SymbolicSparseColMat::try_new_from_indices(nb, nb, &pairs)
         .map_err(|e| SolveError::Faer(format!("{e:?}")))?;
-    let symbolic_with = |ordering: SymmetricOrdering<'_, usize>| {
-        factorize_symbolic_cholesky(
-            symbolic.as_ref(),
-            Side::Lower,
-            ordering,
-            CholeskySymbolicParams::default(),
-        )
-        .map_err(|e| SolveError::Faer(format!("{e:?}")))
-    };
+    let symbolic_with =
+        |ordering: SymmetricOrdering<'_, usize>| symbolic_cholesky(&symbolic, ordering);
     let amd = symbolic_with(SymmetricOrdering::Amd)?;
     let amd_order: Vec<usize> = match amd.perm() {
         Some(p) => p.arrays().0.to_vec(),
