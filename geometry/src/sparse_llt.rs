@@ -106,7 +106,7 @@ impl SpdPattern {
     /// degree (a level-structure nested dissection measured 30 % more fill on the surfacer's
     /// systems).
     pub fn new(n: usize, entries: &[(usize, usize)]) -> Result<Self, SolveError> {
-        Self::ordered(n, entries, None, false)
+        Self::ordered(n, entries, None)
     }
 
     /// As [`new`](Self::new), eliminated in `order` (`order[k]`: the row eliminated `k`-th,
@@ -117,16 +117,14 @@ impl SpdPattern {
         entries: &[(usize, usize)],
         order: &[usize],
     ) -> Result<Self, SolveError> {
-        Self::ordered(n, entries, Some(order), false)
+        Self::ordered(n, entries, Some(order))
     }
 
-    /// With `order` (when it is a permutation): that order alone when `exact`, else the one of
-    /// it and approximate minimum degree with the smaller fill.
+    /// In `order` when it is a permutation of `0..n`, else by approximate minimum degree.
     fn ordered(
         n: usize,
         entries: &[(usize, usize)],
         order: Option<&[usize]>,
-        exact: bool,
     ) -> Result<Self, SolveError> {
         if let Some(&(row, col)) = entries.iter().find(|&&(r, c)| r >= n || c > r) {
             return Err(SolveError::BadEntry { row, col, n });
@@ -137,21 +135,11 @@ impl SpdPattern {
             .map_err(|e| SolveError::Faer(format!("{e:?}")))?;
         let symbolic_with =
             |ordering: SymmetricOrdering<'_, usize>| symbolic_cholesky(&symbolic, ordering);
-        let inverse = order.and_then(|o| inverse_of(o, n));
-        let mut chol = None;
-        if let (Some(order), Some(inverse)) = (order, &inverse) {
-            let perm = faer::perm::PermRef::new_checked(order, inverse, n);
-            chol = Some(symbolic_with(SymmetricOrdering::Custom(perm))?);
-        }
-        let chol = match chol {
-            Some(custom) if exact => custom,
-            custom => {
-                let amd = symbolic_with(SymmetricOrdering::Amd)?;
-                match custom {
-                    Some(c) if c.len_val() < amd.len_val() => c,
-                    _ => amd,
-                }
-            }
+        let chol = match order.and_then(|o| Some((o, inverse_of(o, n)?))) {
+            Some((order, inverse)) => symbolic_with(SymmetricOrdering::Custom(
+                faer::perm::PermRef::new_checked(order, &inverse, n),
+            ))?,
+            None => symbolic_with(SymmetricOrdering::Amd)?,
         };
         Ok(SpdPattern {
             n,
@@ -294,7 +282,7 @@ impl CachedPattern {
             self.cached = None;
             self.last = None;
             let order = order();
-            let mut pattern = SpdPattern::ordered(n, &entries, order.as_deref(), true)?;
+            let mut pattern = SpdPattern::ordered(n, &entries, order.as_deref())?;
             pattern.spare = self.spare.clone();
             self.symbolic_count += 1;
             self.entries = entries;

@@ -163,7 +163,6 @@ fn best_pulse(
     };
     let yp: Vec<f64> = y.iter().zip(&u).map(|(y, u)| y - ym - slope * u).collect();
     let gaps = gaps_in(t);
-
     let mut best: Option<Ramp> = None;
     for &tau in &TAUS {
         let steps = ((hi.min(end.min(t1) - tau) - lo) / STEP).floor();

@@ -246,17 +246,16 @@ fn level_axis(q: &[nalgebra::UnitQuaternion<f64>]) -> Vector3<f64> {
             })
             .fold(f64::INFINITY, f64::min)
     };
+    let axes = [Vector3::x(), Vector3::y(), Vector3::z()].map(|e| (least(&e), e));
     // The tangent while it never climbs steeply: its heading is the curve's direction on the
     // map, which turns smoothly with the curve (another axis's heading also turns with the
     // surface's slope under the device).
-    if least(&Vector3::x()) >= STEEP {
-        return Vector3::x();
+    if axes[0].0 >= STEEP {
+        return axes[0].1;
     }
-    [Vector3::x(), Vector3::y(), Vector3::z()]
-        .into_iter()
-        .map(|e| (e, least(&e)))
-        .max_by(|a, b| a.1.total_cmp(&b.1))
-        .map_or(Vector3::x(), |(e, _)| e)
+    axes.into_iter()
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map_or(Vector3::x(), |(_, e)| e)
 }
 
 /// The horizontal part of a unit axis below which its heading is not used (an axis within
