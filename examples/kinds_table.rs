@@ -6,7 +6,10 @@
 //! surface (% of the diagonal) and the dihedral angle across each crease against the truth's.
 //!
 //! `cargo run --release --example kinds_table -- [--seeds 1,2,3] [--scenes box,roof]
-//! [--devices morphorider,phone] [--guide N]`
+//! [--devices morphorider,phone] [--profile default|field] [--guide N]`
+//!
+//! Diagnostics: `SFS_TRUE_D=1` / `SFS_TRUE_Q=1` put the simulator's true distances /
+//! orientations into the acquired curves, to split a surface's error by its source.
 //!
 //! `--guide N`: instead, curve N of each scene made a guide curve (as `[curves] kinds` would),
 //! its own error (its points to the truth network, `sfs eval`'s `curves_by_kind`) against the
@@ -44,17 +47,22 @@ struct GuideScore {
 
 fn score(
     name: &str,
+    profile: Profile,
     device: DeviceKind,
     seed: u64,
     smooth: bool,
     guide: Option<usize>,
 ) -> Result<(Score, GuideScore), String> {
     let s = scene::builtin(name).map_err(|e| e.to_string())?;
-    let sim = simulate::run(&s, device, Profile::Default, seed);
+    let sim = simulate::run(&s, device, profile, seed);
     let mut scan = Acquisition::scan_bytes(&sim.bytes, AcquisitionConfig::default());
-    // Diagnostic: the simulator's true distances put in.
-    if std::env::var("SFS_TRUE_D").is_ok() {
-        sim.samples.put_into(&mut scan.curves, false, true);
+    // Diagnostics: the simulator's true distances and/or orientations put in.
+    let (true_q, true_d) = (
+        std::env::var("SFS_TRUE_Q").is_ok(),
+        std::env::var("SFS_TRUE_D").is_ok(),
+    );
+    if true_q || true_d {
+        sim.samples.put_into(&mut scan.curves, true_q, true_d);
     }
     if let Some(g) = guide {
         let c = scan.curves.get_mut(g).ok_or("no such curve")?;
@@ -113,6 +121,10 @@ fn main() {
         .map(|s| s.parse().expect("a seed"))
         .collect();
     let scenes = list(&args, "--scenes", "box,roof");
+    let profile = match list(&args, "--profile", "default")[0].as_str() {
+        "field" => Profile::Field,
+        _ => Profile::Default,
+    };
     let devices: Vec<DeviceKind> = list(&args, "--devices", "morphorider,phone")
         .iter()
         .map(|d| match d.as_str() {
@@ -131,7 +143,7 @@ fn main() {
         for name in &scenes {
             for &device in &devices {
                 for &seed in &seeds {
-                    match score(name, device, seed, false, Some(g)) {
+                    match score(name, profile, device, seed, false, Some(g)) {
                         Ok((_, s)) => println!(
                             "| {name} | {} | {seed} | {:.2} / {:.2} | {:.2} / {:.2} |",
                             device.name(),
@@ -152,7 +164,7 @@ fn main() {
     for name in &scenes {
         for &device in &devices {
             for &seed in &seeds {
-                let cell = |smooth| match score(name, device, seed, smooth, None) {
+                let cell = |smooth| match score(name, profile, device, seed, smooth, None) {
                     Ok((s, _)) => s,
                     Err(e) => {
                         eprintln!("{name} {} seed {seed}: {e}", device.name());
