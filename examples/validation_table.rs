@@ -318,6 +318,8 @@ fn per_curve(name: &str, curves: &[Curve], truth: &[TruthSample], shifts: &[f64]
             })
             .collect();
         eprintln!("  timeline: {}", timeline(c, truth, *shift));
+        eprintln!("  {}", body_offset(c, truth, *shift, 3));
+        eprintln!("  {}", body_offset(c, truth, *shift, 1));
         angles.sort_by(f64::total_cmp);
         let at = |p: usize| {
             angles
@@ -392,6 +394,31 @@ fn timeline(c: &Curve, truth: &[TruthSample], shift: f64) -> String {
         ));
     }
     out.join(" ")
+}
+
+/// The mean error rotation in the device's own frame, `q_true⁻¹ q_acquired` over the samples
+/// where it moves (a rotation vector about T, B, N, degrees), and the spread about it: a
+/// mounting offset (the sensor turned in the device) is the same on every curve.
+fn body_offset(c: &Curve, truth: &[TruthSample], shift: f64, phase: u8) -> String {
+    use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+    let quat =
+        |a: [f64; 4]| UnitQuaternion::from_quaternion(Quaternion::new(a[0], a[1], a[2], a[3]));
+    let errs: Vec<Vector3<f64>> = (0..c.samples.len())
+        .filter_map(|i| {
+            let s = truth_at(truth, c.samples.t[i] + shift)?;
+            (s.phase == phase).then(|| (quat(s.q).inverse() * quat(c.samples.q[i])).scaled_axis())
+        })
+        .collect();
+    let n = errs.len().max(1) as f64;
+    let mean = errs.iter().sum::<Vector3<f64>>() / n;
+    let sd = (errs.iter().map(|e| (e - mean).norm_squared()).sum::<f64>() / n).sqrt();
+    format!(
+        "body-frame error, phase {phase} (about T, B, N): {:+.2}° {:+.2}° {:+.2}°, spread {:.2}°",
+        mean.x.to_degrees(),
+        mean.y.to_degrees(),
+        mean.z.to_degrees(),
+        sd.to_degrees()
+    )
 }
 
 /// `--study`: as is, true q, true d, both, per capture.
