@@ -1,6 +1,8 @@
 //! Curve-network reconstruction: tagged curves → filtered frames → positions.
 //!
 //! - [`prefilter`](mod@prefilter): per-curve outlier removal, duplicates, uniform Gaussian resampling.
+//! - [`mounting`]: the device's mounting offset (a roll and a pitch common to every frame in
+//!   its own axes) estimated from the normals at the nodes, and turned back.
 //! - [`closure`]: node tags the network's loops refuse (a mistyped or half-lost index) are
 //!   detached from their node.
 //! - [`regression`]: the frames regressed on SO(3)ᴺ over the whole network.
@@ -20,6 +22,7 @@ pub mod closure;
 pub mod crease;
 pub mod join;
 pub mod marginals;
+pub mod mounting;
 pub mod poisson;
 pub mod prefilter;
 pub mod regression;
@@ -41,6 +44,8 @@ pub struct NetworkParams {
     pub no_regression: bool,
     /// Skip the loop-closure test of the tags ([`closure`]), for comparisons.
     pub no_closure_check: bool,
+    /// Do not estimate the device's mounting offset from the node normals ([`mounting`]).
+    pub no_mounting: bool,
     /// Live updates (issue 19): when > 0, a run after the first moves only the frames of the
     /// curves that changed since the last run and those within this many samples of the
     /// nodes they pass through ([`RegressionSolver::run_local`]); the others keep the last
@@ -62,6 +67,9 @@ pub struct NetworkReport {
     pub outliers_removed: usize,
     /// Tags detached from their node by the loop-closure test (each also a warning).
     pub tags_detached: usize,
+    /// The device's mounting offset estimated from the normals at the nodes, and whether the
+    /// frames were turned back by it ([`mounting`]); none where the nodes cannot tell it.
+    pub mounting: Option<mounting::MountingEstimate>,
     /// Largest angle between the normals of two curves at a shared node, degrees.
     pub max_node_normal_angle_deg: f64,
     /// The regression's iterations and energies.
@@ -372,6 +380,14 @@ impl Reconstructor {
             }
             return Err(Unreconstructed { warnings });
         }
+        let mounting = if p.no_mounting {
+            None
+        } else {
+            mounting::estimate(&uniform)
+        };
+        if let Some(est) = mounting.filter(|e| e.applied) {
+            mounting::apply(&mut uniform, &est);
+        }
         let closure = closure_check(curves, &mut uniform, p, &mut warnings);
         let regression = self.regress(&mut uniform, p, warm);
         let t2 = Instant::now();
@@ -430,6 +446,7 @@ impl Reconstructor {
             components: positions.components,
             outliers_removed: uniform.iter().map(|u| u.outliers).sum(),
             tags_detached: closure.detached.len(),
+            mounting,
             max_node_normal_angle_deg: max_node_normal_angle(&positions),
             provisional: regression.frames_moved < regression.frames,
             regression,
