@@ -560,6 +560,14 @@ mod tests {
     use super::*;
     use nalgebra::UnitQuaternion;
 
+    /// Every frame of `q` within `deg` of the truth's.
+    fn assert_within(q: &[UnitQuaternion<f64>], truth: &[UnitQuaternion<f64>], deg: f64) {
+        for (i, (a, t)) in q.iter().zip(truth).enumerate() {
+            let err = a.angle_to(t).to_degrees();
+            assert!(err < deg, "sample {i}: {err:.2}° off");
+        }
+    }
+
     /// The fringe of a magnet (its field adding 20 % of (15, 0, 5) µT: the heading turns by 8°,
     /// the dip by 1.6°, each sample's test passes) is flagged by the windowed test; the clean
     /// field with noise is not.
@@ -685,10 +693,7 @@ mod tests {
             .collect();
         let changed = bridge_heading(&mut q, &x, &disturbed);
         assert_eq!(changed, disturbed.iter().filter(|&&d| d).count());
-        for (i, (a, t)) in q.iter().zip(&truth).enumerate() {
-            let err = a.angle_to(t).to_degrees();
-            assert!(err < 1.0, "sample {i}: {err:.2}° off");
-        }
+        assert_within(&q, &truth, 1.0);
     }
 
     /// A stand whose heading wobbles by a few degrees (a hand typing) is not a turn in place.
@@ -751,10 +756,7 @@ mod tests {
             .map(|(t, &d)| if d { turn * t } else { *t })
             .collect();
         assert_eq!(bridge_heading(&mut q, &x, &disturbed), 80);
-        for (i, (a, t)) in q.iter().zip(&truth).enumerate() {
-            let err = a.angle_to(t).to_degrees();
-            assert!(err < 1.0, "sample {i}: {err:.2}° off");
-        }
+        assert_within(&q, &truth, 1.0);
     }
 
     #[test]
