@@ -266,19 +266,39 @@ const STEEP: f64 = 0.3;
 /// second at 100 Hz: about 2 cm of rolling).
 pub const END_SAMPLES: usize = 25;
 
-/// The mean heading of the frames `q`'s axis `axis` (rad, unwrapped about the first's) and
-/// the mean of their `x`.
-fn mean_heading(q: &[nalgebra::UnitQuaternion<f64>], x: &[f64], axis: &Vector3<f64>) -> (f64, f64) {
-    let h0 = heading(&q[0], axis);
+/// The mean heading of the frames `q`'s axis `axis` (rad, unwrapped about the first's).
+fn mean_heading<'a>(
+    q: impl ExactSizeIterator<Item = &'a nalgebra::UnitQuaternion<f64>>,
+    axis: &Vector3<f64>,
+) -> f64 {
     let n = q.len().max(1) as f64;
-    let dh: f64 = q
-        .iter()
-        .map(|f| {
-            (heading(f, axis) - h0 + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-                - std::f64::consts::PI
-        })
-        .sum();
-    (h0 + dh / n, x.iter().sum::<f64>() / n)
+    let mut q = q.peekable();
+    let Some(first) = q.peek() else {
+        return 0.0;
+    };
+    let h0 = heading(first, axis);
+    let dh: f64 = q.map(|f| wrap_pi(heading(f, axis) - h0)).sum();
+    h0 + dh / n
+}
+
+/// `a` brought into [−π, π).
+fn wrap_pi(a: f64) -> f64 {
+    (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+}
+
+/// The clean samples next to clean sample `k`, `k` first, up to [`END_SAMPLES`] of them:
+/// towards the curve's start (`backwards`) or its end. A bridge's end averages its heading
+/// over them (one sample's heading carries the sensors' noise into the whole stretch).
+fn clean_next_to(disturbed: &[bool], k: usize, backwards: bool) -> Vec<usize> {
+    let clean = |j: &usize| !disturbed[*j];
+    if backwards {
+        (0..=k).rev().take(END_SAMPLES).take_while(clean).collect()
+    } else {
+        (k..disturbed.len())
+            .take(END_SAMPLES)
+            .take_while(clean)
+            .collect()
+    }
 }
 
 /// Marks as disturbed every run of fewer than `gap` clean samples between two disturbed ones
@@ -346,31 +366,28 @@ pub fn bridge_heading(
         let (a, b) = match (before, after) {
             (Some(a), Some(b)) => (a, b),
             (Some(a), None) => {
-                changed += least_turning(q, disturbed, &standing, a, start..i);
+                changed += least_turning(q, disturbed, &standing, a, true, start..i);
                 continue;
             }
             (None, Some(b)) => {
-                changed += least_turning(q, disturbed, &standing, b, (start..i).rev());
+                changed += least_turning(q, disturbed, &standing, b, false, (start..i).rev());
                 continue;
             }
             (None, None) => continue,
         };
-        // Each end: the mean over the clean samples next to it (one sample's heading
-        // carries the sensors' noise into the whole stretch).
-        let lo = (0..=a)
-            .rev()
-            .take(END_SAMPLES)
-            .take_while(|&k| !disturbed[k])
+        // Each end: the mean over the clean samples next to it.
+        let lo = clean_next_to(&disturbed[..n], a, true)
             .last()
+            .copied()
             .unwrap_or(a);
-        let hi = (b..n)
-            .take(END_SAMPLES)
-            .take_while(|&k| !disturbed[k])
+        let hi = clean_next_to(&disturbed[..n], b, false)
             .last()
+            .copied()
             .unwrap_or(b);
         let axis = level_axis(&q[lo..=hi]);
-        let (h0, x0) = mean_heading(&q[lo..=a], &x[lo..=a], &axis);
-        let (h1, x1) = mean_heading(&q[b..=hi], &x[b..=hi], &axis);
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        let (h0, x0) = (mean_heading(q[lo..=a].iter(), &axis), mean(&x[lo..=a]));
+        let (h1, x1) = (mean_heading(q[b..=hi].iter(), &axis), mean(&x[b..=hi]));
         // The measured headings, unwrapped from the first clean end's; the turns made standing
         // (each run's change of heading, to every sample of the stretch after its start).
         let measured = unwrapped(&q[a..=b], &axis, h0);
@@ -391,8 +408,7 @@ pub fn bridge_heading(
                 turned[k - a] = total;
             }
         }
-        let d = (h1 - h0 - total + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-            - std::f64::consts::PI;
+        let d = wrap_pi(h1 - h0 - total);
         for k in start..i {
             let u = if x1 > x0 {
                 ((x[k] - x0) / (x1 - x0)).clamp(0.0, 1.0)
@@ -419,8 +435,7 @@ fn unwrapped(q: &[nalgebra::UnitQuaternion<f64>], axis: &Vector3<f64>, near: f64
     q.iter()
         .map(|f| {
             let h = heading(f, axis);
-            last += (h - last + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-                - std::f64::consts::PI;
+            last += wrap_pi(h - last);
             last
         })
         .collect()
@@ -467,11 +482,9 @@ fn stand_turns(
             let frames = &q[i..j];
             let axis = level_axis(frames);
             let k = TURN_MEAN.min(frames.len() / 2).max(1);
-            let zeros = vec![0.0; k];
-            let (h0, _) = mean_heading(&frames[..k], &zeros, &axis);
-            let (h1, _) = mean_heading(&frames[frames.len() - k..], &zeros, &axis);
-            let turn = (h1 - h0 + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-                - std::f64::consts::PI;
+            let h0 = mean_heading(frames[..k].iter(), &axis);
+            let h1 = mean_heading(frames[frames.len() - k..].iter(), &axis);
+            let turn = wrap_pi(h1 - h0);
             if turn.abs() >= TURN_MIN_DEG.to_radians() {
                 out.insert(r, turn);
             }
@@ -500,7 +513,8 @@ fn same_stand(standing: &[usize], a: usize, b: usize) -> bool {
 /// headings' noise would add up.
 const STAND_SAMPLES: usize = 20;
 
-/// A stretch with one clean end (`anchor`, the clean sample next to it): each frame of
+/// A stretch with one clean end (`anchor`, the clean sample next to it, with the clean
+/// samples beyond it towards the curve's start when `clean_backwards`): each frame of
 /// `stretch`, walked away from the anchor, is turned about the vertical to the heading that
 /// least turns the device from the frame before it (its tilt kept); while the wheel stands
 /// (`standing`) the frame keeps the turn of the one before, as a magnet's error does.
@@ -516,25 +530,16 @@ fn least_turning(
     disturbed: &[bool],
     standing: &[usize],
     anchor: usize,
+    clean_backwards: bool,
     stretch: impl Iterator<Item = usize>,
 ) -> usize {
     // The clean samples next to the anchor, away from the stretch.
-    let clean: Vec<usize> = if anchor + 1 < disturbed.len() && disturbed[anchor + 1] {
-        (0..=anchor)
-            .rev()
-            .take(END_SAMPLES)
-            .take_while(|&k| !disturbed[k])
-            .collect()
-    } else {
-        (anchor..disturbed.len())
-            .take(END_SAMPLES)
-            .take_while(|&k| !disturbed[k])
-            .collect()
-    };
-    let frames: Vec<_> = clean.iter().map(|&k| q[k]).collect();
+    let frames: Vec<_> = clean_next_to(disturbed, anchor, clean_backwards)
+        .iter()
+        .map(|&k| q[k])
+        .collect();
     let axis = level_axis(&frames);
-    let zeros = vec![0.0; frames.len()];
-    let (mean, _) = mean_heading(&frames, &zeros, &axis);
+    let mean = mean_heading(frames.iter(), &axis);
     let mut delta = heading(&q[anchor], &axis) - mean;
     let turns = stand_turns(q, standing);
     let mut prev_k = anchor;

@@ -45,9 +45,9 @@
 //! ```
 
 use super::prefilter::UniformCurve;
-use super::regression::CREASE_PAIR_DEG;
+use super::regression;
 use nalgebra::{Matrix2, UnitQuaternion, Vector2, Vector3};
-use std::collections::{BTreeMap, HashSet};
+use std::collections::BTreeMap;
 
 /// The estimated offset: the rotation that turned every frame in its own axes (the frames
 /// read `true · offset`), degrees, with its standard errors and what it rests on.
@@ -79,15 +79,11 @@ pub const MIN_PAIRS: usize = 4;
 /// first estimate, is left out ([`estimate`]).
 pub const OUTLIER: f64 = 4.0;
 
-/// The frame pairs at the nodes: every two frames of different curves at a node, at a node a
-/// crease passes through only those whose normals agree within [`CREASE_PAIR_DEG`] (the same
-/// face), as the regression ties them.
+/// The frame pairs at the nodes the regression ties ([`regression::tied`]): every two frames
+/// of different curves at a node, at a node a crease passes through only those on the same
+/// face.
 fn node_pairs(curves: &[UniformCurve]) -> Vec<(UnitQuaternion<f64>, UnitQuaternion<f64>)> {
-    let crease: HashSet<u32> = curves
-        .iter()
-        .filter(|c| c.kind == crate::curve::CurveKind::Crease)
-        .flat_map(|c| c.nodes.iter().map(|x| x.1))
-        .collect();
+    let crease = regression::crease_nodes(curves);
     let mut at: BTreeMap<u32, Vec<(usize, UnitQuaternion<f64>)>> = BTreeMap::new();
     for (k, c) in curves.iter().enumerate() {
         for &(i, node) in &c.nodes {
@@ -96,7 +92,6 @@ fn node_pairs(curves: &[UniformCurve]) -> Vec<(UnitQuaternion<f64>, UnitQuaterni
             }
         }
     }
-    let agree = CREASE_PAIR_DEG.to_radians().cos();
     let mut pairs = Vec::new();
     for (node, frames) in &at {
         for (a, (ka, qa)) in frames.iter().enumerate() {
@@ -105,7 +100,7 @@ fn node_pairs(curves: &[UniformCurve]) -> Vec<(UnitQuaternion<f64>, UnitQuaterni
                     continue;
                 }
                 let (na, nb) = (qa * Vector3::z(), qb * Vector3::z());
-                if crease.contains(node) && na.dot(&nb) < agree {
+                if !regression::tied(crease.contains(node), na.dot(&nb)) {
                     continue;
                 }
                 pairs.push((*qa, *qb));

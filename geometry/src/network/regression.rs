@@ -221,6 +221,22 @@ struct Problem {
     var_of: Vec<Vec<usize>>,
 }
 
+/// The nodes a crease curve passes through.
+pub(crate) fn crease_nodes(curves: &[UniformCurve]) -> std::collections::HashSet<u32> {
+    curves
+        .iter()
+        .filter(|c| c.kind == crate::curve::CurveKind::Crease)
+        .flat_map(|c| c.nodes.iter().map(|x| x.1))
+        .collect()
+}
+
+/// Whether `E_N` ties two frames of different curves at a node, their unit normals' dot
+/// product `dot`: everywhere but at a node a crease passes through (`crease`), where only the
+/// frames already on the same face (normals within [`CREASE_PAIR_DEG`]) are tied.
+pub(crate) fn tied(crease: bool, dot: f64) -> bool {
+    !(crease && dot < CREASE_PAIR_DEG.to_radians().cos())
+}
+
 fn problem(curves: &[UniformCurve]) -> Problem {
     let mut a = Vec::new();
     let mut w = Vec::new();
@@ -228,11 +244,7 @@ fn problem(curves: &[UniformCurve]) -> Problem {
     let mut edges = Vec::new();
     let mut triples = Vec::new();
     let mut at_node: HashMap<u32, Vec<usize>> = HashMap::new();
-    let crease_nodes: std::collections::HashSet<u32> = curves
-        .iter()
-        .filter(|c| c.kind == crate::curve::CurveKind::Crease)
-        .flat_map(|c| c.nodes.iter().map(|x| x.1))
-        .collect();
+    let crease_nodes = crease_nodes(curves);
     for c in curves {
         let n = c.q.len();
         // A loop that closes at a kink keeps its last frame (arriving) apart from its first.
@@ -282,15 +294,13 @@ fn problem(curves: &[UniformCurve]) -> Problem {
     let mut pairs = Vec::new();
     let mut keys: Vec<&u32> = at_node.keys().collect();
     keys.sort();
-    let agree = CREASE_PAIR_DEG.to_radians().cos();
     for k in keys {
         let vs = &at_node[k];
         let crease = crease_nodes.contains(k);
         for i in 0..vs.len() {
             for j in i + 1..vs.len() {
-                // At a crease, only frames already on the same face are tied.
                 let (ni, nj) = (a[vs[i]].column(2), a[vs[j]].column(2));
-                if crease && ni.dot(&nj) < agree {
+                if !tied(crease, ni.dot(&nj)) {
                     continue;
                 }
                 pairs.push((vs[i], vs[j]));
