@@ -618,9 +618,9 @@ mod tests {
     /// level axis, the azimuth fixed) while the surface rolls the device by 5° about its
     /// tangent, a magnet turning its first or its last 60 samples by up to 30° about the
     /// vertical (most at the curve's end, fading towards the clean side): bridged from the one
-    /// clean side, every frame is back within 1.5° (from 30°). What is left is the vertical part of the
-    /// roll about a climbing tangent, which the bridge drops with the magnet's turn. (Issue 33
-    /// left such a stretch as measured: 30° off.)
+    /// clean side, every frame is back within 1.5° (from 30°). What is left is the vertical
+    /// part of the roll about a climbing tangent, which the bridge drops with the magnet's
+    /// turn. (Issue 33 left such a stretch as measured: 30° off.)
     #[test]
     fn issue_52_a_stretch_with_one_clean_side_keeps_the_turns_about_level_axes() {
         let n = 150;
