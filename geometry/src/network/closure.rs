@@ -146,13 +146,46 @@ pub struct Slip {
     pub chord_m: f64,
     /// Share of the network's misfit energy it explains.
     pub share: f64,
+    /// The segment was lengthened by the loops' estimate before the regression and Poisson
+    /// ([`Slip::lengthen`]).
+    pub lengthened: bool,
+}
+
+impl Slip {
+    /// Lengthens the slipped segment of its curve in `curves` by the loops' estimate (`1 + κ`,
+    /// its samples' steps and distances alike; those after it moved on by as much): what the
+    /// wheel missed given back. Whether the segment was found.
+    pub fn lengthen(&self, curves: &mut [UniformCurve]) -> bool {
+        let Some(c) = curves.iter_mut().find(|c| c.index == self.curve) else {
+            return false;
+        };
+        let (Some(&(a, _)), Some(&(b, _))) = (c.nodes.get(self.tag), c.nodes.get(self.tag + 1))
+        else {
+            return false;
+        };
+        let scale = 1.0 / (1.0 - self.short_fraction);
+        if !(scale.is_finite() && scale > 1.0) || b <= a || b >= c.d.len() {
+            return false;
+        }
+        c.h[self.tag] *= scale;
+        let d0 = c.d[a];
+        let before = c.d[b];
+        for x in &mut c.d[a + 1..=b] {
+            *x = d0 + (*x - d0) * scale;
+        }
+        let moved = c.d[b] - before;
+        for x in &mut c.d[b + 1..] {
+            *x += moved;
+        }
+        true
+    }
 }
 
 impl std::fmt::Display for Slip {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "curve {}, segment from node {} to node {} (tags {} to {}): the network's loops close if it is {:.0} % longer than measured ({:.0} mm; {:.0} % of the network's misfit): the wheel probably slipped (a phone: its segment length short); rescan the curve",
+            "curve {}, segment from node {} to node {} (tags {} to {}): the network's loops close if it is {:.0} % longer than measured ({:.0} mm; {:.0} % of the network's misfit): the wheel probably slipped (a phone: its segment length short); {}rescan the curve",
             self.curve,
             self.nodes.0,
             self.nodes.1,
@@ -160,7 +193,12 @@ impl std::fmt::Display for Slip {
             self.tag + 2,
             100.0 * self.short_fraction / (1.0 - self.short_fraction).max(1e-9),
             self.chord_m * self.short_fraction / (1.0 - self.short_fraction).max(1e-9) * 1e3,
-            self.share * 100.0
+            self.share * 100.0,
+            if self.lengthened {
+                "lengthened by as much meanwhile; "
+            } else {
+                ""
+            }
         )
     }
 }
@@ -172,6 +210,60 @@ pub const SLIP_VS_TAG: f64 = 0.8;
 /// …and its segment reads between these fractions of its true length short (a wheel slipping
 /// over a stretch reads a few % to tens of % short).
 pub const SLIP_SHORT: (f64, f64) = (0.03, 0.5);
+
+/// How much of the loops' misfit a segment must explain to be named a slip ([`Slip`]), and
+/// how many are looked for (each lengthened before the next is looked for).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlipTest {
+    /// Share of the network's misfit energy the segment's length explains…
+    pub share: f64,
+    /// …and its energy drop against the mean energy per remaining degree of freedom.
+    pub ratio: f64,
+    /// …and at least this share of what freeing the best tag would ([`SLIP_VS_TAG`]),
+    pub vs_tag: f64,
+    /// …and its segment reads between these fractions of its true length short
+    /// ([`SLIP_SHORT`]).
+    pub short: (f64, f64),
+    /// At most this many slips are named.
+    pub max: usize,
+}
+
+impl SlipTest {
+    /// As a refused tag ([`SHARE`], [`RATIO`]): a device whose segments read long as often as
+    /// short (a phone's lengths, fitted from its stands and accelerometer), where a short one
+    /// is no sign of its own.
+    pub const STRICT: SlipTest = SlipTest {
+        share: SHARE,
+        ratio: RATIO,
+        vs_tag: SLIP_VS_TAG,
+        short: SLIP_SHORT,
+        max: 1,
+    };
+
+    /// A wheel's (the Morphorider): it reads only short (it slips, it never turns on its own),
+    /// so a segment the loops would lengthen is a sign in itself, and a scan may hold several.
+    /// Named from a tenth of the misfit at 5× the rest per degree of freedom, 0.6 of the best
+    /// tag's explanation, and 5 % short (below it lies what the loops' orientation misfit,
+    /// taken for a length, reads: 3–7 % where it named a sound segment). Measured
+    /// (BENCHMARKS.md "Trust", slips), on the 207 Morphorider captures of the validation set
+    /// and of our simulator (planted faults, the field profile's own skids): of the 78
+    /// segments named, 74 read truly short by 5–17 % (the loops' estimate within 2 points);
+    /// the 4 others are one segment of the relief (field profile, seeds 1–2), lengthened
+    /// 6–7 % for 0.1 %. The strict test named 12, all true.
+    pub const WHEEL: SlipTest = SlipTest {
+        share: 0.1,
+        ratio: 5.0,
+        vs_tag: 0.6,
+        short: (0.05, SLIP_SHORT.1),
+        max: 3,
+    };
+}
+
+impl Default for SlipTest {
+    fn default() -> Self {
+        SlipTest::STRICT
+    }
+}
 
 struct Segment {
     curve: usize,
@@ -245,13 +337,13 @@ impl Drops {
     /// stands out as a refused tag would, close to the best tag's explanation
     /// ([`SLIP_VS_TAG`]), no other stretch explaining as much ([`LOCATED`]), and short by a
     /// plausible fraction ([`SLIP_SHORT`]).
-    fn slip(&self, curves: &[UniformCurve]) -> Option<Slip> {
+    fn slip(&self, curves: &[UniformCurve], test: &SlipTest) -> Option<Slip> {
         let best = self
             .stretches
             .iter()
             .max_by(|a, b| a.drop.total_cmp(&b.drop))?;
         let per_dof = (self.energy - best.drop).max(0.0) / self.dof;
-        let refuses = explains(best.drop, self.energy, self.dof, SHARE, RATIO);
+        let refuses = explains(best.drop, self.energy, self.dof, test.share, test.ratio);
         let best_tag = self.tags.iter().map(|c| c.drop).fold(0.0, f64::max);
         let located = !self
             .stretches
@@ -270,8 +362,8 @@ impl Drops {
         );
         if !(refuses
             && located
-            && best.drop >= SLIP_VS_TAG * best_tag
-            && (SLIP_SHORT.0..=SLIP_SHORT.1).contains(&short))
+            && best.drop >= test.vs_tag * best_tag
+            && (test.short.0..=test.short.1).contains(&short))
         {
             return None;
         }
@@ -287,6 +379,7 @@ impl Drops {
             short_fraction: short,
             chord_m: s.d.norm(),
             share: best.drop / self.energy,
+            lengthened: false,
         })
     }
 
@@ -727,6 +820,18 @@ pub fn detach_outlier_tags(
     curves: &mut [UniformCurve],
     uncertain: impl Fn(usize, usize) -> bool,
 ) -> ClosureReport {
+    check(curves, uncertain, &SlipTest::STRICT, false)
+}
+
+/// [`detach_outlier_tags`], then the slips `slips` names (see [`SlipTest`]): with `lengthen`,
+/// each is lengthened in `curves` ([`Slip::lengthen`]) before the next is looked for, and the
+/// curves' misfits are those of the loops after them.
+pub fn check(
+    curves: &mut [UniformCurve],
+    uncertain: impl Fn(usize, usize) -> bool,
+    slips: &SlipTest,
+    lengthen: bool,
+) -> ClosureReport {
     let mut out = ClosureReport::default();
     let last = loop {
         let Some(d) = drops(curves) else { break None };
@@ -802,8 +907,32 @@ pub fn detach_outlier_tags(
             share: c.drop / d.energy,
         });
     };
+    let mut last = last;
+    while let Some(d) = &last {
+        if out.slips.len() == slips.max {
+            break;
+        }
+        let Some(mut slip) = d.slip(curves, slips) else {
+            break;
+        };
+        if !lengthen {
+            out.slips.push(slip);
+            break;
+        }
+        slip.lengthened = slip.lengthen(curves);
+        let again = slip.lengthened;
+        out.slips.push(slip);
+        if !again {
+            break;
+        }
+        // The loops with the segment lengthened: what they say now (`None`: nothing left to
+        // check, the last figures stand).
+        match drops(curves) {
+            Some(next) => last = Some(next),
+            None => break,
+        }
+    }
     if let Some(d) = last {
-        out.slips.extend(d.slip(curves));
         out.curves = curve_misfits(curves, &d, &out.detached);
         out.misfit_m = Some((d.energy / d.dof / d.mean_c).max(0.0).sqrt());
     }
@@ -1052,6 +1181,63 @@ mod tests {
                     .contains("curve 5, segment from node 5 to node 9"),
                 "{s}"
             );
+        }
+    }
+
+    /// Segment `seg` of `c` read `f` short (its step and the distances from it on).
+    fn shorten(c: &mut UniformCurve, seg: usize, f: f64) {
+        let (i0, i1) = (c.nodes[seg].0, c.nodes[seg + 1].0);
+        c.h[seg] *= 1.0 - f;
+        let base = c.d[i0];
+        let lost = (c.d[i1] - base) * f;
+        for j in i0..=i1 {
+            c.d[j] = base + (c.d[j] - base) * (1.0 - f);
+        }
+        for d in &mut c.d[i1 + 1..] {
+            *d -= lost;
+        }
+    }
+
+    /// Issue 49: two segments read short on two curves: each named in turn, lengthened by the
+    /// loops' estimate before the next is looked for, their steps given back within 1.5 %;
+    /// the strict test of [`detach_outlier_tags`] names one and lengthens nothing.
+    #[test]
+    fn issue_49_slips_are_named_and_lengthened_one_after_another() {
+        let test = SlipTest {
+            share: 0.2,
+            ratio: 10.0,
+            vs_tag: SLIP_VS_TAG,
+            short: SLIP_SHORT,
+            max: 3,
+        };
+        for seed in 1..=5 {
+            let mut g = grid(4, 0.5, seed);
+            let exact: Vec<Vec<f64>> = g.iter().map(|c| c.h.clone()).collect();
+            assert!(check(&mut g.clone(), |_, _| false, &test, true)
+                .slips
+                .is_empty());
+            shorten(&mut g[5], 1, 0.12);
+            shorten(&mut g[2], 0, 0.10);
+            let mut strict = g.clone();
+            let r = detach_outlier_tags(&mut strict, |_, _| false);
+            assert!(
+                r.slips.len() <= 1 && r.slips.iter().all(|s| !s.lengthened),
+                "{r:?}"
+            );
+            assert!(strict.iter().zip(&g).all(|(a, b)| a.h == b.h));
+            let r = check(&mut g, |_, _| false, &test, true);
+            let mut named: Vec<(usize, usize)> = r.slips.iter().map(|s| (s.curve, s.tag)).collect();
+            named.sort_unstable();
+            assert_eq!(named, vec![(2, 0), (5, 1)], "seed {seed}: {r:?}");
+            assert!(r.slips.iter().all(|s| s.lengthened), "{r:?}");
+            for (c, k) in named {
+                let back = g[c].h[k] / exact[c][k];
+                assert!(
+                    (back - 1.0).abs() < 0.015,
+                    "seed {seed}: curve {c} segment {k}: {back}"
+                );
+            }
+            assert!(r.detached.is_empty(), "seed {seed}: {r:?}");
         }
     }
 

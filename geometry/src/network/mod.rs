@@ -46,6 +46,10 @@ pub struct NetworkParams {
     pub no_closure_check: bool,
     /// Do not estimate the device's mounting offset from the node normals ([`mounting`]).
     pub no_mounting: bool,
+    /// Keep a segment the loops name a slip as measured ([`closure::Slip::lengthen`]).
+    pub no_slip_repair: bool,
+    /// What the loops must show to name a slip ([`closure::SlipTest`]: the device's).
+    pub slips: closure::SlipTest,
     /// Live updates (issue 19): when > 0, a run after the first moves only the frames of the
     /// curves that changed since the last run and those within this many samples of the
     /// nodes they pass through ([`RegressionSolver::run_local`]); the others keep the last
@@ -609,7 +613,12 @@ fn closure_check(
                     .map(|(k, _)| (c.index, k))
             })
             .collect();
-        closure::detach_outlier_tags(uniform, |c, k| uncertain.contains(&(c, k)))
+        closure::check(
+            uniform,
+            |c, k| uncertain.contains(&(c, k)),
+            &p.slips,
+            !p.no_slip_repair,
+        )
     };
     warnings.extend(
         closure
