@@ -293,11 +293,13 @@ pub fn exact(surface: &SurfaceParams) -> SurfaceParams {
 /// The reconstruction settings with the whole network regressed: the network a run from
 /// scratch gives (the final outputs of a session, the live worker's settled updates).
 /// `network` with the noise of `device` (the Morphorider's when unknown), what the nodes'
-/// uncertainty is calibrated with (`sfs_geometry::network::marginals::NoisePrior`).
+/// uncertainty is calibrated with (`sfs_geometry::network::marginals::NoisePrior`), and the
+/// test its slips are named by (`SlipTest`: a wheel's milder, a phone's strict).
 pub fn for_device(
     network: &NetworkParams,
     device: Option<device_protocol::DeviceKind>,
 ) -> NetworkParams {
+    use sfs_geometry::network::closure::SlipTest;
     use sfs_geometry::network::marginals::NoisePrior;
     NetworkParams {
         noise: match device {
@@ -305,6 +307,10 @@ pub fn for_device(
             _ => NoisePrior::MORPHORIDER,
         }
         .overridden(),
+        slips: match device {
+            Some(device_protocol::DeviceKind::Phone) => SlipTest::STRICT,
+            _ => SlipTest::WHEEL,
+        },
         ..*network
     }
 }

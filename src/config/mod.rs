@@ -58,6 +58,8 @@
 //! regression = true                  # false: pre-filter only
 //! estimate_mounting = true           # the device's mounting offset (roll, pitch) from the
 //!                                    #   normals at the nodes; false: frames as measured
+//! repair_slips = true                # a segment the loops name a slip is lengthened by
+//!                                    #   their estimate; false: kept as measured
 //! bend_fraction = 0.5                # bending smoothing length ℓ₂ in h (or bend_length in m)
 //! stretch_length = 0.0               # stretching smoothing length ℓ₁, m
 //! xi = 1e4                           # weight of the node normal consistency
