@@ -337,7 +337,7 @@ impl Drops {
     /// stands out as a refused tag would, close to the best tag's explanation
     /// ([`SLIP_VS_TAG`]), no other stretch explaining as much ([`LOCATED`]), and short by a
     /// plausible fraction ([`SLIP_SHORT`]).
-    fn slip(&self, curves: &[UniformCurve], test: &SlipTest) -> Option<Slip> {
+    fn slip(&self, curves: &[UniformCurve], test: &SlipTest, joined: &[u32]) -> Option<Slip> {
         let best = self
             .stretches
             .iter()
@@ -369,13 +369,19 @@ impl Drops {
         }
         let s = &self.segs[best.seg];
         let (tag, c) = (s.tags.0, &curves[s.curve]);
+        let ends = (
+            c.nodes[tag].1,
+            c.nodes.get(tag + 1).map_or(c.nodes[tag].1, |x| x.1),
+        );
+        if joined.contains(&ends.0) || joined.contains(&ends.1) {
+            // A join's place along its curve is free: the misfit there is the join's to
+            // explain (a wrong one misfits), not a length's.
+            return None;
+        }
         Some(Slip {
             curve: c.index,
             tag,
-            nodes: (
-                c.nodes[tag].1,
-                c.nodes.get(tag + 1).map_or(c.nodes[tag].1, |x| x.1),
-            ),
+            nodes: ends,
             short_fraction: short,
             chord_m: s.d.norm(),
             share: best.drop / self.energy,
@@ -820,17 +826,19 @@ pub fn detach_outlier_tags(
     curves: &mut [UniformCurve],
     uncertain: impl Fn(usize, usize) -> bool,
 ) -> ClosureReport {
-    check(curves, uncertain, &SlipTest::STRICT, false)
+    check(curves, uncertain, &SlipTest::STRICT, false, &[])
 }
 
 /// [`detach_outlier_tags`], then the slips `slips` names (see [`SlipTest`]): with `lengthen`,
 /// each is lengthened in `curves` ([`Slip::lengthen`]) before the next is looked for, and the
-/// curves' misfits are those of the loops after them.
+/// curves' misfits are those of the loops after them. No slip is named on a segment that ends
+/// at one of the nodes `joined` (where a join holds or is tried: its loops judge the join).
 pub fn check(
     curves: &mut [UniformCurve],
     uncertain: impl Fn(usize, usize) -> bool,
     slips: &SlipTest,
     lengthen: bool,
+    joined: &[u32],
 ) -> ClosureReport {
     let mut out = ClosureReport::default();
     let last = loop {
@@ -912,7 +920,7 @@ pub fn check(
         if out.slips.len() == slips.max {
             break;
         }
-        let Some(mut slip) = d.slip(curves, slips) else {
+        let Some(mut slip) = d.slip(curves, slips, joined) else {
             break;
         };
         if !lengthen {
@@ -1213,7 +1221,7 @@ mod tests {
         for seed in 1..=5 {
             let mut g = grid(4, 0.5, seed);
             let exact: Vec<Vec<f64>> = g.iter().map(|c| c.h.clone()).collect();
-            assert!(check(&mut g.clone(), |_, _| false, &test, true)
+            assert!(check(&mut g.clone(), |_, _| false, &test, true, &[])
                 .slips
                 .is_empty());
             shorten(&mut g[5], 1, 0.12);
@@ -1225,7 +1233,7 @@ mod tests {
                 "{r:?}"
             );
             assert!(strict.iter().zip(&g).all(|(a, b)| a.h == b.h));
-            let r = check(&mut g, |_, _| false, &test, true);
+            let r = check(&mut g, |_, _| false, &test, true, &[]);
             let mut named: Vec<(usize, usize)> = r.slips.iter().map(|s| (s.curve, s.tag)).collect();
             named.sort_unstable();
             assert_eq!(named, vec![(2, 0), (5, 1)], "seed {seed}: {r:?}");

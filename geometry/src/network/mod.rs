@@ -392,7 +392,8 @@ impl Reconstructor {
         if let Some(est) = mounting.filter(|e| e.applied) {
             mounting::apply(&mut uniform, &est);
         }
-        let closure = closure_check(curves, &mut uniform, p, &mut warnings);
+        let joined: Vec<u32> = slides.iter().map(|x| x.1).collect();
+        let closure = closure_check(curves, &mut uniform, p, &joined, &mut warnings);
         let regression = self.regress(&mut uniform, p, warm);
         let t2 = Instant::now();
         // Each slide's curve (position) and the tag's position in its nodes.
@@ -591,13 +592,15 @@ impl Reconstructor {
     }
 }
 
-/// The loop-closure test of the tags ([`closure::detach_outlier_tags`]; tags the operator
-/// marked uncertain go first), unless [`NetworkParams::no_closure_check`]; its detached and
-/// refused tags are warnings.
+/// The loop-closure test of the tags and slips ([`closure::check`]; tags the operator marked
+/// uncertain go first; no slip at the nodes `joined`), unless
+/// [`NetworkParams::no_closure_check`]; its detached and refused tags and its slips are
+/// warnings.
 fn closure_check(
     curves: &[Curve],
     uniform: &mut [UniformCurve],
     p: &NetworkParams,
+    joined: &[u32],
     warnings: &mut Vec<NetworkWarning>,
 ) -> closure::ClosureReport {
     let closure = if p.no_closure_check {
@@ -618,6 +621,7 @@ fn closure_check(
             |c, k| uncertain.contains(&(c, k)),
             &p.slips,
             !p.no_slip_repair,
+            joined,
         )
     };
     warnings.extend(
