@@ -64,8 +64,13 @@ pub const LAND: f64 = 0.3;
 /// or more.
 pub const LAND_MARGIN: f64 = 4.0;
 
-/// At most this many tags are detached (a network that needs more has a worse problem).
+/// At most this many tags are detached, or [`MAX_DETACHED_SHARE`] of the tags if more (a
+/// network that needs more has a worse problem).
 pub const MAX_DETACHED: usize = 4;
+/// The share of a network's tags that may be detached: a long session's link loses digits at
+/// a rate, so its wrong indices grow with its tags (the 100-curve grid, 9 000 tags: 39 digits
+/// lost, each a wrong index).
+pub const MAX_DETACHED_SHARE: f64 = 0.02;
 
 /// A refused tag whose misfit another tag explains to this fraction is not located (see
 /// [`detach_outlier_tags`]).
@@ -282,8 +287,9 @@ struct Candidate {
     tag: usize,
     drop: f64,
     offset: f64,
-    /// For a tag that stands out ([`Drops::refuses`]): where its curve's end lands once the
-    /// tag lets go of its node, the nearest other node there and how far from it, m.
+    /// For a tag that stands out ([`Drops::refuses`]), or that was typed while packets were
+    /// lost and stands out of the noise ([`Drops::one_of_many`]): where its curve's end lands
+    /// once the tag lets go of its node, the nearest other node there and how far from it, m.
     lands: Option<(u32, f64)>,
 }
 
@@ -394,6 +400,14 @@ impl Drops {
         self.stands_out(c, SHARE, RATIO)
     }
 
+    /// Whether `c` is one of several wrong tags: it stands out of the noise ([`RATIO`]) but
+    /// shares the misfit with others, so no share says it; its curve, let go, lands on another
+    /// node ([`LAND`]). Asked only of tags typed while packets were lost (a digit lost on a
+    /// long session's link: `110` typed, `11` received).
+    fn one_of_many(&self, c: &Candidate) -> bool {
+        self.stands_out(c, 0.0, RATIO) && self.lands(c)
+    }
+
     /// Whether no other tag explains the misfit as well as `c`: on a single loop (a closed
     /// curve alone, early in a live session) every tag does, and the misfit is the loop's
     /// drift, not any one tag's.
@@ -425,7 +439,7 @@ fn land_ratio(c: &Candidate) -> f64 {
     c.lands.map_or(f64::INFINITY, |(_, r)| r / c.offset)
 }
 
-fn drops(curves: &[UniformCurve]) -> Option<Drops> {
+fn drops(curves: &[UniformCurve], uncertain: &dyn Fn(usize, usize) -> bool) -> Option<Drops> {
     let mut var: BTreeMap<u32, usize> = BTreeMap::new();
     let mut ids = Vec::new();
     for c in curves {
@@ -565,7 +579,9 @@ fn drops(curves: &[UniformCurve]) -> Option<Drops> {
         // Let go, the tag's end moves by δ = −g/σ off its node, and the nodes by −y δ
         // (y = L⁻¹u): it lands at x_v + (1 − y_v) δ. Only for the tags that stand out (a
         // solve and a pass over the nodes each).
-        let lands = if explains(drop, energy, dof, SHARE, RATIO) {
+        let lands = if explains(drop, energy, dof, SHARE, RATIO)
+            || (uncertain(curves[ci].index, tag) && explains(drop, energy, dof, 0.0, RATIO))
+        {
             let mut y = vec![[0.0]; n];
             for (&i, &ui) in &t.u {
                 y[i][0] = ui;
@@ -648,7 +664,7 @@ pub struct LoopFit {
 /// loops it closes fit beside the others ([`LoopFit`]); `None` for a tag that frees nothing
 /// (its node held by its curve alone) or where the network has no loop.
 pub fn loop_test(curves: &[UniformCurve], tags: &[(usize, usize)]) -> Vec<Option<LoopFit>> {
-    let Some(d) = drops(curves) else {
+    let Some(d) = drops(curves, &|_, _| false) else {
         return vec![None; tags.len()];
     };
     let length = |energy_per_dof: f64| (energy_per_dof.max(0.0) / d.mean_c).sqrt();
@@ -841,9 +857,13 @@ pub fn check(
     joined: &[u32],
 ) -> ClosureReport {
     let mut out = ClosureReport::default();
+    let tags: usize = curves.iter().map(|c| c.nodes.len()).sum();
+    let most = MAX_DETACHED.max((MAX_DETACHED_SHARE * tags as f64) as usize);
     let last = loop {
-        let Some(d) = drops(curves) else { break None };
-        if out.detached.len() == MAX_DETACHED {
+        let Some(d) = drops(curves, &uncertain) else {
+            break None;
+        };
+        if out.detached.len() == most {
             break Some(d);
         }
         let worst = d
@@ -861,7 +881,14 @@ pub fn check(
                     || d.lands(c)
             })
             .filter(|c| d.refuses(c) && d.located(c))
-            .max_by(|a, b| a.drop.total_cmp(&b.drop));
+            .max_by(|a, b| a.drop.total_cmp(&b.drop))
+            .or_else(|| {
+                d.tags
+                    .iter()
+                    .filter(|c| uncertain(curves[c.curve].index, c.tag))
+                    .filter(|c| d.one_of_many(c) && d.located(c))
+                    .max_by(|a, b| a.drop.total_cmp(&b.drop))
+            });
         for c in d.tags.iter().filter(|c| c.lands.is_some()) {
             tracing::debug!(
                 curve = curves[c.curve].index,
@@ -935,7 +962,7 @@ pub fn check(
         }
         // The loops with the segment lengthened: what they say now (`None`: nothing left to
         // check, the last figures stand).
-        match drops(curves) {
+        match drops(curves, &uncertain) {
             Some(next) => last = Some(next),
             None => break,
         }
@@ -1258,6 +1285,38 @@ mod tests {
         assert_eq!(r.detached.len(), 1, "{r:?}");
         assert_eq!((r.detached[0].curve, r.detached[0].tag), (1, 2));
         assert!(r.refused.is_empty());
+    }
+
+    /// A long session's link loses digits at a rate (`110` typed, `11` received): several wrong
+    /// indices at once, each typed while packets were lost. None explains half the misfit, so
+    /// the one-outlier test refuses none; each stands out of the noise and its curve, let go,
+    /// lands on the node meant: all are put back, more than [`MAX_DETACHED`] of them.
+    #[test]
+    fn several_digits_lost_on_a_long_session_are_each_put_back() {
+        let k = 13; // 26 curves, 338 tags: up to 6 detached
+        for seed in 1..=3 {
+            let mut g = grid(k, 0.5, seed);
+            let mut wrong = Vec::new();
+            for (c, t) in [(1, 3), (4, 8), (7, 1), (15, 5), (19, 10), (23, 6)] {
+                let meant = g[c].nodes[t].1;
+                let typed = (meant + 5 * k as u32) % (k * k) as u32;
+                g[c].nodes[t].1 = typed;
+                wrong.push((c, t, meant));
+            }
+            let lost = |c: usize, t: usize| wrong.iter().any(|w| (w.0, w.1) == (c, t));
+            let before = detach_outlier_tags(&mut g.clone(), |_, _| false);
+            assert!(before.detached.is_empty(), "seed {seed}: {before:?}");
+            let r = detach_outlier_tags(&mut g, lost);
+            let mut put: Vec<(usize, usize, u32)> = r
+                .detached
+                .iter()
+                .filter(|d| d.retagged)
+                .map(|d| (d.curve, d.tag, d.kept_as))
+                .collect();
+            put.sort_unstable();
+            assert_eq!(put, wrong, "seed {seed}: {r:?}");
+            assert_eq!(r.detached.len(), wrong.len(), "seed {seed}: {r:?}");
+        }
     }
 
     #[test]
