@@ -8,7 +8,7 @@ use sfs::scan::{Scan, Tag};
 use sfs::simulate::scene::{self, Scene};
 use sfs::simulate::truth::Truth;
 use sfs::simulate::{self, Profile};
-use sfs_geometry::network::{NetworkParams, Reconstructor};
+use sfs_geometry::network::{Network, NetworkParams, Reconstructor};
 
 fn load(name: &str) -> (Scene, Truth) {
     let s = scene::builtin(name).unwrap_or_else(|e| panic!("{e}"));
@@ -25,11 +25,16 @@ fn load(name: &str) -> (Scene, Truth) {
 fn score(t: &Truth, scan: &Scan, h: f64) -> f64 {
     let mut p = NetworkParams::default();
     p.prefilter.h = h;
+    reconstructed(t, scan, &p).0
+}
+
+/// `scan`'s network with `p`, and its curves' mean error against `t` (% of the diagonal).
+fn reconstructed(t: &Truth, scan: &Scan, p: &NetworkParams) -> (f64, Network) {
     let net = Reconstructor::new()
-        .run(&scan.curves, &p)
+        .run(&scan.curves, p)
         .expect("a network");
     let rec = sfs::gltf_out::as_read_network(&net.positions);
-    sfs::eval::evaluate(t, &rec).unwrap().curves.mean_pct
+    (sfs::eval::evaluate(t, &rec).unwrap().curves.mean_pct, net)
 }
 
 #[test]
@@ -216,11 +221,7 @@ fn issue_52_a_mounting_offset_is_estimated_and_turned_back() {
                 no_mounting,
                 ..NetworkParams::default()
             };
-            let net = Reconstructor::new()
-                .run(&scan.curves, &p)
-                .expect("a network");
-            let rec = sfs::gltf_out::as_read_network(&net.positions);
-            let e = sfs::eval::evaluate(&t, &rec).unwrap().curves.mean_pct;
+            let (e, net) = reconstructed(&t, scan, &p);
             (e, net.report.mounting)
         };
         let (base, _) = run(&exact, true);
@@ -276,11 +277,7 @@ fn issue_49_a_slip_named_by_the_loops_is_lengthened_back() {
                 no_slip_repair,
                 ..NetworkParams::default()
             };
-            let net = Reconstructor::new()
-                .run(&scan.curves, &p)
-                .expect("a network");
-            let rec = sfs::gltf_out::as_read_network(&net.positions);
-            let e = sfs::eval::evaluate(&t, &rec).unwrap().curves.mean_pct;
+            let (e, net) = reconstructed(&t, scan, &p);
             let slips: Vec<_> = net
                 .warnings
                 .iter()
