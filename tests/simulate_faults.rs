@@ -521,3 +521,44 @@ fn issue_49_a_wheel_slip_is_named_lengthened_and_leaves_the_scan_good() {
         assert!(e <= 1.2 * t + 0.02, "{name} seed {seed}: {e} against {t}");
     }
 }
+
+/// A long session's lost Enters (issue 51's grid, 4-digit indices 15 mm apart): an Enter lost
+/// on the link merges two indices into one over six digits, refused; the tag typed next is
+/// counted from its own first digit, not from the refused index's, so no late Enter is named
+/// there (it was, on each of the five: the device had rolled on over two nodes meanwhile).
+#[test]
+fn issue_51_an_index_refused_as_too_long_does_not_make_the_next_tag_late() {
+    use sfs::warning::{AcquisitionWarning, Warning};
+    let s = scene::builtin("ellipsoid-grid").unwrap();
+    let sim = simulate::run(&s, DeviceKind::Morphorider, Profile::Default, 1);
+    let scan = acquire(&sim.bytes);
+    let refused: Vec<(usize, f64)> = scan
+        .warnings
+        .iter()
+        .filter_map(|w| match w {
+            Warning::Keypad(k) if k.issue.code() == "keypad_index_too_long" => {
+                Some((k.curve?, k.t))
+            }
+            _ => None,
+        })
+        .collect();
+    assert!(refused.len() >= 3, "{refused:?}");
+    let late: Vec<(usize, f64)> = scan
+        .warnings
+        .iter()
+        .filter_map(|w| match w {
+            Warning::Acquisition(AcquisitionWarning::LateEnter { curve, t, .. }) => {
+                Some((*curve, *t))
+            }
+            _ => None,
+        })
+        .collect();
+    for (c, t0) in &refused {
+        assert!(
+            !late
+                .iter()
+                .any(|(l, t)| l == c && *t > *t0 && *t < t0 + 10.0),
+            "curve {c}, index refused at {t0} s: {late:?}"
+        );
+    }
+}

@@ -729,7 +729,15 @@ impl Acquisition {
         events.clear();
         self.keypad.set_travelled(self.travelled_loop());
         self.keypad.key(t, key, &mut events);
-        self.key_events(events)
+        let update = self.key_events(events);
+        if key == b'\n' || key == b'\r' {
+            // An Enter that tagged nothing (an index over six digits, its Enter lost on the
+            // link) ends that typing too: the next index is typed from its own first digit.
+            if let Some(o) = &mut self.open {
+                o.first_digit = None;
+            }
+        }
+        update
     }
 
     /// Acts on what the keypad did.
