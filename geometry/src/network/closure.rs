@@ -161,29 +161,37 @@ impl Slip {
     /// its samples' steps and distances alike; those after it moved on by as much): what the
     /// wheel missed given back. Whether the segment was found.
     pub fn lengthen(&self, curves: &mut [UniformCurve]) -> bool {
-        let Some(c) = curves.iter_mut().find(|c| c.index == self.curve) else {
-            return false;
-        };
-        let (Some(&(a, _)), Some(&(b, _))) = (c.nodes.get(self.tag), c.nodes.get(self.tag + 1))
-        else {
-            return false;
-        };
         let scale = 1.0 / (1.0 - self.short_fraction);
-        if !(scale.is_finite() && scale > 1.0) || b <= a || b >= c.d.len() {
+        if !(scale.is_finite() && scale > 1.0) {
             return false;
         }
-        c.h[self.tag] *= scale;
-        let d0 = c.d[a];
-        let before = c.d[b];
-        for x in &mut c.d[a + 1..=b] {
-            *x = d0 + (*x - d0) * scale;
-        }
-        let moved = c.d[b] - before;
-        for x in &mut c.d[b + 1..] {
-            *x += moved;
-        }
-        true
+        curves
+            .iter_mut()
+            .find(|c| c.index == self.curve)
+            .is_some_and(|c| scale_segment(c, self.tag, scale))
     }
+}
+
+/// Scales segment `seg` of `c` (from tag `seg` to the next) by `scale`: its step and its
+/// samples' distances, those after it moved on by as much. Whether the segment was found.
+fn scale_segment(c: &mut UniformCurve, seg: usize, scale: f64) -> bool {
+    let (Some(&(a, _)), Some(&(b, _))) = (c.nodes.get(seg), c.nodes.get(seg + 1)) else {
+        return false;
+    };
+    if b <= a || b >= c.d.len() {
+        return false;
+    }
+    c.h[seg] *= scale;
+    let d0 = c.d[a];
+    let before = c.d[b];
+    for x in &mut c.d[a + 1..=b] {
+        *x = d0 + (*x - d0) * scale;
+    }
+    let moved = c.d[b] - before;
+    for x in &mut c.d[b + 1..] {
+        *x += moved;
+    }
+    true
 }
 
 impl std::fmt::Display for Slip {
@@ -859,7 +867,7 @@ pub fn check(
     let mut out = ClosureReport::default();
     let tags: usize = curves.iter().map(|c| c.nodes.len()).sum();
     let most = MAX_DETACHED.max((MAX_DETACHED_SHARE * tags as f64) as usize);
-    let last = loop {
+    let mut last = loop {
         let Some(d) = drops(curves, &uncertain) else {
             break None;
         };
@@ -942,7 +950,6 @@ pub fn check(
             share: c.drop / d.energy,
         });
     };
-    let mut last = last;
     while let Some(d) = &last {
         if out.slips.len() == slips.max {
             break;
@@ -1221,16 +1228,7 @@ mod tests {
 
     /// Segment `seg` of `c` read `f` short (its step and the distances from it on).
     fn shorten(c: &mut UniformCurve, seg: usize, f: f64) {
-        let (i0, i1) = (c.nodes[seg].0, c.nodes[seg + 1].0);
-        c.h[seg] *= 1.0 - f;
-        let base = c.d[i0];
-        let lost = (c.d[i1] - base) * f;
-        for j in i0..=i1 {
-            c.d[j] = base + (c.d[j] - base) * (1.0 - f);
-        }
-        for d in &mut c.d[i1 + 1..] {
-            *d -= lost;
-        }
+        assert!(scale_segment(c, seg, 1.0 - f));
     }
 
     /// Issue 49: two segments read short on two curves: each named in turn, lengthened by the
