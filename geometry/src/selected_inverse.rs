@@ -358,6 +358,10 @@ fn numeric<T: Scalar>(
     // diagonal, Z_ki) without a search. Every Z_ik needed is there: R's rows past k are
     // on column k's pattern (the elimination tree). Each sum takes its terms in the
     // order of R, as the equations read.
+    //
+    // s_k is summed in a register (no other term of it comes while column k is walked: its
+    // rows lie below k), and the walk stops past R's last row (column k's rows are sorted):
+    // the same terms in the same order as the equations read, so the same bits.
     let mut place = vec![usize::MAX; n];
     let mut s = Vec::new();
     for j in (0..n).rev() {
@@ -367,19 +371,25 @@ fn numeric<T: Scalar>(
         }
         s.clear();
         s.resize(hi - lo, T::ZERO);
+        let last = if hi > lo { rows[hi - 1] } else { 0 };
         for q in lo..hi {
             let (k, lk) = (rows[q], l[q]);
             let qk = q - lo;
             // The diagonal first, then the rows below it in R.
-            s[qk] = s[qk] + z[col_ptr[k]] * lk;
+            let mut sk = s[qk] + z[col_ptr[k]] * lk;
             for e in col_ptr[k] + 1..col_ptr[k + 1] {
-                let at = place[rows[e]];
+                let r = rows[e];
+                if r > last {
+                    break;
+                }
+                let at = place[r];
                 if at != usize::MAX {
                     // Z_rk: a term of s_r (with l_k) and of s_k (with l_r).
                     s[at] = s[at] + z[e] * lk;
-                    s[qk] = s[qk] + z[e] * l[lo + at];
+                    sk = sk + z[e] * l[lo + at];
                 }
             }
+            s[qk] = sk;
         }
         let mut zjj = T::ONE / d[j];
         for p in lo..hi {
