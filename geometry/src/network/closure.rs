@@ -717,6 +717,8 @@ pub struct ClosureReport {
     /// loops, of what a segment of the network's mean stiffness misses by, m (the measure of
     /// [`LoopFit`]); `None` without loops.
     pub misfit_m: Option<f64>,
+    /// The tags whose node the test changed, as [`check_from`] finds them again.
+    pub moved: Vec<Moved>,
 }
 
 /// How one curve closes the network's loops: what the operator needs to know to decide what
@@ -864,9 +866,84 @@ pub fn check(
     lengthen: bool,
     joined: &[u32],
 ) -> ClosureReport {
+    check_from(curves, uncertain, slips, lengthen, joined, &[])
+}
+
+/// A tag an earlier run of the closure test detached, found again by its curve, the node it
+/// was typed as, which of that curve's tags of the node it is, and where on the curve it lies
+/// (a join's tag put in before it shifts its place in the tag list, not these).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Moved {
+    /// Its curve's scan index.
+    pub curve: usize,
+    /// The node it was typed as.
+    pub node: u32,
+    /// Which of its curve's tags of `node` it is (0 = the first).
+    pub occurrence: usize,
+    /// Its arc length on the curve, m.
+    pub d: f64,
+    /// What the earlier run did with it (`kept_as` the node it ended on).
+    pub detached: Detached,
+}
+
+/// A prior tag is found again only this close along its curve, m.
+const MOVED_TOLERANCE_M: f64 = 0.01;
+
+/// [`check`], starting from the tags an earlier run detached (`prior`, its
+/// [`ClosureReport::moved`]): each found again is first put where that run left it (a retag
+/// on the same node, a detached tag on a fresh anonymous node), then the test goes on as
+/// [`check`] does, one tag at a time. A live update of a long session uses it: the grid of 100
+/// curves puts back some 45 lost digits, each a pass of the loop test, and would do so again
+/// at every update. The result is what the test accepts from that start, not to the bit what
+/// [`check`] finds from scratch (a tag put back that the new loops refuse is moved again);
+/// the settle runs [`check`].
+pub fn check_from(
+    curves: &mut [UniformCurve],
+    uncertain: impl Fn(usize, usize) -> bool,
+    slips: &SlipTest,
+    lengthen: bool,
+    joined: &[u32],
+    prior: &[Moved],
+) -> ClosureReport {
     let mut out = ClosureReport::default();
     let tags: usize = curves.iter().map(|c| c.nodes.len()).sum();
     let most = MAX_DETACHED.max((MAX_DETACHED_SHARE * tags as f64) as usize);
+    let typed: Vec<Vec<u32>> = curves
+        .iter()
+        .map(|c| c.nodes.iter().map(|n| n.1).collect())
+        .collect();
+    for m in prior.iter().take(most) {
+        let Some(ci) = curves.iter().position(|c| c.index == m.curve) else {
+            continue;
+        };
+        let Some(tag) = typed[ci]
+            .iter()
+            .enumerate()
+            .filter(|(_, &n)| n == m.node)
+            .nth(m.occurrence)
+            .map(|(k, _)| k)
+        else {
+            continue;
+        };
+        let cu = &curves[ci];
+        let found =
+            cu.d.get(cu.nodes[tag].0)
+                .is_some_and(|d| (d - m.d).abs() <= MOVED_TOLERANCE_M);
+        if !found || cu.nodes[tag].1 != m.node {
+            continue;
+        }
+        let kept_as = if m.detached.retagged {
+            m.detached.kept_as
+        } else {
+            next_anonymous(curves)
+        };
+        curves[ci].nodes[tag].1 = kept_as;
+        out.detached.push(Detached {
+            tag,
+            kept_as,
+            ..m.detached.clone()
+        });
+    }
     let mut last = loop {
         let Some(d) = drops(curves, &uncertain) else {
             break None;
@@ -930,12 +1007,7 @@ pub fn check(
             }
             break Some(d);
         };
-        let next = curves
-            .iter()
-            .flat_map(|c| c.nodes.iter().map(|n| n.1))
-            .max()
-            .map_or(ANONYMOUS_NODE_BASE, |m| m.saturating_add(1))
-            .max(ANONYMOUS_NODE_BASE);
+        let next = next_anonymous(curves);
         let lands_on = c.lands.filter(|_| d.lands(&c)).map(|l| l.0);
         let cu = &mut curves[c.curve];
         let node = cu.nodes[c.tag].1;
@@ -977,6 +1049,58 @@ pub fn check(
     if let Some(d) = last {
         out.curves = curve_misfits(curves, &d, &out.detached);
         out.misfit_m = Some((d.energy / d.dof / d.mean_c).max(0.0).sqrt());
+    }
+    out.moved = moved(curves, &typed, &out.detached);
+    out
+}
+
+/// A node number no tag of `curves` has, among the anonymous ones.
+fn next_anonymous(curves: &[UniformCurve]) -> u32 {
+    curves
+        .iter()
+        .flat_map(|c| c.nodes.iter().map(|n| n.1))
+        .max()
+        .map_or(ANONYMOUS_NODE_BASE, |m| m.saturating_add(1))
+        .max(ANONYMOUS_NODE_BASE)
+}
+
+/// Each tag of `curves` whose node is no longer the one typed (`typed`, each curve's nodes
+/// before the test), as a later [`check_from`] finds it again.
+fn moved(curves: &[UniformCurve], typed: &[Vec<u32>], detached: &[Detached]) -> Vec<Moved> {
+    let mut out = Vec::new();
+    for (c, typed) in curves.iter().zip(typed) {
+        for (tag, (&(sample, now), &node)) in c.nodes.iter().zip(typed).enumerate() {
+            if now == node {
+                continue;
+            }
+            let occurrence = typed[..tag].iter().filter(|&&n| n == node).count();
+            out.push(Moved {
+                curve: c.index,
+                node,
+                occurrence,
+                d: c.d.get(sample).copied().unwrap_or(f64::NAN),
+                // As the test last moved it, from the node typed to where it is now.
+                detached: Detached {
+                    node,
+                    kept_as: now,
+                    retagged: !crate::curve::is_anonymous(now),
+                    ..detached
+                        .iter()
+                        .rev()
+                        .find(|x| x.curve == c.index && x.tag == tag)
+                        .cloned()
+                        .unwrap_or(Detached {
+                            curve: c.index,
+                            tag,
+                            node,
+                            kept_as: now,
+                            retagged: false,
+                            offset_m: 0.0,
+                            share: 0.0,
+                        })
+                },
+            });
+        }
     }
     out
 }
@@ -1315,6 +1439,79 @@ mod tests {
             assert_eq!(put, wrong, "seed {seed}: {r:?}");
             assert_eq!(r.detached.len(), wrong.len(), "seed {seed}: {r:?}");
         }
+    }
+
+    /// A live update starts the test from the tags the last one moved: on the same curves it
+    /// ends where that test ended, and a tag the last test moved wrongly (a prior the new loops
+    /// refute) is moved back, not kept.
+    #[test]
+    fn issue_51_a_live_update_starts_from_the_tags_the_last_test_moved() {
+        let k = 13;
+        let mut g = grid(k, 0.5, 1);
+        let mut wrong = Vec::new();
+        for (c, t) in [(1, 3), (4, 8), (7, 1), (15, 5), (19, 10), (23, 6)] {
+            let meant = g[c].nodes[t].1;
+            g[c].nodes[t].1 = (meant + 5 * k as u32) % (k * k) as u32;
+            wrong.push((c, t, meant));
+        }
+        let lost = |c: usize, t: usize| wrong.iter().any(|w| (w.0, w.1) == (c, t));
+        let test = |g: &mut [UniformCurve], prior: &[Moved]| {
+            check_from(g, lost, &SlipTest::STRICT, false, &[], prior)
+        };
+        let nodes = |g: &[UniformCurve]| -> Vec<Vec<u32>> {
+            g.iter()
+                .map(|c| c.nodes.iter().map(|n| n.1).collect())
+                .collect()
+        };
+        let mut scratch = g.clone();
+        let first = test(&mut scratch, &[]);
+        assert_eq!(first.moved.len(), wrong.len(), "{first:?}");
+        let mut warm = g.clone();
+        let again = test(&mut warm, &first.moved);
+        assert_eq!(nodes(&warm), nodes(&scratch));
+        assert_eq!(again.moved, first.moved);
+        let key = |r: &ClosureReport| {
+            let mut v: Vec<_> = r
+                .detached
+                .iter()
+                .map(|d| (d.curve, d.tag, d.node, d.kept_as))
+                .collect();
+            v.sort_unstable();
+            v
+        };
+        assert_eq!(key(&again), key(&first));
+        // The start is the prior's: with no tag marked uncertain, the test from scratch puts
+        // none back; started from the prior, the loops accept all six where they are.
+        let unmarked = |g: &mut [UniformCurve], prior: &[Moved]| {
+            check_from(g, |_, _| false, &SlipTest::STRICT, false, &[], prior)
+        };
+        assert!(unmarked(&mut g.clone(), &[]).moved.is_empty());
+        let mut warm = g.clone();
+        assert_eq!(unmarked(&mut warm, &first.moved).moved, first.moved);
+        assert_eq!(nodes(&warm), nodes(&scratch));
+        // A prior that moved a right tag (curve 10, tag 4) onto another node: the loops refuse
+        // it, its curve lands on the node typed, and it goes back.
+        let right = g[10].nodes[4];
+        let mut stale = first.moved.clone();
+        stale.push(Moved {
+            curve: 10,
+            node: right.1,
+            occurrence: 0,
+            d: g[10].d[right.0],
+            detached: Detached {
+                curve: 10,
+                tag: 4,
+                node: right.1,
+                kept_as: (right.1 + 3) % (k * k) as u32,
+                retagged: true,
+                offset_m: 0.0,
+                share: 0.0,
+            },
+        });
+        let mut warm = g.clone();
+        let r = test(&mut warm, &stale);
+        assert_eq!(nodes(&warm), nodes(&scratch), "{r:?}");
+        assert_eq!(r.moved, first.moved);
     }
 
     #[test]

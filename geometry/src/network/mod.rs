@@ -272,6 +272,9 @@ pub struct Reconstructor {
     /// The node ties of each curve the last regression saw (sample, node), after the closure
     /// test: a curve whose ties changed moves whole in a local run.
     regressed_nodes: HashMap<usize, Vec<(usize, u32)>>,
+    /// The tags the last closure test moved: where a live update's test starts
+    /// ([`closure::check_from`]).
+    closure_moved: Vec<closure::Moved>,
     /// Curves pre-filtered by the last run (not taken from the cache).
     pub prefiltered_last: usize,
 }
@@ -324,7 +327,7 @@ impl Reconstructor {
     /// reconstructed, the warnings that say why. The result depends only on `curves` and `p` (the caches change the time it takes, not the
     /// bits).
     pub fn run(&mut self, curves: &[Curve], p: &NetworkParams) -> Result<Network, Unreconstructed> {
-        self.run_inner(curves, p, false, &[]).map(|(n, _)| n)
+        self.run_inner(curves, p, false, &[], false).map(|(n, _)| n)
     }
 
     /// As [`run`](Self::run), with the regression warm-started from the previous run's
@@ -337,7 +340,7 @@ impl Reconstructor {
         curves: &[Curve],
         p: &NetworkParams,
     ) -> Result<Network, Unreconstructed> {
-        self.run_inner(curves, p, true, &[]).map(|(n, _)| n)
+        self.run_inner(curves, p, true, &[], false).map(|(n, _)| n)
     }
 
     /// The reconstruction with the tags `slides` (`(scan index of the curve, node)`) free to
@@ -349,30 +352,36 @@ impl Reconstructor {
         p: &NetworkParams,
         slides: &[(usize, u32)],
     ) -> Result<(Network, Vec<Option<f64>>), Unreconstructed> {
-        let (net, s) = self.run_slides(curves, p, slides)?;
+        let (net, s) = self.run_inner(curves, p, false, slides, false)?;
         Ok((net, s.iter().map(|x| x.map(|x| x.sigma)).collect()))
     }
 
     /// As [`run_sliding`](Self::run_sliding), with each tag's [`Slide`]: where the loops put
     /// it and how its loops fit (what the join passes above, [`join::run_joined`], iterate).
+    /// The loop-closure test starts from the tags it moved in the last run (the pass
+    /// before, or the run the passes started from: [`closure::check_from`]), so that a long
+    /// session's lost digits are not put back one at a time again in every pass.
     pub(crate) fn run_slides(
         &mut self,
         curves: &[Curve],
         p: &NetworkParams,
         slides: &[(usize, u32)],
     ) -> Result<(Network, Vec<Option<Slide>>), Unreconstructed> {
-        self.run_inner(curves, p, false, slides)
+        self.run_inner(curves, p, false, slides, true)
     }
 
     /// The reconstruction, with the tags `slides` (`(scan index of the curve, node)`, issue
     /// 34's joins) free to slide along their curve in the Poisson solve: for each, where the
-    /// loops put it and how its loops fit ([`Slide`]).
+    /// loops put it and how its loops fit ([`Slide`]). The loop-closure test starts from the
+    /// tags the last run moved in a live update ([`NetworkParams::local_window`]) and with
+    /// `closure_from_last`, from the tags as typed otherwise.
     fn run_inner(
         &mut self,
         curves: &[Curve],
         p: &NetworkParams,
         warm: bool,
         slides: &[(usize, u32)],
+        closure_from_last: bool,
     ) -> Result<(Network, Vec<Option<Slide>>), Unreconstructed> {
         let mut warnings = Vec::new();
         let t0 = Instant::now();
@@ -393,7 +402,16 @@ impl Reconstructor {
             mounting::apply(&mut uniform, &est);
         }
         let joined: Vec<u32> = slides.iter().map(|x| x.1).collect();
-        let closure = closure_check(curves, &mut uniform, p, &joined, &mut warnings);
+        // A live update starts the closure test from the tags the last one moved, and so does
+        // a join pass (from the pass before); a run that starts the passes (and so the settle
+        // and a replay), from the tags as typed.
+        let prior = if p.local_window > 0 || closure_from_last {
+            std::mem::take(&mut self.closure_moved)
+        } else {
+            Vec::new()
+        };
+        let closure = closure_check(curves, &mut uniform, p, &joined, &prior, &mut warnings);
+        self.closure_moved = closure.moved.clone();
         let regression = self.regress(&mut uniform, p, warm);
         let t2 = Instant::now();
         // Each slide's curve (position) and the tag's position in its nodes.
@@ -453,7 +471,10 @@ impl Reconstructor {
             tags_detached: closure.detached.len(),
             mounting,
             max_node_normal_angle_deg: max_node_normal_angle(&positions),
-            provisional: regression.frames_moved < regression.frames,
+            // A live update's closure test, started from the last update's moves, may differ
+            // from the one of a run from scratch: the settle runs that.
+            provisional: regression.frames_moved < regression.frames
+                || (p.local_window > 0 && !prior.is_empty()),
             regression,
             closure_misfit_m: closure.misfit_m,
             closure: closure.curves,
@@ -601,6 +622,7 @@ fn closure_check(
     uniform: &mut [UniformCurve],
     p: &NetworkParams,
     joined: &[u32],
+    prior: &[closure::Moved],
     warnings: &mut Vec<NetworkWarning>,
 ) -> closure::ClosureReport {
     let closure = if p.no_closure_check {
@@ -616,12 +638,13 @@ fn closure_check(
                     .map(|(k, _)| (c.index, k))
             })
             .collect();
-        closure::check(
+        closure::check_from(
             uniform,
             |c, k| uncertain.contains(&(c, k)),
             &p.slips,
             !p.no_slip_repair,
             joined,
+            prior,
         )
     };
     warnings.extend(
