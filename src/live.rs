@@ -26,8 +26,9 @@
 //! sees it at once; as soon as no curve waits, the worker reconstructs the whole network and
 //! surfaces it exactly, and replaces the update (`report.json`: `network.provisional`,
 //! `surface.provisional` until then, `live.settled`). A curve that arrives while the settled
-//! network is made goes first (the settled surface is not made; the next update starts from
-//! the exact frames). A settled
+//! network is made goes first: the settle asks between the network's long steps (each pass of
+//! the loop-closure test, each join pass) and stops there (`Pipeline::settle`; the next update
+//! starts from the frames regressed so far). A settled
 //! update is a pure function of the curves (the caches change the time, not the bits: the
 //! regression is not warm-started, which measured no fewer iterations), and the last update
 //! is always settled, so the same bytes in give the same files out whatever the timing was.

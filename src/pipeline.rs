@@ -158,12 +158,25 @@ impl Pipeline {
     /// The network of `curves` alone (no surface, no glb yet): the first phase of
     /// [`run`](Self::run), what the live view draws before the surface comes.
     pub fn reconstruct(&mut self, curves: &[Curve], network: &NetworkParams) -> Products {
+        self.reconstruct_until(curves, network, &|| false)
+            .unwrap_or_default()
+    }
+
+    /// As [`reconstruct`](Self::reconstruct), asking `stop` between its long steps (each pass
+    /// of the loop-closure test, each join pass): `None` once it said yes.
+    fn reconstruct_until(
+        &mut self,
+        curves: &[Curve],
+        network: &NetworkParams,
+        stop: &dyn Fn() -> bool,
+    ) -> Option<Products> {
         let t0 = Instant::now();
-        let net = sfs_geometry::network::join::run_joined(
+        let net = sfs_geometry::network::join::run_joined_until(
             &mut self.reconstructor,
             curves,
             network,
             &self.joins,
+            stop,
         );
         let mut out = Products {
             network_ms: t0.elapsed().as_secs_f64() * 1e3,
@@ -171,13 +184,14 @@ impl Pipeline {
         };
         let net = match net {
             Ok(net) => net,
+            Err(why) if why.interrupted => return None,
             Err(why) => {
                 // Nothing reconstructed: the report says why (each curve left out, or the
                 // failed solve).
                 out.warnings
                     .extend(why.warnings.into_iter().map(Warning::Network));
                 out.warnings.iter().for_each(|w| self.log.log(w));
-                return out;
+                return Some(out);
             }
         };
         out.warnings
@@ -187,7 +201,7 @@ impl Pipeline {
             out.nodes.insert(k.to_string(), crate::gltf_out::to_gltf(p));
         }
         out.network = Some(net);
-        out
+        Some(out)
     }
 
     /// Makes provisional products exact: a network regressed locally
@@ -195,8 +209,10 @@ impl Pipeline {
     /// surfaced exactly; a provisional surface (a live update that kept faces,
     /// [`SurfaceParams::reuse_tolerance`]) is surfaced again with no tolerance: what a run
     /// from scratch on `curves` gives. Whether `out` was settled: not when there was nothing
-    /// to settle, nor when `waiting` says a curve waits once the network is made (the next
-    /// update comes first; its local regression then starts from the exact frames).
+    /// to settle, nor when `waiting` says a curve waits: it is asked between the network's
+    /// long steps (each pass of the loop-closure test, each join pass) and once the network is
+    /// made, and the settle stops there (the next update comes first; its local regression
+    /// starts from the frames regressed so far).
     pub fn settle(
         &mut self,
         curves: &[Curve],
@@ -207,7 +223,11 @@ impl Pipeline {
     ) -> bool {
         let surface = surface.map(exact);
         if out.network.as_ref().is_some_and(|n| n.report.provisional) {
-            let mut settled = self.reconstruct(curves, &exact_network(network));
+            let Some(mut settled) =
+                self.reconstruct_until(curves, &exact_network(network), &waiting)
+            else {
+                return false;
+            };
             if waiting() {
                 return false;
             }

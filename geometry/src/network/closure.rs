@@ -719,6 +719,8 @@ pub struct ClosureReport {
     pub misfit_m: Option<f64>,
     /// The tags whose node the test changed, as [`check_from`] finds them again.
     pub moved: Vec<Moved>,
+    /// Stopped by the caller ([`check_from`]'s `stop`) before the test ended.
+    pub interrupted: bool,
 }
 
 /// How one curve closes the network's loops: what the operator needs to know to decide what
@@ -866,7 +868,7 @@ pub fn check(
     lengthen: bool,
     joined: &[u32],
 ) -> ClosureReport {
-    check_from(curves, uncertain, slips, lengthen, joined, &[])
+    check_from(curves, uncertain, slips, lengthen, joined, &[], &|| false)
 }
 
 /// A tag an earlier run of the closure test detached, found again by its curve, the node it
@@ -896,7 +898,8 @@ const MOVED_TOLERANCE_M: f64 = 0.01;
 /// curves puts back some 45 lost digits, each a pass of the loop test, and would do so again
 /// at every update. The result is what the test accepts from that start, not to the bit what
 /// [`check`] finds from scratch (a tag put back that the new loops refuse is moved again);
-/// the settle runs [`check`].
+/// the settle runs [`check`]. `stop` is asked before each pass of the loop test: once it says
+/// yes, the test ends there ([`ClosureReport::interrupted`]; the curves as they were left).
 pub fn check_from(
     curves: &mut [UniformCurve],
     uncertain: impl Fn(usize, usize) -> bool,
@@ -904,6 +907,7 @@ pub fn check_from(
     lengthen: bool,
     joined: &[u32],
     prior: &[Moved],
+    stop: &dyn Fn() -> bool,
 ) -> ClosureReport {
     let mut out = ClosureReport::default();
     let tags: usize = curves.iter().map(|c| c.nodes.len()).sum();
@@ -945,6 +949,10 @@ pub fn check_from(
         });
     }
     let mut last = loop {
+        if stop() {
+            out.interrupted = true;
+            return out;
+        }
         let Some(d) = drops(curves, &uncertain) else {
             break None;
         };
@@ -1456,7 +1464,7 @@ mod tests {
         }
         let lost = |c: usize, t: usize| wrong.iter().any(|w| (w.0, w.1) == (c, t));
         let test = |g: &mut [UniformCurve], prior: &[Moved]| {
-            check_from(g, lost, &SlipTest::STRICT, false, &[], prior)
+            check_from(g, lost, &SlipTest::STRICT, false, &[], prior, &|| false)
         };
         let nodes = |g: &[UniformCurve]| -> Vec<Vec<u32>> {
             g.iter()
@@ -1483,7 +1491,15 @@ mod tests {
         // The start is the prior's: with no tag marked uncertain, the test from scratch puts
         // none back; started from the prior, the loops accept all six where they are.
         let unmarked = |g: &mut [UniformCurve], prior: &[Moved]| {
-            check_from(g, |_, _| false, &SlipTest::STRICT, false, &[], prior)
+            check_from(
+                g,
+                |_, _| false,
+                &SlipTest::STRICT,
+                false,
+                &[],
+                prior,
+                &|| false,
+            )
         };
         assert!(unmarked(&mut g.clone(), &[]).moved.is_empty());
         let mut warm = g.clone();

@@ -219,14 +219,20 @@ impl std::fmt::Display for NetworkWarning {
 }
 
 /// Why nothing could be reconstructed: the warnings that say so (each curve left out and
-/// why, or the failed solve), in order.
+/// why, or the failed solve), in order; or that the caller stopped the run
+/// ([`Reconstructor::run_until`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Unreconstructed {
     pub warnings: Vec<NetworkWarning>,
+    /// Stopped by the caller before the end: nothing is wrong with the scan.
+    pub interrupted: bool,
 }
 
 impl std::fmt::Display for Unreconstructed {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.interrupted {
+            return f.write_str("stopped before the end");
+        }
         if self.warnings.is_empty() {
             return f.write_str("no curve to reconstruct");
         }
@@ -327,7 +333,22 @@ impl Reconstructor {
     /// reconstructed, the warnings that say why. The result depends only on `curves` and `p` (the caches change the time it takes, not the
     /// bits).
     pub fn run(&mut self, curves: &[Curve], p: &NetworkParams) -> Result<Network, Unreconstructed> {
-        self.run_inner(curves, p, false, &[], false).map(|(n, _)| n)
+        self.run_inner(curves, p, false, &[], false, &|| false)
+            .map(|(n, _)| n)
+    }
+
+    /// As [`run`](Self::run), asking `stop` before each pass of the loop-closure test (a
+    /// long session's from scratch puts back its lost digits one pass each): once it says
+    /// yes, the run ends with nothing reconstructed ([`Unreconstructed::interrupted`]). The
+    /// caches keep what was done (the pre-filtered curves).
+    pub fn run_until(
+        &mut self,
+        curves: &[Curve],
+        p: &NetworkParams,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Network, Unreconstructed> {
+        self.run_inner(curves, p, false, &[], false, stop)
+            .map(|(n, _)| n)
     }
 
     /// As [`run`](Self::run), with the regression warm-started from the previous run's
@@ -340,7 +361,8 @@ impl Reconstructor {
         curves: &[Curve],
         p: &NetworkParams,
     ) -> Result<Network, Unreconstructed> {
-        self.run_inner(curves, p, true, &[], false).map(|(n, _)| n)
+        self.run_inner(curves, p, true, &[], false, &|| false)
+            .map(|(n, _)| n)
     }
 
     /// The reconstruction with the tags `slides` (`(scan index of the curve, node)`) free to
@@ -352,7 +374,7 @@ impl Reconstructor {
         p: &NetworkParams,
         slides: &[(usize, u32)],
     ) -> Result<(Network, Vec<Option<f64>>), Unreconstructed> {
-        let (net, s) = self.run_inner(curves, p, false, slides, false)?;
+        let (net, s) = self.run_inner(curves, p, false, slides, false, &|| false)?;
         Ok((net, s.iter().map(|x| x.map(|x| x.sigma)).collect()))
     }
 
@@ -366,8 +388,9 @@ impl Reconstructor {
         curves: &[Curve],
         p: &NetworkParams,
         slides: &[(usize, u32)],
+        stop: &dyn Fn() -> bool,
     ) -> Result<(Network, Vec<Option<Slide>>), Unreconstructed> {
-        self.run_inner(curves, p, false, slides, true)
+        self.run_inner(curves, p, false, slides, true, stop)
     }
 
     /// The reconstruction, with the tags `slides` (`(scan index of the curve, node)`, issue
@@ -382,6 +405,7 @@ impl Reconstructor {
         warm: bool,
         slides: &[(usize, u32)],
         closure_from_last: bool,
+        stop: &dyn Fn() -> bool,
     ) -> Result<(Network, Vec<Option<Slide>>), Unreconstructed> {
         let mut warnings = Vec::new();
         let t0 = Instant::now();
@@ -391,7 +415,10 @@ impl Reconstructor {
             if !curves.is_empty() {
                 warnings.push(NetworkWarning::NothingUsable);
             }
-            return Err(Unreconstructed { warnings });
+            return Err(Unreconstructed {
+                warnings,
+                interrupted: false,
+            });
         }
         let mounting = if p.no_mounting {
             None
@@ -406,11 +433,25 @@ impl Reconstructor {
         // a join pass (from the pass before); a run that starts the passes (and so the settle
         // and a replay), from the tags as typed.
         let prior = if p.local_window > 0 || closure_from_last {
-            std::mem::take(&mut self.closure_moved)
+            self.closure_moved.clone()
         } else {
             Vec::new()
         };
-        let closure = closure_check(curves, &mut uniform, p, &joined, &prior, &mut warnings);
+        let closure = closure_check(
+            curves,
+            &mut uniform,
+            p,
+            &joined,
+            &prior,
+            stop,
+            &mut warnings,
+        );
+        if closure.interrupted {
+            return Err(Unreconstructed {
+                warnings: Vec::new(),
+                interrupted: true,
+            });
+        }
         self.closure_moved = closure.moved.clone();
         let regression = self.regress(&mut uniform, p, warm);
         let t2 = Instant::now();
@@ -438,7 +479,10 @@ impl Reconstructor {
             Err(e) => {
                 tracing::error!("Poisson reconstruction failed: {e}");
                 warnings.push(NetworkWarning::PoissonFailed(e));
-                return Err(Unreconstructed { warnings });
+                return Err(Unreconstructed {
+                    warnings,
+                    interrupted: false,
+                });
             }
         };
         warnings.extend(
@@ -623,6 +667,7 @@ fn closure_check(
     p: &NetworkParams,
     joined: &[u32],
     prior: &[closure::Moved],
+    stop: &dyn Fn() -> bool,
     warnings: &mut Vec<NetworkWarning>,
 ) -> closure::ClosureReport {
     let closure = if p.no_closure_check {
@@ -645,6 +690,7 @@ fn closure_check(
             !p.no_slip_repair,
             joined,
             prior,
+            stop,
         )
     };
     warnings.extend(

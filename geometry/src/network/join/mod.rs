@@ -67,7 +67,7 @@ pub(crate) mod passes;
 
 pub use crossings::{find_crossings, CROSSING_DEG};
 pub use parts::{place_parts, DISTINCT_RATIO};
-pub use passes::run_joined;
+pub use passes::{run_joined, run_joined_until};
 
 use super::poisson::{CurvePositions, Positions};
 use crate::curve::{Curve, CurveKind, Tag, ANONYMOUS_NODE_BASE};

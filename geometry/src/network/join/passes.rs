@@ -39,7 +39,21 @@ pub fn run_joined(
     p: &NetworkParams,
     js: &JoinSettings,
 ) -> Result<Network, Unreconstructed> {
-    let mut net = r.run(curves, p)?;
+    run_joined_until(r, curves, p, js, &|| false)
+}
+
+/// As [`run_joined`], asking `stop` before each pass of the loop-closure test and each join
+/// pass ([`Reconstructor::run_until`]): once it says yes, nothing is reconstructed
+/// ([`Unreconstructed::interrupted`]). What the live worker settles with: a curve that comes
+/// in meanwhile goes first.
+pub fn run_joined_until(
+    r: &mut Reconstructor,
+    curves: &[Curve],
+    p: &NetworkParams,
+    js: &JoinSettings,
+    stop: &dyn Fn() -> bool,
+) -> Result<Network, Unreconstructed> {
+    let mut net = r.run_until(curves, p, stop)?;
     if !js.enabled() {
         return Ok(net);
     }
@@ -79,12 +93,18 @@ pub fn run_joined(
         }
         state.joins.extend(fresh);
         state.passes += 1;
+        if stop() {
+            return Err(Unreconstructed {
+                warnings: Vec::new(),
+                interrupted: true,
+            });
+        }
         if state.joins.is_empty() {
-            net = r.run(curves, p)?;
+            net = r.run_until(curves, p, stop)?;
             break;
         }
         let (work, slides) = state.joined_scan(curves);
-        match r.run_slides(&work, p, &slides) {
+        match r.run_slides(&work, p, &slides, stop) {
             Ok((n, slid)) => {
                 net = n;
                 moved = state.slide(&work, &slid);
@@ -99,6 +119,7 @@ pub fn run_joined(
                     moved = moved.max(1.0);
                 }
             }
+            Err(e) if e.interrupted => return Err(e),
             // The joined network cannot be reconstructed: keep the last that could.
             Err(e) => {
                 state.drop_all(&format!(
