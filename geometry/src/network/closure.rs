@@ -18,7 +18,9 @@
 //! typed wrong lands on the node it passed, and the tag is put on that node instead of an
 //! anonymous one. It also tells which of two tags the loops blame alike is wrong: both ends of
 //! a curve of one segment (freeing either frees the segment), the two tags at a node only two
-//! curves hold; only the wrong one lands on another node (issue 49).
+//! curves hold; only the wrong one lands on another node (issue 49). Where both land on one,
+//! the only one typed while packets were lost whose landing node's number holds the digits
+//! received (`7` for 17: [`digits_lost`]) is the wrong one: the link lost a digit of it.
 //!
 //! ## The test
 //! Each segment `s` of a curve (between two consecutive tags, nodes `a → b`) integrates its
