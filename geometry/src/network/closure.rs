@@ -1126,31 +1126,25 @@ fn moved(curves: &[UniformCurve], typed: &[Vec<u32>], detached: &[Detached]) -> 
             if now == node {
                 continue;
             }
-            let occurrence = typed[..tag].iter().filter(|&&n| n == node).count();
+            // The test's last record of it (every node it changed has one).
+            let Some(last) = detached
+                .iter()
+                .rev()
+                .find(|x| x.curve == c.index && x.tag == tag)
+            else {
+                continue;
+            };
             out.push(Moved {
                 curve: c.index,
                 node,
-                occurrence,
+                occurrence: typed[..tag].iter().filter(|&&n| n == node).count(),
                 d: c.d.get(sample).copied().unwrap_or(f64::NAN),
-                // As the test last moved it, from the node typed to where it is now.
+                // From the node typed to where it is now.
                 detached: Detached {
                     node,
                     kept_as: now,
                     retagged: !crate::curve::is_anonymous(now),
-                    ..detached
-                        .iter()
-                        .rev()
-                        .find(|x| x.curve == c.index && x.tag == tag)
-                        .cloned()
-                        .unwrap_or(Detached {
-                            curve: c.index,
-                            tag,
-                            node,
-                            kept_as: now,
-                            retagged: false,
-                            offset_m: 0.0,
-                            share: 0.0,
-                        })
+                    ..last.clone()
                 },
             });
         }
@@ -1162,6 +1156,20 @@ mod tests {
     use super::*;
     use crate::rng::Rng;
     use nalgebra::UnitQuaternion;
+
+    /// A frame of heading `yaw` in the plane (normal +z) turned by a random rotation of up to
+    /// `noise_deg`.
+    fn frame(rng: &mut Rng, yaw: f64, noise_deg: f64) -> UnitQuaternion<f64> {
+        let axis = Vector3::new(
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+        );
+        let noise = UnitQuaternion::from_scaled_axis(
+            axis.normalize() * rng.range(0.0, noise_deg.to_radians()),
+        );
+        noise * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw)
+    }
 
     /// A planar grid of `k` curves along x and `k` along y (spacing 1 m, step 1 cm) through
     /// nodes `i + k·j`, frames with normal +z, each sample's frame turned by a random rotation
@@ -1179,19 +1187,7 @@ mod tests {
                 } else {
                     std::f64::consts::FRAC_PI_2
                 };
-                let q = (0..=n)
-                    .map(|_| {
-                        let axis = Vector3::new(
-                            rng.range(-1.0, 1.0),
-                            rng.range(-1.0, 1.0),
-                            rng.range(-1.0, 1.0),
-                        );
-                        let noise = UnitQuaternion::from_scaled_axis(
-                            axis.normalize() * rng.range(0.0, noise_deg.to_radians()),
-                        );
-                        noise * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw)
-                    })
-                    .collect();
+                let q = (0..=n).map(|_| frame(&mut rng, yaw, noise_deg)).collect();
                 let nodes = (0..k)
                     .map(|i| {
                         let node = if dir == 0 { i + k * j } else { j + k * i };
@@ -1644,15 +1640,7 @@ mod tests {
                         };
                         nodes.push((q.len(), (x + k * y) as u32));
                     }
-                    let axis = Vector3::new(
-                        rng.range(-1.0, 1.0),
-                        rng.range(-1.0, 1.0),
-                        rng.range(-1.0, 1.0),
-                    );
-                    let noise = UnitQuaternion::from_scaled_axis(
-                        axis.normalize() * rng.range(0.0, 0.5_f64.to_radians()),
-                    );
-                    q.push(noise * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw));
+                    q.push(frame(&mut rng, yaw, 0.5));
                 }
             }
             let n = q.len() - 1;

@@ -228,6 +228,16 @@ pub struct Unreconstructed {
     pub interrupted: bool,
 }
 
+impl Unreconstructed {
+    /// The run the caller stopped.
+    pub(crate) fn interrupted() -> Self {
+        Unreconstructed {
+            warnings: Vec::new(),
+            interrupted: true,
+        }
+    }
+}
+
 impl std::fmt::Display for Unreconstructed {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         if self.interrupted {
@@ -432,27 +442,18 @@ impl Reconstructor {
         // A live update starts the closure test from the tags the last one moved, and so does
         // a join pass (from the pass before); a run that starts the passes (and so the settle
         // and a replay), from the tags as typed.
-        let prior = if p.local_window > 0 || closure_from_last {
-            self.closure_moved.clone()
+        let prior: &[closure::Moved] = if p.local_window > 0 || closure_from_last {
+            &self.closure_moved
         } else {
-            Vec::new()
+            &[]
         };
-        let closure = closure_check(
-            curves,
-            &mut uniform,
-            p,
-            &joined,
-            &prior,
-            stop,
-            &mut warnings,
-        );
+        let from_prior = !prior.is_empty();
+        let mut closure =
+            closure_check(curves, &mut uniform, p, &joined, prior, stop, &mut warnings);
         if closure.interrupted {
-            return Err(Unreconstructed {
-                warnings: Vec::new(),
-                interrupted: true,
-            });
+            return Err(Unreconstructed::interrupted());
         }
-        self.closure_moved = closure.moved.clone();
+        self.closure_moved = std::mem::take(&mut closure.moved);
         let regression = self.regress(&mut uniform, p, warm);
         let t2 = Instant::now();
         // Each slide's curve (position) and the tag's position in its nodes.
@@ -518,7 +519,7 @@ impl Reconstructor {
             // A live update's closure test, started from the last update's moves, may differ
             // from the one of a run from scratch: the settle runs that.
             provisional: regression.frames_moved < regression.frames
-                || (p.local_window > 0 && !prior.is_empty()),
+                || (p.local_window > 0 && from_prior),
             regression,
             closure_misfit_m: closure.misfit_m,
             closure: closure.curves,

@@ -94,10 +94,7 @@ pub fn run_joined_until(
         state.joins.extend(fresh);
         state.passes += 1;
         if stop() {
-            return Err(Unreconstructed {
-                warnings: Vec::new(),
-                interrupted: true,
-            });
+            return Err(Unreconstructed::interrupted());
         }
         if state.joins.is_empty() {
             net = r.run_until(curves, p, stop)?;
