@@ -202,26 +202,15 @@ fn issue_18_box_and_roof_from_exact_frames() {
 /// several times it).
 #[test]
 fn issue_52_a_mounting_offset_is_estimated_and_turned_back() {
-    use nalgebra::{Quaternion, UnitQuaternion};
+    use nalgebra::UnitQuaternion;
     for name in ["ellipsoid-dense", "relief"] {
         let (s, t) = load(name);
         let exact = s.exact_scan();
         let offset = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -1.7f64.to_radians())
             * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.8f64.to_radians());
-        let mut turned = exact.clone();
-        for c in &mut turned.curves {
-            for q in &mut c.samples.q {
-                let r = UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
-                    * offset;
-                *q = [r.w, r.i, r.j, r.k];
-            }
-        }
+        let turned = turned(&exact, offset);
         let run = |scan: &Scan, no_mounting: bool| {
-            let p = NetworkParams {
-                no_mounting,
-                ..NetworkParams::default()
-            };
-            let (e, net) = reconstructed(&t, scan, &p);
+            let (e, net) = mounted(&t, scan, no_mounting);
             (e, net.report.mounting)
         };
         let (base, _) = run(&exact, true);
@@ -239,6 +228,72 @@ fn issue_52_a_mounting_offset_is_estimated_and_turned_back() {
         assert!(
             off > 2.0 * base,
             "{name}: the offset costs only {off:.4} % against {base:.4} %"
+        );
+    }
+}
+
+/// [`reconstructed`] with the defaults, the mounting offset estimated or not.
+fn mounted(t: &Truth, scan: &Scan, no_mounting: bool) -> (f64, Network) {
+    let p = NetworkParams {
+        no_mounting,
+        ..NetworkParams::default()
+    };
+    reconstructed(t, scan, &p)
+}
+
+/// `scan` with every frame turned in its own axes by `offset` (the frames read
+/// `true · offset`: a sensor turned in its housing).
+fn turned(scan: &Scan, offset: nalgebra::UnitQuaternion<f64>) -> Scan {
+    use nalgebra::{Quaternion, UnitQuaternion};
+    let mut turned = scan.clone();
+    for c in &mut turned.curves {
+        for q in &mut c.samples.q {
+            let r =
+                UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3])) * offset;
+            *q = [r.w, r.i, r.j, r.k];
+        }
+    }
+    turned
+}
+
+/// Issue 52: the mounting's yaw about N (1.5°; the independent simulator's rough captures
+/// carry up to 2°) is not seen at the nodes but by the loops. It is estimated from their
+/// misfit within 0.1°, the frames are turned back, and the network comes back within 1.1×
+/// the exact frames' error (several times it without). The exact frames are left alone.
+#[test]
+fn issue_52_the_mounting_yaw_is_estimated_from_the_loops_and_turned_back() {
+    use nalgebra::UnitQuaternion;
+    for name in ["ellipsoid-dense", "relief"] {
+        let (s, t) = load(name);
+        let exact = s.exact_scan();
+        let yawed = turned(
+            &exact,
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 1.5f64.to_radians()),
+        );
+        let run = |scan: &Scan, no_mounting: bool| {
+            let (e, net) = mounted(&t, scan, no_mounting);
+            (e, net.report.mounting_yaw)
+        };
+        let (base, none) = run(&exact, false);
+        let (off, _) = run(&yawed, true);
+        let (back, est) = run(&yawed, false);
+        let est = est.expect("an estimate");
+        eprintln!(
+            "{name}: exact {base:.4} % ({none:?}), yawed {off:.4} %, turned back {back:.4} %; {est:?}"
+        );
+        assert!(est.applied, "{name}: {est:?}");
+        assert!((est.yaw_deg - 1.5).abs() < 0.1, "{name}: {est:?}");
+        assert!(
+            none.is_none_or(|n| !n.applied || n.yaw_deg.abs() < 0.02),
+            "{name}: {none:?}"
+        );
+        assert!(
+            back <= 1.1 * base,
+            "{name}: {back:.4} % against {base:.4} %"
+        );
+        assert!(
+            off > 2.0 * base,
+            "{name}: the yaw costs only {off:.4} % against {base:.4} %"
         );
     }
 }

@@ -57,7 +57,8 @@
 //! alpha = 0.9                        # outlier threshold on |q_i · q_i±1|
 //! regression = true                  # false: pre-filter only
 //! estimate_mounting = true           # the device's mounting offset (roll, pitch) from the
-//!                                    #   normals at the nodes; false: frames as measured
+//!                                    #   normals at the nodes, its yaw from the loops;
+//!                                    #   false: frames as measured
 //! repair_slips = true                # a segment the loops name a slip is lengthened by
 //!                                    #   their estimate; false: kept as measured
 //! bend_fraction = 0.5                # bending smoothing length ℓ₂ in h (or bend_length in m)

@@ -74,6 +74,9 @@ pub struct NetworkReport {
     /// The device's mounting offset estimated from the normals at the nodes, and whether the
     /// frames were turned back by it ([`mounting`]); none where the nodes cannot tell it.
     pub mounting: Option<mounting::MountingEstimate>,
+    /// The yaw of that offset about N, estimated from the loops after the closure test
+    /// ([`mounting::estimate_yaw`]); a live update keeps the last run's.
+    pub mounting_yaw: Option<mounting::YawEstimate>,
     /// Largest angle between the normals of two curves at a shared node, degrees.
     pub max_node_normal_angle_deg: f64,
     /// The regression's iterations and energies.
@@ -291,6 +294,9 @@ pub struct Reconstructor {
     /// The tags the last closure test moved: where a live update's test starts
     /// ([`closure::check_from`]).
     closure_moved: Vec<closure::Moved>,
+    /// The yaw the last run estimated from the loops ([`mounting::estimate_yaw`]): a live
+    /// update keeps it, so that the frames it does not regress again stay turned alike.
+    yaw: Option<mounting::YawEstimate>,
     /// Curves pre-filtered by the last run (not taken from the cache).
     pub prefiltered_last: usize,
 }
@@ -454,6 +460,23 @@ impl Reconstructor {
             return Err(Unreconstructed::interrupted());
         }
         self.closure_moved = std::mem::take(&mut closure.moved);
+        // The yaw about N, from the loops with the tags as the closure test left them; a live
+        // update (a local regression) keeps the last run's.
+        let local = p.local_window > 0 && !self.regressed_nodes.is_empty();
+        if p.no_mounting {
+            self.yaw = None;
+        } else if !local {
+            self.yaw = match self.poisson.yaw_form(&uniform) {
+                Ok(form) => mounting::estimate_yaw(&form),
+                Err(e) => {
+                    tracing::debug!("no yaw estimate: {e}");
+                    None
+                }
+            };
+        }
+        if let Some(est) = self.yaw.filter(|e| e.applied) {
+            mounting::apply_yaw(&mut uniform, &est);
+        }
         let regression = self.regress(&mut uniform, p, warm);
         let t2 = Instant::now();
         // Each slide's curve (position) and the tag's position in its nodes.
@@ -515,6 +538,7 @@ impl Reconstructor {
             outliers_removed: uniform.iter().map(|u| u.outliers).sum(),
             tags_detached: closure.detached.len(),
             mounting,
+            mounting_yaw: self.yaw,
             max_node_normal_angle_deg: max_node_normal_angle(&positions),
             // A live update's closure test, started from the last update's moves, may differ
             // from the one of a run from scratch: the settle runs that.

@@ -10,8 +10,14 @@
 //! never cross at an angle leave them unknown (a singular system: no estimate). Turning every
 //! frame back by the estimate leaves the regression the noise alone to tie at the nodes; the
 //! pitch otherwise tilts every tangent out of the surface by `π` between the nodes, where the
-//! regression's ties do not reach. The yaw about N turns the tangents within the surface and
-//! is not seen at the nodes: it is left as it is.
+//! regression's ties do not reach.
+//!
+//! The yaw `ψ` about N turns the tangents within the surface and is not seen at the nodes;
+//! the loops see it ([`estimate_yaw`]): a closed section whose tangents all turn by `ψ` misses
+//! its start by about `L sin ψ`, and curves crossing on a curved surface no longer meet where
+//! they are tagged. The loops' misfit of the frames turned by `ψ` is a quadratic form in
+//! `(cos ψ, sin ψ)` ([`super::poisson::YawForm`]), so its minimum is an eigenvector of a 2 by 2
+//! matrix. On a plane every turn in the surface is a rigid motion, and nothing is estimated.
 //!
 //! ```
 //! use nalgebra::{UnitQuaternion, Vector3};
@@ -78,6 +84,93 @@ pub const MIN_PAIRS: usize = 4;
 /// A pair whose normals disagree by more than this many times the median pair's, at the
 /// first estimate, is left out ([`estimate`]).
 pub const OUTLIER: f64 = 4.0;
+
+/// The yaw about N estimated from the loops ([`estimate_yaw`]): the frames read
+/// `true · Rz(yaw)`, degrees, with its standard error.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct YawEstimate {
+    pub yaw_deg: f64,
+    /// The larger of the loops' noise's (as if independent per edge) and the spread of the
+    /// curves' shares (each curve's errors hang together along it).
+    pub yaw_sigma_deg: f64,
+    /// Whether the frames were turned back by it ([`apply_yaw`]): at least [`SIGNIFICANT`]
+    /// standard errors, and at most [`MAX_YAW_DEG`].
+    pub applied: bool,
+}
+
+/// A yaw larger than this is not a mounting offset (the sensor is not turned that far in
+/// its housing): something else misfits the loops, and the frames are left as measured.
+pub const MAX_YAW_DEG: f64 = 10.0;
+
+/// Fewest curves the yaw's standard error is taken over (the spread of their shares).
+pub const MIN_YAW_CURVES: usize = 4;
+
+/// Estimates the yaw about N common to every frame from the loops' misfit as a function of
+/// it (`form`, [`super::poisson::PoissonSolver::yaw_form`]): the turn of least misfit. `None`
+/// without loops, with fewer than [`MIN_YAW_CURVES`] curves, or where every turn fits alike
+/// (a plane).
+pub fn estimate_yaw(form: &super::poisson::YawForm) -> Option<YawEstimate> {
+    if form.loops == 0 || form.per_curve.len() < MIN_YAW_CURVES {
+        return None;
+    }
+    let m: Matrix2<f64> = form.per_curve.iter().sum();
+    if !m.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    let eig = m.symmetric_eigen();
+    let (lo, hi) = if eig.eigenvalues[0] <= eig.eigenvalues[1] {
+        (0, 1)
+    } else {
+        (1, 0)
+    };
+    // chi2(ψ* + δ) = λ_lo + (λ_hi − λ_lo) sin² δ.
+    let curvature = eig.eigenvalues[hi] - eig.eigenvalues[lo];
+    if curvature <= 1e-9 * eig.eigenvalues[hi].abs().max(f64::MIN_POSITIVE) {
+        return None;
+    }
+    let mut u: Vector2<f64> = eig.eigenvectors.column(lo).into();
+    if u.x < 0.0 {
+        u = -u;
+    }
+    // The turn that takes the frames back (T → cos ψ T + sin ψ B); the frames read
+    // true · Rz(−ψ).
+    let psi = u.y.atan2(u.x);
+    let du = Vector2::new(-u.y, u.x);
+    // Independent noise per edge: var ψ = s² / curvature, s² the misfit per degree of freedom.
+    let white = eig.eigenvalues[lo].max(0.0) / (3 * form.loops) as f64 / curvature;
+    // The curves' shares of the gradient at ψ* (they sum to 0 there): their spread.
+    let cluster = form
+        .per_curve
+        .iter()
+        .map(|mc| (u.dot(&(mc * du))).powi(2))
+        .sum::<f64>()
+        / (curvature * curvature);
+    let sigma = white.max(cluster).sqrt();
+    let yaw = -psi;
+    if !(yaw.is_finite() && sigma.is_finite()) {
+        return None;
+    }
+    Some(YawEstimate {
+        yaw_deg: yaw.to_degrees(),
+        yaw_sigma_deg: sigma.to_degrees(),
+        applied: yaw.abs() >= SIGNIFICANT * sigma && yaw.to_degrees().abs() <= MAX_YAW_DEG,
+    })
+}
+
+/// Turns every frame of `curves` (and the frames arriving at their kinks) back by the yaw
+/// `est`, about its own N.
+pub fn apply_yaw(curves: &mut [UniformCurve], est: &YawEstimate) {
+    let back = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -est.yaw_deg.to_radians());
+    for c in curves {
+        for q in c.q.iter_mut() {
+            *q *= back;
+        }
+        for (_, q) in c.kinks.iter_mut() {
+            *q *= back;
+        }
+    }
+}
 
 /// The frame pairs at the nodes the regression ties ([`regression::tied`]): every two frames
 /// of different curves at a node, at a node a crease passes through only those on the same
@@ -289,6 +382,30 @@ mod tests {
         assert_eq!(est.pairs, 24, "{est:?}");
         assert!((est.roll_deg - 0.8).abs() < 0.2, "{est:?}");
         assert!((est.pitch_deg + 1.7).abs() < 0.2, "{est:?}");
+    }
+
+    /// On a plane every turn of the tangents within the surface is a rigid motion of the
+    /// network: the loops cannot see a yaw, and none is estimated.
+    #[test]
+    fn a_plane_gives_no_yaw() {
+        let yawed = |curves: &mut Vec<UniformCurve>| {
+            let z = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 2f64.to_radians());
+            for c in curves.iter_mut() {
+                for q in c.q.iter_mut() {
+                    *q *= z;
+                }
+            }
+        };
+        for seed in 1..=3 {
+            let mut curves = grid(6, 0.5f64.to_radians(), 0.0, 0.0, seed);
+            yawed(&mut curves);
+            let form = super::super::poisson::PoissonSolver::new()
+                .yaw_form(&curves)
+                .expect("a form");
+            assert!(form.loops > 0);
+            let est = estimate_yaw(&form);
+            assert!(est.is_none_or(|e| !e.applied), "{est:?}");
+        }
     }
 
     /// Curves that never cross at an angle (all along x, nodes shared end to end) cannot tell

@@ -64,6 +64,18 @@ pub struct Misfit {
     pub mean_h: f64,
 }
 
+/// The loops' misfit as a function of a yaw `ψ` common to every frame
+/// ([`PoissonSolver::yaw_form`]): `chi2(ψ) = uᵀ M u` with `u = (cos ψ, sin ψ)` and `M` the sum
+/// of `per_curve` (each curve's edges' share, 2 by 2, symmetric; the same weights as
+/// [`Misfit::chi2`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct YawForm {
+    /// Per curve (in the order of the curves solved), its edges' share of `M`.
+    pub per_curve: Vec<nalgebra::Matrix2<f64>>,
+    /// The network's cycle rank ([`Misfit::loops`]).
+    pub loops: usize,
+}
+
 /// Keeps the symbolic factorisation between solves.
 #[derive(Debug, Default)]
 pub struct PoissonSolver {
@@ -96,6 +108,44 @@ impl PoissonSolver {
         self.solve_sliding(curves, &[]).map(|(p, _)| p)
     }
 
+    /// The loops' misfit of the frames turned about their own normals by a yaw `ψ` (the
+    /// tangents read `cos ψ T + sin ψ B`): the residual is linear in `(cos ψ, sin ψ)`, so the
+    /// misfit is a quadratic form in them, found with one factorisation and the solves of the
+    /// tangents' and the binormals' data ([`YawForm`]; [`super::mounting::estimate_yaw`]).
+    pub fn yaw_form(&mut self, curves: &[UniformCurve]) -> Result<YawForm, SolveError> {
+        let (_, var_of, n) = unknowns(curves);
+        let (along, edge_at) = edges(curves, &var_of, &Vector3::x());
+        let (across, _) = edges(curves, &var_of, &Vector3::y());
+        let (entries, vals, gauges) = normal_matrix(n, &along);
+        let f = self.pattern.factor(n, entries, &vals)?;
+        let mut x = [vec![[0.0; 3]; n], vec![[0.0; 3]; n]];
+        for (x, e) in x.iter_mut().zip([&along, &across]) {
+            add_rhs(x, e);
+            f.solve(x);
+        }
+        let mut per_curve = vec![nalgebra::Matrix2::<f64>::zeros(); curves.len()];
+        let mut used = 0usize;
+        for ((ea, eb), &(ci, _)) in along.iter().zip(&across).zip(&edge_at) {
+            if ea.a == ea.b {
+                continue;
+            }
+            used += 1;
+            let r = |x: &[[f64; 3]], e: &Edge| Vector3::from(x[e.b]) - Vector3::from(x[e.a]) - e.v;
+            let (ra, rb) = (r(&x[0], ea), r(&x[1], eb));
+            let m = &mut per_curve[ci];
+            m[(0, 0)] += ea.w * ra.norm_squared();
+            m[(0, 1)] += ea.w * ra.dot(&rb);
+            m[(1, 1)] += ea.w * rb.norm_squared();
+        }
+        for m in &mut per_curve {
+            m[(1, 0)] = m[(0, 1)];
+        }
+        Ok(YawForm {
+            per_curve,
+            loops: (used + gauges.len()).saturating_sub(n),
+        })
+    }
+
     /// As [`solve`](Self::solve), with some tags free to slide along their curve (issue 34's
     /// joins): each of `slides`, `(curve position in curves, sample index of the tag)`, gets
     /// an unknown `σ`, the node lying at `σ` along the curve's tangent from the curve's
@@ -111,89 +161,15 @@ impl PoissonSolver {
         curves: &[UniformCurve],
         slides: &[(usize, usize)],
     ) -> Result<(Positions, Vec<f64>), SolveError> {
-        // Unknowns: nodes first (in index order), then every other sample.
-        let mut node_var: BTreeMap<u32, usize> = BTreeMap::new();
-        for c in curves {
-            for &(_, n) in &c.nodes {
-                let k = node_var.len();
-                node_var.entry(n).or_insert(k);
-            }
-        }
-        let mut var_of: Vec<Vec<usize>> = Vec::with_capacity(curves.len());
-        let mut n = node_var.len();
-        for c in curves {
-            let mut v = vec![usize::MAX; c.q.len()];
-            for &(i, nd) in &c.nodes {
-                v[i] = node_var[&nd];
-            }
-            for x in v.iter_mut().filter(|x| **x == usize::MAX) {
-                *x = n;
-                n += 1;
-            }
-            var_of.push(v);
-        }
+        let (node_var, var_of, n) = unknowns(curves);
         let tangents: Vec<Vec<Vector3<f64>>> = curves
             .iter()
             .map(|c| c.q.iter().map(|q| q * Vector3::x()).collect())
             .collect();
-        let mut edges = Vec::new();
-        // (curve position, sample) of each edge's start.
-        let mut edge_at = Vec::new();
-        for (ci, c) in curves.iter().enumerate() {
-            for j in 0..c.q.len().saturating_sub(1) {
-                let h = c.edge_h(j);
-                // Into a kink, the frame arriving there.
-                let arriving = if c.kinked(j + 1) {
-                    c.arriving(j + 1) * Vector3::x()
-                } else {
-                    tangents[ci][j + 1]
-                };
-                let t = (tangents[ci][j] + arriving) * 0.5;
-                // Residual (x_b − x_a)/h − t, squared: weight 1/h² on (x_b − x_a − h t).
-                edges.push(Edge {
-                    a: var_of[ci][j],
-                    b: var_of[ci][j + 1],
-                    w: 1.0 / (h * h),
-                    v: t * h,
-                });
-                edge_at.push((ci, j));
-            }
-        }
-        // Components (union-find) and a gauge per component.
-        let mut sets = crate::union_find::UnionFind::new(n);
-        for e in &edges {
-            sets.union(e.a, e.b);
-        }
-        // The lowest unknown of each component (a node if it has one).
-        let gauges: Vec<usize> = sets.roots().collect();
-        let mean_w = edges.iter().map(|e| e.w).sum::<f64>() / edges.len().max(1) as f64;
-        // Pattern: diagonal, then one entry per edge (duplicates summed).
-        let mut entries: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
-        entries.extend(
-            edges
-                .iter()
-                .filter(|e| e.a != e.b)
-                .map(|e| (e.a.max(e.b), e.a.min(e.b))),
-        );
-        let mut vals = vec![0.0; entries.len()];
+        let (edges, edge_at) = edges(curves, &var_of, &Vector3::x());
+        let (entries, vals, gauges) = normal_matrix(n, &edges);
         let mut rhs = vec![[0.0; 3]; n];
-        let mut k = n;
-        for e in &edges {
-            if e.a == e.b {
-                continue; // a loop of one edge: no constraint
-            }
-            vals[e.a] += e.w;
-            vals[e.b] += e.w;
-            vals[k] -= e.w;
-            k += 1;
-            for (d, v) in e.v.iter().enumerate() {
-                rhs[e.b][d] += e.w * v;
-                rhs[e.a][d] -= e.w * v;
-            }
-        }
-        for &g in &gauges {
-            vals[g] += mean_w.max(1.0);
-        }
+        add_rhs(&mut rhs, &edges);
         let f = self.pattern.factor(n, entries, &vals)?;
         f.solve(&mut rhs);
         let mut x: Vec<Vector3<f64>> = rhs.iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
@@ -232,6 +208,115 @@ impl PoissonSolver {
             },
             sigma,
         ))
+    }
+}
+
+/// The unknowns: one per node (in index order), then one per other sample; `(node → unknown,
+/// each curve's unknown per sample, #unknowns)`.
+fn unknowns(curves: &[UniformCurve]) -> (BTreeMap<u32, usize>, Vec<Vec<usize>>, usize) {
+    let mut node_var: BTreeMap<u32, usize> = BTreeMap::new();
+    for c in curves {
+        for &(_, n) in &c.nodes {
+            let k = node_var.len();
+            node_var.entry(n).or_insert(k);
+        }
+    }
+    let mut var_of: Vec<Vec<usize>> = Vec::with_capacity(curves.len());
+    let mut n = node_var.len();
+    for c in curves {
+        let mut v = vec![usize::MAX; c.q.len()];
+        for &(i, nd) in &c.nodes {
+            v[i] = node_var[&nd];
+        }
+        for x in v.iter_mut().filter(|x| **x == usize::MAX) {
+            *x = n;
+            n += 1;
+        }
+        var_of.push(v);
+    }
+    (node_var, var_of, n)
+}
+
+/// The data of the edge from sample `j` of `c` to the next: `h` times the mean of the frames'
+/// `axis` at its two ends (the midpoint rule; into a kink, the frame arriving there), and `h`.
+fn edge_data(c: &UniformCurve, j: usize, axis: &Vector3<f64>) -> (Vector3<f64>, f64) {
+    let h = c.edge_h(j);
+    let arriving = if c.kinked(j + 1) {
+        c.arriving(j + 1)
+    } else {
+        c.q[j + 1]
+    };
+    ((c.q[j] * axis + arriving * axis) * (0.5 * h), h)
+}
+
+/// Every edge of every curve, in order along each, with its data from the frames' `axis`
+/// (`Vector3::x()`: the tangents), and the (curve position, sample) of each edge's start.
+fn edges(
+    curves: &[UniformCurve],
+    var_of: &[Vec<usize>],
+    axis: &Vector3<f64>,
+) -> (Vec<Edge>, Vec<(usize, usize)>) {
+    let mut edges = Vec::new();
+    let mut edge_at = Vec::new();
+    for (ci, c) in curves.iter().enumerate() {
+        for j in 0..c.q.len().saturating_sub(1) {
+            let (v, h) = edge_data(c, j, axis);
+            // Residual (x_b − x_a)/h − t, squared: weight 1/h² on (x_b − x_a − h t).
+            edges.push(Edge {
+                a: var_of[ci][j],
+                b: var_of[ci][j + 1],
+                w: 1.0 / (h * h),
+                v,
+            });
+            edge_at.push((ci, j));
+        }
+    }
+    (edges, edge_at)
+}
+
+/// The normal matrix of the edges' least squares over `n` unknowns (a weighted graph
+/// Laplacian; the lower triangle's entries, duplicates to be summed, and their values), with a
+/// gauge on the lowest unknown of each connected component (returned).
+fn normal_matrix(n: usize, edges: &[Edge]) -> (Vec<(usize, usize)>, Vec<f64>, Vec<usize>) {
+    let mut sets = crate::union_find::UnionFind::new(n);
+    for e in edges {
+        sets.union(e.a, e.b);
+    }
+    // The lowest unknown of each component (a node if it has one).
+    let gauges: Vec<usize> = sets.roots().collect();
+    let mean_w = edges.iter().map(|e| e.w).sum::<f64>() / edges.len().max(1) as f64;
+    // Pattern: diagonal, then one entry per edge (duplicates summed).
+    let mut entries: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
+    entries.extend(
+        edges
+            .iter()
+            .filter(|e| e.a != e.b)
+            .map(|e| (e.a.max(e.b), e.a.min(e.b))),
+    );
+    let mut vals = vec![0.0; entries.len()];
+    let mut k = n;
+    for e in edges {
+        if e.a == e.b {
+            continue; // a loop of one edge: no constraint
+        }
+        vals[e.a] += e.w;
+        vals[e.b] += e.w;
+        vals[k] -= e.w;
+        k += 1;
+    }
+    for &g in &gauges {
+        vals[g] += mean_w.max(1.0);
+    }
+    (entries, vals, gauges)
+}
+
+/// Adds the edges' data to the right-hand side (#unknowns by 3).
+fn add_rhs(rhs: &mut [[f64; 3]], edges: &[Edge]) {
+    for e in edges.iter().filter(|e| e.a != e.b) {
+        for (d, v) in e.v.iter().enumerate() {
+            rhs[e.b][d] += e.w * v;
+            rhs[e.a][d] -= e.w * v;
+        }
     }
 }
 
@@ -328,13 +413,7 @@ fn slide(
             if a == b {
                 continue;
             }
-            let h = c.edge_h(j);
-            let arriving = if c.kinked(j + 1) {
-                c.arriving(j + 1) * Vector3::x()
-            } else {
-                tangents[ci][j + 1]
-            };
-            let v = (tangents[ci][j] + arriving) * (0.5 * h);
+            let (v, h) = edge_data(c, j, &Vector3::x());
             at.push((k, sign, a, b, 1.0 / (h * h), v));
         }
     }
