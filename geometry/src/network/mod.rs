@@ -74,8 +74,9 @@ pub struct NetworkReport {
     /// The device's mounting offset estimated from the normals at the nodes, and whether the
     /// frames were turned back by it ([`mounting`]); none where the nodes cannot tell it.
     pub mounting: Option<mounting::MountingEstimate>,
-    /// The yaw of that offset about N, estimated from the loops after the closure test
-    /// ([`mounting::estimate_yaw`]); a live update keeps the last run's.
+    /// The yaw of that offset about N, estimated from the loops before the closure test, and
+    /// its remainder after it where the test moved a tag or lengthened a segment
+    /// ([`mounting::estimate_yaw`]); a live update keeps the last full run's.
     pub mounting_yaw: Option<mounting::YawEstimate>,
     /// Largest angle between the normals of two curves at a shared node, degrees.
     pub max_node_normal_angle_deg: f64,
@@ -444,6 +445,18 @@ impl Reconstructor {
         if let Some(est) = mounting.filter(|e| e.applied) {
             mounting::apply(&mut uniform, &est);
         }
+        // The yaw about N, from the loops' misfit with the tags as typed, so that the closure
+        // test sees the misfit the yaw leaves; a live update (a local regression) keeps the
+        // last run's, so that the frames it does not regress again stay turned alike.
+        let local = p.local_window > 0 && !self.regressed_nodes.is_empty();
+        if p.no_mounting {
+            self.yaw = None;
+        } else if !local {
+            self.yaw = self.estimate_yaw(&uniform);
+        }
+        if let Some(est) = self.yaw.filter(|e| e.applied) {
+            mounting::apply_yaw(&mut uniform, &est);
+        }
         let joined: Vec<u32> = slides.iter().map(|x| x.1).collect();
         // A live update starts the closure test from the tags the last one moved, and so does
         // a join pass (from the pass before); a run that starts the passes (and so the settle
@@ -460,22 +473,18 @@ impl Reconstructor {
             return Err(Unreconstructed::interrupted());
         }
         self.closure_moved = std::mem::take(&mut closure.moved);
-        // The yaw about N, from the loops with the tags as the closure test left them; a live
-        // update (a local regression) keeps the last run's.
-        let local = p.local_window > 0 && !self.regressed_nodes.is_empty();
-        if p.no_mounting {
-            self.yaw = None;
-        } else if !local {
-            self.yaw = match self.poisson.yaw_form(&uniform) {
-                Ok(form) => mounting::estimate_yaw(&form),
-                Err(e) => {
-                    tracing::debug!("no yaw estimate: {e}");
-                    None
-                }
-            };
-        }
-        if let Some(est) = self.yaw.filter(|e| e.applied) {
-            mounting::apply_yaw(&mut uniform, &est);
+        // Tags the closure test moved, or segments it lengthened, misfit the loops no more:
+        // what they say of the yaw then is added.
+        let changed = !closure.detached.is_empty() || closure.slips.iter().any(|s| s.lengthened);
+        if !p.no_mounting && !local && changed {
+            if let Some(more) = self.estimate_yaw(&uniform).filter(|e| e.applied) {
+                mounting::apply_yaw(&mut uniform, &more);
+                self.yaw = Some(mounting::YawEstimate {
+                    yaw_deg: self.yaw.filter(|e| e.applied).map_or(0.0, |e| e.yaw_deg)
+                        + more.yaw_deg,
+                    ..more
+                });
+            }
         }
         let regression = self.regress(&mut uniform, p, warm);
         let t2 = Instant::now();
@@ -573,6 +582,17 @@ impl Reconstructor {
             },
             slid,
         ))
+    }
+
+    /// The yaw about N of `uniform`'s frames, from the loops ([`mounting::estimate_yaw`]).
+    fn estimate_yaw(&mut self, uniform: &[UniformCurve]) -> Option<mounting::YawEstimate> {
+        match self.poisson.yaw_form(uniform) {
+            Ok(form) => mounting::estimate_yaw(&form),
+            Err(e) => {
+                tracing::debug!("no yaw estimate: {e}");
+                None
+            }
+        }
     }
 
     /// Every curve resampled ([`prefilter_with_kinks`]: curves may kink at the nodes a crease
