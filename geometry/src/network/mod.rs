@@ -356,7 +356,7 @@ impl Reconstructor {
 
     /// As [`run`](Self::run), asking `stop` before each pass of the loop-closure test (a
     /// long session's from scratch puts back its lost digits one pass each): once it says
-    /// yes, the run ends with nothing reconstructed ([`Unreconstructed::interrupted`]). The
+    /// yes, the run ends with nothing reconstructed ([`Unreconstructed`], `interrupted`). The
     /// caches keep what was done (the pre-filtered curves).
     pub fn run_until(
         &mut self,

@@ -44,7 +44,7 @@ pub fn run_joined(
 
 /// As [`run_joined`], asking `stop` before each pass of the loop-closure test and each join
 /// pass ([`Reconstructor::run_until`]): once it says yes, nothing is reconstructed
-/// ([`Unreconstructed::interrupted`]). What the live worker settles with: a curve that comes
+/// ([`Unreconstructed`], `interrupted`). What the live worker settles with: a curve that comes
 /// in meanwhile goes first.
 pub fn run_joined_until(
     r: &mut Reconstructor,
