@@ -9,6 +9,8 @@
 //! Per cell: `full / untagged / joined` error, then the crossings left out, those joined
 //! right, false joins (a node joined to a curve it is not on), joins refused, proposals, the
 //! passes and the time the joins added (ms). `--untagged`: `[network] join_untagged = true`.
+//! Diagnostics: `SFS_TRUE_D=1` / `SFS_TRUE_Q=1` put the simulator's true distances /
+//! orientations into every capture (as `kinds_table` does).
 
 use device_protocol::DeviceKind;
 use sfs::acquisition::{Acquisition, AcquisitionConfig};
@@ -72,6 +74,14 @@ fn cell(
     let run = |m: &Mistakes, js: &JoinSettings, oracle: bool| {
         let sim = simulate::run_with(&s, device, profile, seed, m);
         let mut scan = Acquisition::scan_bytes(&sim.bytes, AcquisitionConfig::default());
+        // Diagnostics: the simulator's true distances and/or orientations put in.
+        let (true_q, true_d) = (
+            std::env::var("SFS_TRUE_Q").is_ok(),
+            std::env::var("SFS_TRUE_D").is_ok(),
+        );
+        if true_q || true_d {
+            sim.samples.put_into(&mut scan.curves, true_q, true_d);
+        }
         if oracle {
             // Each untagged crossing tagged where the device truly passed it.
             let mut joins = Vec::new();
