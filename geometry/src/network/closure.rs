@@ -410,6 +410,14 @@ impl Drops {
         })
     }
 
+    /// The tag that explains most of the misfit among those the loops refuse and locate.
+    fn worst(&self) -> Option<&Candidate> {
+        self.tags
+            .iter()
+            .filter(|c| self.refuses(c) && self.located(c))
+            .max_by(|a, b| a.drop.total_cmp(&b.drop))
+    }
+
     /// Whether `c` passes the test (see the module docs).
     fn refuses(&self, c: &Candidate) -> bool {
         self.stands_out(c, SHARE, RATIO)
@@ -979,11 +987,7 @@ pub fn check_from(
         if out.detached.len() == most {
             break Some(d);
         }
-        let worst = d
-            .tags
-            .iter()
-            .filter(|c| d.refuses(c) && d.located(c))
-            .max_by(|a, b| a.drop.total_cmp(&b.drop));
+        let worst = d.worst();
         // A tag typed while packets were lost whose curve lands on a node whose number is the
         // index received with digits missing (`7` received, 17 landed on): the link lost a
         // digit of it. Of tags the loops blame alike (the two tags of a node only two curves
@@ -1101,12 +1105,7 @@ pub fn check_from(
         }
     }
     if let Some(d) = last.as_ref().filter(|_| judge_refused) {
-        let worst = d
-            .tags
-            .iter()
-            .filter(|c| d.refuses(c) && d.located(c))
-            .max_by(|a, b| a.drop.total_cmp(&b.drop));
-        if let Some(w) = worst {
+        if let Some(w) = d.worst() {
             let cu = &curves[w.curve];
             out.refused.push(Refused {
                 curve: cu.index,

@@ -448,7 +448,7 @@ impl Reconstructor {
         // The yaw about N, from the loops' misfit with the tags as typed, so that the closure
         // test sees the misfit the yaw leaves; a live update (a local regression) keeps the
         // last run's, so that the frames it does not regress again stay turned alike.
-        let local = p.local_window > 0 && !self.regressed_nodes.is_empty();
+        let local = self.local(p);
         if p.no_mounting {
             self.yaw = None;
         } else if !local {
@@ -584,6 +584,12 @@ impl Reconstructor {
         ))
     }
 
+    /// Whether a run with `p` is a live update: a local regression
+    /// ([`NetworkParams::local_window`]) after a first run. It keeps the last run's yaw.
+    fn local(&self, p: &NetworkParams) -> bool {
+        p.local_window > 0 && !self.regressed_nodes.is_empty()
+    }
+
     /// The yaw about N of `uniform`'s frames, from the loops ([`mounting::estimate_yaw`]).
     fn estimate_yaw(&mut self, uniform: &[UniformCurve]) -> Option<mounting::YawEstimate> {
         match self.poisson.yaw_form(uniform) {
@@ -659,7 +665,7 @@ impl Reconstructor {
             .collect();
         changed_nodes.sort_unstable();
         changed_nodes.dedup();
-        let local = p.local_window > 0 && !self.regressed_nodes.is_empty();
+        let local = self.local(p);
         let regression = if p.no_regression {
             RegressionReport::default()
         } else if local {
