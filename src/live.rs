@@ -220,8 +220,12 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
         let t0 = Instant::now();
         let network = crate::pipeline::for_device(&settings.network, snapshot.device);
         // Phase one: the network, published at once (the operator sees the curve in place);
-        // phase two: its surface and network.glb (issue 35).
-        let mut products = pipeline.reconstruct(&scan.curves, &network);
+        // phase two: the nodes' uncertainty (issue 51), the surface and network.glb (issue 35).
+        let first = sfs_geometry::network::NetworkParams {
+            defer_uncertainty: true,
+            ..network
+        };
+        let mut products = pipeline.reconstruct(&scan.curves, &first);
         if let Some(v) = &settings.view {
             v.curves(&products, report.updates + 1, &posted);
         }
@@ -230,6 +234,7 @@ fn worker(shared: Arc<Shared>, settings: LiveSettings) -> LiveOutcome {
             .curves_latencies
             .extend(posted.iter().map(|(_, at)| ms(published - *at)));
         report.curves_latency_ms = Percentiles::of(&report.curves_latencies);
+        pipeline.uncertainty_into(&mut products, &network);
         pipeline.surface_into(&mut products, settings.surface.as_ref());
         let compute_ms = ms(t0.elapsed());
         if let Err(e) = products.write_glb(&settings.out_dir) {

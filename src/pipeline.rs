@@ -204,6 +204,16 @@ impl Pipeline {
         Some(out)
     }
 
+    /// The nodes' uncertainty of the network in `out`, reconstructed by
+    /// [`reconstruct`](Self::reconstruct) with `network`'s `defer_uncertainty` (the live
+    /// worker's first phase, whose curves are published before it): the second phase's first
+    /// step.
+    pub fn uncertainty_into(&mut self, out: &mut Products, network: &NetworkParams) {
+        if let Some(net) = out.network.as_mut() {
+            self.reconstructor.uncertainty(net, network);
+        }
+    }
+
     /// Makes provisional products exact: a network regressed locally
     /// ([`NetworkParams::local_window`]) is reconstructed again over the whole network and
     /// surfaced exactly; a provisional surface (a live update that kept faces,
@@ -338,6 +348,7 @@ pub fn for_device(
 pub fn exact_network(network: &NetworkParams) -> NetworkParams {
     NetworkParams {
         local_window: 0,
+        defer_uncertainty: false,
         ..*network
     }
 }

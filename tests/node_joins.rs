@@ -663,3 +663,59 @@ fn issue_51_a_live_update_cuts_the_join_passes_short_and_stays_provisional() {
         "no scene needed more passes than a live update runs"
     );
 }
+
+/// Issue 51: the join passes compute the nodes' uncertainty once, for the network they end
+/// with (it was computed in every pass and thrown away), and a live update's first phase
+/// leaves it to the second (`defer_uncertainty`, then `Reconstructor::uncertainty`): the same
+/// σ to the bit either way; a network that is not the reconstructor's last is left without.
+#[test]
+fn issue_51_the_uncertainty_is_computed_once_after_the_join_passes() {
+    let s = scene::builtin("cone").expect("shipped scene");
+    let m = sfs::simulate::Mistakes {
+        untagged: simulate::untagged_crossings(&s, 1.0 / 3.0, 1),
+        ..Default::default()
+    };
+    let sim = simulate::run_with(
+        &s,
+        device_protocol::DeviceKind::Morphorider,
+        sfs::simulate::Profile::Default,
+        1,
+        &m,
+    );
+    let curves = sfs::acquisition::Acquisition::scan_bytes(
+        &sim.bytes,
+        sfs::acquisition::AcquisitionConfig::default(),
+    )
+    .curves;
+    let js = JoinSettings::default();
+    let whole = run_joined(
+        &mut Reconstructor::new(),
+        &curves,
+        &NetworkParams::default(),
+        &js,
+    )
+    .expect("a network");
+    assert!(whole.report.join_passes > 0, "no join pass to test");
+    assert!(!whole.uncertainty.nodes.is_empty(), "no σ");
+    let deferred = NetworkParams {
+        defer_uncertainty: true,
+        ..NetworkParams::default()
+    };
+    let mut r = Reconstructor::new();
+    let mut first = run_joined(&mut r, &curves, &deferred, &js).expect("a network");
+    assert!(
+        first.uncertainty.nodes.is_empty(),
+        "σ computed in the first phase"
+    );
+    assert!(first.positions.curves.iter().all(|c| c.sigma_m.is_empty()));
+    let kept = first.clone();
+    r.uncertainty(&mut first, &NetworkParams::default());
+    assert_eq!(first.uncertainty, whole.uncertainty);
+    assert_eq!(first.positions, whole.positions, "the points' σ differ");
+    assert_eq!(first.report.noise, whole.report.noise);
+    // After a run of other curves, the kept network is not the last run's.
+    run_joined(&mut r, &curves[..curves.len() - 1], &deferred, &js).expect("a network");
+    let mut stale = kept;
+    r.uncertainty(&mut stale, &NetworkParams::default());
+    assert!(stale.uncertainty.nodes.is_empty(), "σ of another network");
+}

@@ -22,11 +22,11 @@
 //! them (distance along, frames whose x is the tangent and z the surface normal, exact),
 //! then, after the network without meridian 1, the update that adds it as the live worker
 //! runs it:
-//! - `curves`: the network reconstructed (pre-filter, the regression local to 10 samples
-//!   either side of the new curve's nodes as the daemon's `LIVE_LOCAL_WINDOW`, Poisson: what
-//!   the view's `curves` event publishes);
-//! - `surface`: its surface, provisional (τ = 0.5, after the surface of the network without
-//!   the meridian);
+//! - `curves`: the network reconstructed (pre-filter, the loop-closure test, the regression
+//!   local to 10 samples either side of the new curve's nodes as the daemon's
+//!   `LIVE_LOCAL_WINDOW`, Poisson: what the view's `curves` event publishes);
+//! - `surface`: the nodes' uncertainty (left to the second phase since issue 51) and the
+//!   surface, provisional (τ = 0.5, after the surface of the network without the meridian);
 //! - `update`: both (what `network.glb` waits for);
 //! - `settle`: what the worker does next while idle: the whole network's regression and the
 //!   exact surface (τ = 0), replacing the provisional update.
@@ -168,8 +168,14 @@ fn phases(net: &NetworkSegments, runs: usize) -> (usize, [f64; 4]) {
         let before = r.run(&without, &np).expect("a network");
         s.run(&NetworkSegments::from_positions(&before.positions), &sp)
             .expect("a surface");
-        let (curves_ms, after) = ms(|| r.run(&curves, &np).expect("a network"));
+        // Phase one without the nodes' uncertainty, which phase two begins with (issue 51).
+        let first = NetworkParams {
+            defer_uncertainty: true,
+            ..np
+        };
+        let (curves_ms, mut after) = ms(|| r.run(&curves, &first).expect("a network"));
         let (surface_ms, out) = ms(|| {
+            r.uncertainty(&mut after, &np);
             s.run(&NetworkSegments::from_positions(&after.positions), &sp)
                 .expect("a surface")
         });

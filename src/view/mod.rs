@@ -584,7 +584,8 @@ impl View {
                     .iter()
                     .map(|p| crate::gltf_out::to_gltf(p).map(|x| (x * 1e5).round() / 1e5))
                     .collect();
-                // Each point's uncertainty, mm to the hundredth (issue 49).
+                // Each point's uncertainty, mm to the hundredth (issue 49); empty in a live
+                // update, whose second phase computes it (issue 51): the glb then has it.
                 let sigma_mm: Vec<f64> = c
                     .sigma_m
                     .iter()

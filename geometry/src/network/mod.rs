@@ -6,7 +6,8 @@
 //! - [`closure`]: node tags the network's loops refuse (a mistyped or half-lost index) are
 //!   detached from their node.
 //! - [`regression`]: the frames regressed on SO(3)ᴺ over the whole network.
-//! - [`poisson`]: positions of the whole network from its tangents, nodes shared.
+//! - [`poisson`]: positions of the whole network from its tangents, nodes shared; solved on
+//!   the nodes by [`kron`] reduction (each run of samples between tags eliminated exactly).
 //! - [`crease`]: the other face of each crease curve, from the curves at its nodes.
 //!
 //! [`Reconstructor::run`] runs them over a scan, leaving out (with a warning) what cannot be
@@ -21,6 +22,7 @@
 pub mod closure;
 pub mod crease;
 pub mod join;
+pub mod kron;
 pub mod marginals;
 pub mod mounting;
 pub mod poisson;
@@ -58,6 +60,9 @@ pub struct NetworkParams {
     pub local_window: usize,
     /// The device's noise where the loops cannot tell it ([`marginals`]).
     pub noise: marginals::NoisePrior,
+    /// Leave the nodes' uncertainty to [`Reconstructor::uncertainty`] (a live update publishes
+    /// the curves first, issue 51): the network comes without it.
+    pub defer_uncertainty: bool,
 }
 
 /// What a reconstruction did, for `report.json`.
@@ -300,6 +305,9 @@ pub struct Reconstructor {
     yaw: Option<mounting::YawEstimate>,
     /// Curves pre-filtered by the last run (not taken from the cache).
     pub prefiltered_last: usize,
+    /// The last run's curves as regressed: what its network's uncertainty is computed from
+    /// ([`Reconstructor::uncertainty`]).
+    last_uniform: Vec<UniformCurve>,
 }
 
 /// What identifies a curve's content for the pre-filter cache: a curve that gained samples,
@@ -350,8 +358,7 @@ impl Reconstructor {
     /// reconstructed, the warnings that say why. The result depends only on `curves` and `p` (the caches change the time it takes, not the
     /// bits).
     pub fn run(&mut self, curves: &[Curve], p: &NetworkParams) -> Result<Network, Unreconstructed> {
-        self.run_inner(curves, p, false, &[], false, &|| false)
-            .map(|(n, _)| n)
+        self.run_until(curves, p, &|| false)
     }
 
     /// As [`run`](Self::run), asking `stop` before each pass of the loop-closure test (a
@@ -364,8 +371,55 @@ impl Reconstructor {
         p: &NetworkParams,
         stop: &dyn Fn() -> bool,
     ) -> Result<Network, Unreconstructed> {
+        let mut net = self.run_bare_until(curves, p, stop)?;
+        if !p.defer_uncertainty {
+            self.uncertainty(&mut net, p);
+        }
+        Ok(net)
+    }
+
+    /// As [`run_until`](Self::run_until), without the nodes' uncertainty: what the join passes
+    /// run, the uncertainty left to the network they end with.
+    pub(crate) fn run_bare_until(
+        &mut self,
+        curves: &[Curve],
+        p: &NetworkParams,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Network, Unreconstructed> {
         self.run_inner(curves, p, false, &[], false, stop)
             .map(|(n, _)| n)
+    }
+
+    /// The uncertainty of the nodes and points of `net`, the network of this reconstructor's
+    /// last run ([`marginals`]): into `net.uncertainty`, its points' `sigma_m` and
+    /// `net.report.noise`. A network from another reconstructor, or made before its last run,
+    /// is left without.
+    pub fn uncertainty(&mut self, net: &mut Network, p: &NetworkParams) {
+        let t0 = Instant::now();
+        let same = self.last_uniform.len() == net.positions.curves.len()
+            && self
+                .last_uniform
+                .iter()
+                .zip(&net.positions.curves)
+                .all(|(u, c)| u.index == c.index && u.q.len() == c.points.len());
+        if !same {
+            tracing::debug!("no uncertainty: the network is not the last run's");
+            return;
+        }
+        net.uncertainty = match self
+            .marginals
+            .run(&self.last_uniform, &mut net.positions, &p.noise)
+        {
+            Ok(u) => u,
+            Err(e) => {
+                // The node Laplacian is the Poisson one's Schur complement: it factors when
+                // that one did. Should it not, the positions stand without their σ.
+                tracing::warn!("the uncertainty of the network could not be computed: {e}");
+                marginals::Uncertainty::default()
+            }
+        };
+        net.report.noise = net.uncertainty.noise;
+        net.report.timings_ms.uncertainty = t0.elapsed().as_secs_f64() * 1e3;
     }
 
     /// As [`run`](Self::run), with the regression warm-started from the previous run's
@@ -378,8 +432,11 @@ impl Reconstructor {
         curves: &[Curve],
         p: &NetworkParams,
     ) -> Result<Network, Unreconstructed> {
-        self.run_inner(curves, p, true, &[], false, &|| false)
-            .map(|(n, _)| n)
+        let (mut net, _) = self.run_inner(curves, p, true, &[], false, &|| false)?;
+        if !p.defer_uncertainty {
+            self.uncertainty(&mut net, p);
+        }
+        Ok(net)
     }
 
     /// The reconstruction with the tags `slides` (`(scan index of the curve, node)`) free to
@@ -391,7 +448,10 @@ impl Reconstructor {
         p: &NetworkParams,
         slides: &[(usize, u32)],
     ) -> Result<(Network, Vec<Option<f64>>), Unreconstructed> {
-        let (net, s) = self.run_inner(curves, p, false, slides, false, &|| false)?;
+        let (mut net, s) = self.run_inner(curves, p, false, slides, false, &|| false)?;
+        if !p.defer_uncertainty {
+            self.uncertainty(&mut net, p);
+        }
         Ok((net, s.iter().map(|x| x.map(|x| x.sigma)).collect()))
     }
 
@@ -399,7 +459,8 @@ impl Reconstructor {
     /// it and how its loops fit (what the join passes above, [`join::run_joined`], iterate).
     /// The loop-closure test starts from the tags it moved in the last run (the pass
     /// before, or the run the passes started from: [`closure::check_from`]), so that a long
-    /// session's lost digits are not put back one at a time again in every pass.
+    /// session's lost digits are not put back one at a time again in every pass. Without the
+    /// nodes' uncertainty ([`uncertainty`](Self::uncertainty)).
     pub(crate) fn run_slides(
         &mut self,
         curves: &[Curve],
@@ -524,16 +585,6 @@ impl Reconstructor {
                 .map(NetworkWarning::CreaseUnknown),
         );
         let t3 = Instant::now();
-        let uncertainty = match self.marginals.run(&uniform, &mut positions, &p.noise) {
-            Ok(u) => u,
-            Err(e) => {
-                // The node Laplacian is the Poisson one's Schur complement: it factors when
-                // that one did. Should it not, the positions stand without their σ.
-                tracing::warn!("the uncertainty of the network could not be computed: {e}");
-                marginals::Uncertainty::default()
-            }
-        };
-        let t4 = Instant::now();
         if positions.components > 1 {
             warnings.push(NetworkWarning::InParts {
                 components: positions.components,
@@ -556,12 +607,10 @@ impl Reconstructor {
             regression,
             closure_misfit_m: closure.misfit_m,
             closure: closure.curves,
-            noise: uncertainty.noise,
             timings_ms: Timings {
                 prefilter: (t1 - t0).as_secs_f64() * 1e3,
                 regression: (t2 - t1).as_secs_f64() * 1e3,
                 poisson: (t3 - t2).as_secs_f64() * 1e3,
-                uncertainty: (t4 - t3).as_secs_f64() * 1e3,
                 ..Default::default()
             },
             // The joins are the join passes' (join::run_joined).
@@ -573,10 +622,12 @@ impl Reconstructor {
             .zip(fits)
             .map(|(sigma, fit)| Slide { sigma, fit });
         let slid = at.iter().map(|a| a.and_then(|_| solved.next())).collect();
+        // Kept for the uncertainty of this network ([`Reconstructor::uncertainty`]).
+        self.last_uniform = uniform;
         Ok((
             Network {
                 positions,
-                uncertainty,
+                uncertainty: marginals::Uncertainty::default(),
                 report,
                 warnings,
             },

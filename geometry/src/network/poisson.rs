@@ -2,10 +2,12 @@
 //! sample, each node a single unknown shared by every curve through it; least squares of
 //! `(x_{j+1} − x_j)/h − (T_j + T_{j+1})/2` over every edge of every curve (the midpoint rule,
 //! exact to second order on a circular arc); one gauge vertex per connected component. The
-//! normal matrix is a weighted graph Laplacian, factorised by sparse Cholesky; its symbolic
-//! factorisation is kept and reused while the pattern (the network's topology and sample
-//! counts) stays the same.
+//! normal matrix is a weighted graph Laplacian. Each run of samples between two tags is a
+//! path in it, eliminated exactly ([`super::kron`]): what is factorised, by sparse Cholesky,
+//! is the Laplacian of the nodes alone, its symbolic factorisation kept and reused while the
+//! pattern (the network's topology) stays the same.
 
+use super::kron::{KronReduced, Run};
 use super::prefilter::UniformCurve;
 use crate::sparse_llt::{CachedPattern, SolveError};
 use nalgebra::Vector3;
@@ -113,11 +115,11 @@ impl PoissonSolver {
     /// misfit is a quadratic form in them, found with one factorisation and the solves of the
     /// tangents' and the binormals' data ([`YawForm`]; [`super::mounting::estimate_yaw`]).
     pub fn yaw_form(&mut self, curves: &[UniformCurve]) -> Result<YawForm, SolveError> {
-        let (_, var_of, n) = unknowns(curves);
+        let (node_var, var_of, n) = unknowns(curves);
         let (along, edge_at) = edges(curves, &var_of, &Vector3::x());
         let (across, _) = edges(curves, &var_of, &Vector3::y());
-        let (entries, vals, gauges) = normal_matrix(n, &along);
-        let f = self.pattern.factor(n, entries, &vals)?;
+        let runs = runs(curves, &var_of, &along, node_var.len());
+        let f = KronReduced::new(n, node_var.len(), &runs, ridge(&along), &mut self.pattern)?;
         let mut x = [vec![[0.0; 3]; n], vec![[0.0; 3]; n]];
         for (x, e) in x.iter_mut().zip([&along, &across]) {
             add_rhs(x, e);
@@ -142,7 +144,7 @@ impl PoissonSolver {
         }
         Ok(YawForm {
             per_curve,
-            loops: (used + gauges.len()).saturating_sub(n),
+            loops: (used + f.components()).saturating_sub(n),
         })
     }
 
@@ -167,10 +169,10 @@ impl PoissonSolver {
             .map(|c| c.q.iter().map(|q| q * Vector3::x()).collect())
             .collect();
         let (edges, edge_at) = edges(curves, &var_of, &Vector3::x());
-        let (entries, vals, gauges) = normal_matrix(n, &edges);
+        let runs = runs(curves, &var_of, &edges, node_var.len());
+        let f = KronReduced::new(n, node_var.len(), &runs, ridge(&edges), &mut self.pattern)?;
         let mut rhs = vec![[0.0; 3]; n];
         add_rhs(&mut rhs, &edges);
-        let f = self.pattern.factor(n, entries, &vals)?;
         f.solve(&mut rhs);
         let mut x: Vec<Vector3<f64>> = rhs.iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
         let sigma = slide(&f, &mut x, curves, &var_of, &tangents, slides);
@@ -182,7 +184,7 @@ impl PoissonSolver {
             &tangents,
             slides,
             &sigma,
-            gauges.len(),
+            f.components(),
         );
         let out_curves = curves
             .iter()
@@ -203,7 +205,7 @@ impl PoissonSolver {
             Positions {
                 curves: out_curves,
                 nodes: node_var.iter().map(|(&nd, &v)| (nd, x[v])).collect(),
-                components: gauges.len(),
+                components: f.components(),
                 misfit,
             },
             sigma,
@@ -274,40 +276,26 @@ fn edges(
     (edges, edge_at)
 }
 
-/// The normal matrix of the edges' least squares over `n` unknowns (a weighted graph
-/// Laplacian; the lower triangle's entries, duplicates to be summed, and their values), with a
-/// gauge on the lowest unknown of each connected component (returned).
-fn normal_matrix(n: usize, edges: &[Edge]) -> (Vec<(usize, usize)>, Vec<f64>, Vec<usize>) {
-    let mut sets = crate::union_find::UnionFind::new(n);
-    for e in edges {
-        sets.union(e.a, e.b);
+/// The runs of samples between tags of every curve, for the normal matrix's Kron reduction
+/// onto the `nodes` ([`KronReduced`]): the edges' least squares is a weighted graph Laplacian
+/// (`edges` in the order [`edges`] gives them).
+fn runs(curves: &[UniformCurve], var_of: &[Vec<usize>], edges: &[Edge], nodes: usize) -> Vec<Run> {
+    let mut out = Vec::new();
+    let mut k = 0;
+    for (c, vars) in curves.iter().zip(var_of) {
+        let m = c.q.len().saturating_sub(1);
+        let w: Vec<f64> = edges[k..k + m].iter().map(|e| e.w).collect();
+        k += m;
+        out.extend(Run::along(vars, &w, nodes));
     }
-    // The lowest unknown of each component (a node if it has one).
-    let gauges: Vec<usize> = sets.roots().collect();
+    out
+}
+
+/// The weight of the gauge on the lowest unknown of each connected component: the edges' mean
+/// weight, at least 1.
+fn ridge(edges: &[Edge]) -> f64 {
     let mean_w = edges.iter().map(|e| e.w).sum::<f64>() / edges.len().max(1) as f64;
-    // Pattern: diagonal, then one entry per edge (duplicates summed).
-    let mut entries: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
-    entries.extend(
-        edges
-            .iter()
-            .filter(|e| e.a != e.b)
-            .map(|e| (e.a.max(e.b), e.a.min(e.b))),
-    );
-    let mut vals = vec![0.0; entries.len()];
-    let mut k = n;
-    for e in edges {
-        if e.a == e.b {
-            continue; // a loop of one edge: no constraint
-        }
-        vals[e.a] += e.w;
-        vals[e.b] += e.w;
-        vals[k] -= e.w;
-        k += 1;
-    }
-    for &g in &gauges {
-        vals[g] += mean_w.max(1.0);
-    }
-    (entries, vals, gauges)
+    mean_w.max(1.0)
 }
 
 /// Adds the edges' data to the right-hand side (#unknowns by 3).
@@ -383,7 +371,7 @@ fn misfit(
 /// `D` its own weight and `g` its edges' data. A slide whose edges are missing (a tag at a
 /// curve's end) is 0.
 fn slide(
-    f: &crate::sparse_llt::SpdFactor,
+    f: &KronReduced,
     x: &mut [Vector3<f64>],
     curves: &[UniformCurve],
     var_of: &[Vec<usize>],

@@ -379,10 +379,20 @@ function show(gltf) {
 // the last surface, which the update's network.glb then replaces.
 function showCurves(c) {
   const received = performance.now();
-  const lines = c.curves.map((k) => ({
-    ...k,
-    geometry: new THREE.BufferGeometry().setAttribute('position', new THREE.Float32BufferAttribute(k.points.flat(), 3)),
-  }));
+  // The curves event comes before the nodes' σ (the update's second phase computes it): a
+  // curve drawn before with as many points keeps its σ until the new network's glb.
+  const before = new Map();
+  for (const line of network.children) if (line.isLine && line.userData.sigmaMm) before.set(line.userData.curve, line.userData.sigmaMm);
+  const lines = c.curves.map((k) => {
+    const kept = before.get(k.curve);
+    const sigma = k.sigma_mm && k.sigma_mm.length ? k.sigma_mm
+      : (kept && kept.length === k.points.length ? kept : null);
+    return {
+      ...k,
+      sigma_mm: sigma,
+      geometry: new THREE.BufferGeometry().setAttribute('position', new THREE.Float32BufferAttribute(k.points.flat(), 3)),
+    };
+  });
   drawNetwork(lines, c.nodes);
   showJoins(c.joins);
   showClosure(c.closure);

@@ -53,8 +53,13 @@ pub fn run_joined_until(
     js: &JoinSettings,
     stop: &dyn Fn() -> bool,
 ) -> Result<Network, Unreconstructed> {
-    let mut net = r.run_until(curves, p, stop)?;
+    // Every run without the nodes' uncertainty: it is computed once, for the network the
+    // passes end with (unless `p` defers it to the caller).
+    let mut net = r.run_bare_until(curves, p, stop)?;
     if !js.enabled() {
+        if !p.defer_uncertainty {
+            r.uncertainty(&mut net, p);
+        }
         return Ok(net);
     }
     let t0 = Instant::now();
@@ -97,7 +102,7 @@ pub fn run_joined_until(
             return Err(Unreconstructed::interrupted());
         }
         if state.joins.is_empty() {
-            net = r.run_until(curves, p, stop)?;
+            net = r.run_bare_until(curves, p, stop)?;
             break;
         }
         let (work, slides) = state.joined_scan(curves);
@@ -137,6 +142,9 @@ pub fn run_joined_until(
     net.report.joins_refused = refused;
     net.report.join_passes = state.passes;
     net.report.timings_ms.join = t0.elapsed().as_secs_f64() * 1e3;
+    if !p.defer_uncertainty {
+        r.uncertainty(&mut net, p);
+    }
     Ok(net)
 }
 

@@ -1,0 +1,375 @@
+//! Kron reduction of the Poisson Laplacian onto the nodes (issue 51): every run of samples
+//! between two tags is a path in the graph, so its unknowns can be eliminated exactly, leaving
+//! a Laplacian over the nodes alone (the Schur complement: each run a single edge of the
+//! series conductance `W = 1/Σ_k 1/w_k`) and, per run, a tridiagonal system for its samples.
+//!
+//! A solve of `L x = b` over every unknown is then
+//! 1. per run, `z = T⁻¹ b_I` (`T`: the run's #interior by #interior tridiagonal block of `L`),
+//!    added to its end nodes' right-hand side through the edges to them: `b_a += w_a z_first`,
+//!    `b_b += w_b z_last` (the Schur complement's right-hand side, `b_N − L_NI T⁻¹ b_I`);
+//! 2. the node system `S x_N = b_N` (#nodes square, factorised by sparse Cholesky with its
+//!    symbolic factorisation kept while its pattern stays the same);
+//! 3. per run, `x_I = T⁻¹ (b_I + w_a x_a e_first + w_b x_b e_last)`.
+//!
+//! The same solution as a factorisation of the whole Laplacian, in a different order of
+//! arithmetic; its cost is the node system's plus O(samples), where the whole Laplacian's
+//! symbolic factorisation (a new pattern at every live update) alone took most of Poisson.
+//!
+//! ```
+//! use sfs_geometry::network::kron::{KronReduced, Run};
+//! // A path 0 – 2 – 3 – 1 with nodes 0 and 1 (unknowns 0..2 are nodes): unit weights, the
+//! // node 0 held by a gauge; the data pulls each edge by +1.
+//! let chain = vec![0, 2, 3, 1];
+//! let w = vec![1.0; 3];
+//! let runs = Run::along(&chain, &w, 2);
+//! let mut cache = sfs_geometry::sparse_llt::CachedPattern::default();
+//! let k = KronReduced::new(4, 2, &runs, 1.0, &mut cache).unwrap();
+//! // Right-hand side of the edges' data (+1 on each edge: b_end += 1, b_start −= 1).
+//! let mut b = vec![[-1.0], [1.0], [0.0], [0.0]];
+//! k.solve(&mut b);
+//! let x: Vec<f64> = b.iter().map(|v| v[0]).collect();
+//! for (got, want) in x.iter().zip([0.0, 3.0, 1.0, 2.0]) {
+//!     assert!((got - want).abs() < 1e-12, "{x:?}");
+//! }
+//! ```
+
+use crate::sparse_llt::{CachedPattern, SolveError, SpdFactor};
+
+/// A run of samples along a curve between two tags (or a curve's end): its interior unknowns
+/// (no node among them), the node unknowns at its ends, and the weights of its edges in order
+/// (`interior.len() − 1` between the interior samples, one more for each end present).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Run {
+    pub start: Option<usize>,
+    pub end: Option<usize>,
+    pub interior: Vec<usize>,
+    pub weights: Vec<f64>,
+}
+
+impl Run {
+    /// The runs of one curve: `vars` its unknown at each sample (the nodes' below `nodes`),
+    /// `weights` its edges' (`vars.len() − 1`). A run between two tags of the same sample
+    /// unknown (an edge of a node to itself) has no interior and no edge: it constrains
+    /// nothing and is left out.
+    pub fn along(vars: &[usize], weights: &[f64], nodes: usize) -> Vec<Run> {
+        let mut runs = Vec::new();
+        let mut cur = Run {
+            start: None,
+            end: None,
+            interior: Vec::new(),
+            weights: Vec::new(),
+        };
+        for (j, &v) in vars.iter().enumerate() {
+            if j > 0 {
+                cur.weights.push(weights[j - 1]);
+            }
+            if v < nodes {
+                cur.end = Some(v);
+                let done = std::mem::replace(
+                    &mut cur,
+                    Run {
+                        start: Some(v),
+                        end: None,
+                        interior: Vec::new(),
+                        weights: Vec::new(),
+                    },
+                );
+                if j > 0 && !(done.interior.is_empty() && done.start == done.end) {
+                    runs.push(done);
+                }
+            } else {
+                cur.interior.push(v);
+            }
+        }
+        if !cur.interior.is_empty() {
+            runs.push(cur);
+        }
+        runs
+    }
+
+    /// The series conductance between its two ends; `None` when it has not two distinct ends
+    /// (a curve's end, or a loop back to the node it left: no coupling in the node system).
+    fn conductance(&self) -> Option<(usize, usize, f64)> {
+        match (self.start, self.end) {
+            (Some(a), Some(b)) if a != b => Some((
+                a,
+                b,
+                1.0 / self.weights.iter().map(|w| w.recip()).sum::<f64>(),
+            )),
+            _ => None,
+        }
+    }
+}
+
+/// One run's tridiagonal block `T` factorised as `L D Lᵀ` (unit lower bidiagonal `L`).
+#[derive(Debug, Clone)]
+struct Tridiagonal {
+    /// The pivots `D`.
+    d: Vec<f64>,
+    /// `L`'s subdiagonal (`len − 1`).
+    l: Vec<f64>,
+}
+
+impl Tridiagonal {
+    /// Of the run's interior, with `ridge` added to its first unknown (a gauge).
+    fn of(run: &Run, ridge: f64) -> Result<Self, SolveError> {
+        let m = run.interior.len();
+        let off = usize::from(run.start.is_some());
+        // Edge k of the interior (between interior k and k+1) is weights[off + k]; the edge
+        // into interior k from before is weights[off + k − 1] (or the start's).
+        let before = |k: usize| -> f64 {
+            if k == 0 {
+                if off == 1 {
+                    run.weights[0]
+                } else {
+                    0.0
+                }
+            } else {
+                run.weights[off + k - 1]
+            }
+        };
+        let after = |k: usize| -> f64 { run.weights.get(off + k).copied().unwrap_or(0.0) };
+        let mut d = Vec::with_capacity(m);
+        let mut l = Vec::with_capacity(m.saturating_sub(1));
+        for k in 0..m {
+            let mut diag = before(k) + after(k) + if k == 0 { ridge } else { 0.0 };
+            if k > 0 {
+                let b = -before(k);
+                let lk = b / d[k - 1];
+                diag -= lk * b;
+                l.push(lk);
+            }
+            if !(diag.is_finite() && diag > 0.0) {
+                return Err(SolveError::NonPositivePivot {
+                    index: run.interior[k],
+                });
+            }
+            d.push(diag);
+        }
+        Ok(Tridiagonal { d, l })
+    }
+
+    /// `r ← T⁻¹ r`, each of the K columns.
+    fn solve<const K: usize>(&self, r: &mut [[f64; K]]) {
+        for (k, &l) in self.l.iter().enumerate() {
+            let prev = r[k];
+            axpy(&mut r[k + 1], -l, &prev);
+        }
+        for (rk, &d) in r.iter_mut().zip(&self.d) {
+            rk.iter_mut().for_each(|v| *v /= d);
+        }
+        for (k, &l) in self.l.iter().enumerate().rev() {
+            let next = r[k + 1];
+            axpy(&mut r[k], -l, &next);
+        }
+    }
+}
+
+/// `y ← y + a x`.
+fn axpy<const K: usize>(y: &mut [f64; K], a: f64, x: &[f64; K]) {
+    y.iter_mut().zip(x).for_each(|(y, x)| *y += a * x);
+}
+
+/// The Laplacian over `n` unknowns, of which `0..nodes` are nodes, reduced onto the nodes
+/// (see the module's documentation), with one gauge per connected component: on its lowest
+/// node, or on the first sample of a run with no node at all.
+pub struct KronReduced<'a> {
+    runs: &'a [Run],
+    blocks: Vec<Tridiagonal>,
+    factor: SpdFactor,
+    nodes: usize,
+    components: usize,
+}
+
+impl<'a> KronReduced<'a> {
+    /// Factorises the node system (`cache` keeps its symbolic factorisation) and every run's
+    /// block; `ridge` is the gauges' weight.
+    pub fn new(
+        n: usize,
+        nodes: usize,
+        runs: &'a [Run],
+        ridge: f64,
+        cache: &mut CachedPattern,
+    ) -> Result<Self, SolveError> {
+        debug_assert!(runs.iter().flat_map(|r| &r.interior).all(|&v| v < n));
+        let mut sets = crate::union_find::UnionFind::new(nodes);
+        let edges: Vec<(usize, usize, f64)> = runs.iter().filter_map(Run::conductance).collect();
+        for &(a, b, _) in &edges {
+            sets.union(a, b);
+        }
+        let gauges: Vec<usize> = sets.roots().collect();
+        let mut entries: Vec<(usize, usize)> = (0..nodes).map(|i| (i, i)).collect();
+        entries.extend(edges.iter().map(|&(a, b, _)| (a.max(b), a.min(b))));
+        let mut vals = vec![0.0; entries.len()];
+        for (k, &(a, b, w)) in edges.iter().enumerate() {
+            vals[a] += w;
+            vals[b] += w;
+            vals[nodes + k] -= w;
+        }
+        for &g in &gauges {
+            vals[g] += ridge;
+        }
+        let mut free = 0;
+        let blocks = runs
+            .iter()
+            .map(|r| {
+                let alone = r.start.is_none() && r.end.is_none();
+                free += usize::from(alone);
+                Tridiagonal::of(r, if alone { ridge } else { 0.0 })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let factor = if nodes > 0 {
+            cache.factor(nodes, entries, &vals)?
+        } else {
+            // No node: every run is a curve alone; a 1 by 1 system stands in for the nodes'.
+            cache.factor(1, vec![(0, 0)], &[1.0])?
+        };
+        Ok(KronReduced {
+            runs,
+            blocks,
+            factor,
+            nodes,
+            components: gauges.len() + free,
+        })
+    }
+
+    /// The connected components (each with its gauge).
+    pub fn components(&self) -> usize {
+        self.components
+    }
+
+    /// `b ← L⁻¹ b` (#unknowns by K).
+    pub fn solve<const K: usize>(&self, b: &mut [[f64; K]]) {
+        let mut z: Vec<[f64; K]> = Vec::new();
+        let mut node_b: Vec<[f64; K]> = b[..self.nodes].to_vec();
+        for (run, t) in self.runs.iter().zip(&self.blocks) {
+            z.clear();
+            z.extend(run.interior.iter().map(|&v| b[v]));
+            t.solve(&mut z);
+            if let (Some(a), Some(first)) = (run.start, z.first()) {
+                axpy(&mut node_b[a], run.weights[0], first);
+            }
+            if let (Some(e), Some(last), Some(&w)) = (run.end, z.last(), run.weights.last()) {
+                axpy(&mut node_b[e], w, last);
+            }
+        }
+        if self.nodes > 0 {
+            self.factor.solve(&mut node_b);
+        }
+        for (run, t) in self.runs.iter().zip(&self.blocks) {
+            if run.interior.is_empty() {
+                continue;
+            }
+            z.clear();
+            z.extend(run.interior.iter().map(|&v| b[v]));
+            if let Some(a) = run.start {
+                axpy(&mut z[0], run.weights[0], &node_b[a]);
+            }
+            if let (Some(e), Some(&w), Some(last)) = (run.end, run.weights.last(), z.last_mut()) {
+                axpy(last, w, &node_b[e]);
+            }
+            t.solve(&mut z);
+            for (&v, zv) in run.interior.iter().zip(&z) {
+                b[v] = *zv;
+            }
+        }
+        b[..self.nodes].copy_from_slice(&node_b);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// The dense Laplacian of the runs with the same gauges, solved by nalgebra's Cholesky.
+    fn dense(n: usize, nodes: usize, runs: &[Run], ridge: f64, b: &[[f64; 1]]) -> Vec<f64> {
+        let mut l = nalgebra::DMatrix::<f64>::zeros(n, n);
+        let mut sets = crate::union_find::UnionFind::new(n);
+        for r in runs {
+            let chain: Vec<usize> = r
+                .start
+                .into_iter()
+                .chain(r.interior.iter().copied())
+                .chain(r.end)
+                .collect();
+            for (w, e) in r.weights.iter().zip(chain.windows(2)) {
+                let (a, b) = (e[0], e[1]);
+                sets.union(a, b);
+                l[(a, a)] += w;
+                l[(b, b)] += w;
+                l[(a, b)] -= w;
+                l[(b, a)] -= w;
+            }
+        }
+        for g in sets.roots().collect::<Vec<_>>() {
+            l[(g, g)] += ridge;
+        }
+        let _ = nodes;
+        let rhs = nalgebra::DVector::from_iterator(n, b.iter().map(|v| v[0]));
+        l.cholesky()
+            .expect("SPD")
+            .solve(&rhs)
+            .iter()
+            .copied()
+            .collect()
+    }
+
+    #[test]
+    fn the_reduced_solve_is_the_whole_laplacians() {
+        let mut rng = Rng::new(7);
+        for case in 0..20 {
+            // Nodes 0..5; curves through some of them with samples between.
+            let nodes = 5;
+            let mut n = nodes;
+            let mut runs = Vec::new();
+            for _ in 0..(2 + case % 4) {
+                let len = 3 + (rng.uniform() * 12.0) as usize;
+                let vars: Vec<usize> = (0..len)
+                    .map(|j| {
+                        if rng.uniform() < 0.3 && j % 2 == 0 {
+                            (rng.uniform() * nodes as f64) as usize % nodes
+                        } else {
+                            n += 1;
+                            n - 1
+                        }
+                    })
+                    .collect();
+                let w: Vec<f64> = (1..len).map(|_| 0.5 + rng.uniform() * 2.0).collect();
+                runs.extend(Run::along(&vars, &w, nodes));
+            }
+            // Nodes no run reaches stay with their gauge alone.
+            let b: Vec<[f64; 1]> = (0..n).map(|_| [rng.uniform() - 0.5]).collect();
+            let want = dense(n, nodes, &runs, 1.3, &b);
+            let mut cache = CachedPattern::default();
+            let k = KronReduced::new(n, nodes, &runs, 1.3, &mut cache).expect("factorised");
+            let mut got = b.clone();
+            k.solve(&mut got);
+            for (g, w) in got.iter().zip(&want) {
+                assert!(
+                    (g[0] - w).abs() < 1e-9 * (1.0 + w.abs()),
+                    "case {case}: {g:?} vs {w}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_loop_back_to_its_node_and_a_curve_without_nodes_are_solved() {
+        // Node 0; a loop 0 – 1 – 2 – 0, and a curve 3 – 4 with no node.
+        let mut runs = Run::along(&[0, 1, 2, 0], &[1.0, 2.0, 1.0], 1);
+        runs.extend(Run::along(&[3, 4], &[1.0], 1));
+        assert_eq!(runs.len(), 2);
+        assert_eq!(runs[0].conductance(), None);
+        let mut cache = CachedPattern::default();
+        let k = KronReduced::new(5, 1, &runs, 1.0, &mut cache).expect("factorised");
+        assert_eq!(k.components(), 2);
+        let b = vec![[0.3], [-0.1], [0.2], [-0.5], [0.5]];
+        let want = dense(5, 1, &runs, 1.0, &b);
+        let mut got = b.clone();
+        k.solve(&mut got);
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g[0] - w).abs() < 1e-12, "{got:?} vs {want:?}");
+        }
+    }
+}
