@@ -324,7 +324,7 @@ pub fn exact(surface: &SurfaceParams) -> SurfaceParams {
 /// scratch gives (the final outputs of a session, the live worker's settled updates).
 /// `network` with the noise of `device` (the Morphorider's when unknown), what the nodes'
 /// uncertainty is calibrated with (`sfs_geometry::network::marginals::NoisePrior`), and the
-/// test its slips are named by (`SlipTest`: a wheel's milder, a phone's strict).
+/// test its slips are named by (`SlipTest`: a wheel's milder, a phone's strict, its milder showings named and kept).
 pub fn for_device(
     network: &NetworkParams,
     device: Option<device_protocol::DeviceKind>,
@@ -338,7 +338,7 @@ pub fn for_device(
         }
         .overridden(),
         slips: match device {
-            Some(device_protocol::DeviceKind::Phone) => SlipTest::STRICT,
+            Some(device_protocol::DeviceKind::Phone) => SlipTest::PHONE,
             _ => SlipTest::WHEEL,
         },
         ..*network

@@ -244,6 +244,19 @@ pub struct SlipTest {
     /// A slip at either end of a tag the loops refuse, whose curve lands on no other node, is
     /// lengthened rather than the tag detached (a wheel: it slips routinely).
     pub before_detach: bool,
+    /// A milder showing (`share`, `ratio`, `vs_tag` and the least fraction short, as above)
+    /// is named, once no slip of this test is left, but not lengthened: for the operator to
+    /// rescan.
+    pub named_from: Option<Milder>,
+}
+
+/// The milder showing of a slip that [`SlipTest::named_from`] names without lengthening it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Milder {
+    pub share: f64,
+    pub ratio: f64,
+    pub vs_tag: f64,
+    pub short_min: f64,
 }
 
 impl SlipTest {
@@ -257,6 +270,22 @@ impl SlipTest {
         short: SLIP_SHORT,
         max: 1,
         before_detach: false,
+        named_from: None,
+    };
+
+    /// A phone's: [`STRICT`](Self::STRICT), and a fifth of the misfit at 10× the rest per
+    /// degree of freedom, 0.6 of the best tag and 6 % short named but not lengthened
+    /// ([`SlipTest::named_from`]): lengthening at that showing gave back most planted slips
+    /// but made sound segments of two phone captures 7 and 10 % long (BENCHMARKS.md "Trust",
+    /// a phone's slips named on a milder showing).
+    pub const PHONE: SlipTest = SlipTest {
+        named_from: Some(Milder {
+            share: 0.2,
+            ratio: 10.0,
+            vs_tag: 0.6,
+            short_min: 0.06,
+        }),
+        ..SlipTest::STRICT
     };
 
     /// A wheel's (the Morphorider): it reads only short (it slips, it never turns on its own),
@@ -276,7 +305,20 @@ impl SlipTest {
         short: (0.05, SLIP_SHORT.1),
         max: 3,
         before_detach: true,
+        named_from: None,
     };
+
+    /// The test of its milder showing ([`SlipTest::named_from`]), if any.
+    fn milder(&self) -> Option<SlipTest> {
+        self.named_from.map(|m| SlipTest {
+            share: m.share,
+            ratio: m.ratio,
+            vs_tag: m.vs_tag,
+            short: (m.short_min, self.short.1),
+            named_from: None,
+            ..*self
+        })
+    }
 }
 
 impl Default for SlipTest {
@@ -1104,6 +1146,14 @@ pub fn check_from(
             None => break,
         }
     }
+    // A milder showing, named for the operator to rescan, the segment kept as measured.
+    if let (Some(test), Some(d)) = (slips.milder(), &last) {
+        if out.slips.len() < slips.max {
+            if let Some(slip) = d.slip(curves, &test, joined) {
+                out.slips.push(slip);
+            }
+        }
+    }
     if let Some(d) = last.as_ref().filter(|_| judge_refused) {
         if let Some(w) = d.worst() {
             let cu = &curves[w.curve];
@@ -1446,6 +1496,7 @@ mod tests {
             short: SLIP_SHORT,
             max: 3,
             before_detach: false,
+            named_from: None,
         };
         for seed in 1..=5 {
             let mut g = grid(4, 0.5, seed);
@@ -1475,6 +1526,38 @@ mod tests {
                 );
             }
             assert!(r.detached.is_empty(), "seed {seed}: {r:?}");
+        }
+    }
+
+    /// Issue 49: a phone's segment read 8 % short, beside a curve turned 3° (a misfit no
+    /// length explains, so that the segment explains less than half of it): the strict test
+    /// names nothing; a phone's ([`SlipTest::PHONE`]) names it on its milder showing and keeps
+    /// its length (lengthening at that showing made sound segments of two phone captures 7
+    /// and 10 % long).
+    #[test]
+    fn issue_49_a_phone_names_a_milder_slip_and_keeps_its_length() {
+        let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 3f64.to_radians());
+        for seed in 1..=5 {
+            let mut g = grid(4, 0.5, seed);
+            for q in g[1].q.iter_mut() {
+                *q = turn * *q;
+            }
+            shorten(&mut g[5], 1, 0.08);
+            let measured: Vec<Vec<f64>> = g.iter().map(|c| c.h.clone()).collect();
+            let r = check(&mut g.clone(), |_, _| false, &SlipTest::STRICT, true, &[]);
+            assert!(r.slips.is_empty(), "seed {seed}: {r:?}");
+            let r = check(&mut g, |_, _| false, &SlipTest::PHONE, true, &[]);
+            let named: Vec<(usize, usize, bool)> = r
+                .slips
+                .iter()
+                .map(|s| (s.curve, s.tag, s.lengthened))
+                .collect();
+            assert_eq!(named, [(5, 1, false)], "seed {seed}: {r:?}");
+            assert!((r.slips[0].short_fraction - 0.08).abs() < 0.01, "{r:?}");
+            assert!(
+                g.iter().zip(&measured).all(|(c, h)| &c.h == h),
+                "seed {seed}: a length changed"
+            );
         }
     }
 
