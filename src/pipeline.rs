@@ -324,7 +324,8 @@ pub fn exact(surface: &SurfaceParams) -> SurfaceParams {
 /// scratch gives (the final outputs of a session, the live worker's settled updates).
 /// `network` with the noise of `device` (the Morphorider's when unknown), what the nodes'
 /// uncertainty is calibrated with (`sfs_geometry::network::marginals::NoisePrior`), and the
-/// test its slips are named by (`SlipTest`: a wheel's milder, a phone's strict, its milder showings named and kept).
+/// test its slips are named by (`SlipTest`: a wheel's milder; a phone's strict, its milder
+/// showings named and kept).
 pub fn for_device(
     network: &NetworkParams,
     device: Option<device_protocol::DeviceKind>,

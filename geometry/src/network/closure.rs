@@ -1147,12 +1147,9 @@ pub fn check_from(
         }
     }
     // A milder showing, named for the operator to rescan, the segment kept as measured.
-    if let (Some(test), Some(d)) = (slips.milder(), &last) {
-        if out.slips.len() < slips.max {
-            if let Some(slip) = d.slip(curves, &test, joined) {
-                out.slips.push(slip);
-            }
-        }
+    let room = out.slips.len() < slips.max;
+    if let (Some(test), Some(d)) = (slips.milder().filter(|_| room), &last) {
+        out.slips.extend(d.slip(curves, &test, joined));
     }
     if let Some(d) = last.as_ref().filter(|_| judge_refused) {
         if let Some(w) = d.worst() {

@@ -283,7 +283,7 @@ mod tests {
     use crate::rng::Rng;
 
     /// The dense Laplacian of the runs with the same gauges, solved by nalgebra's Cholesky.
-    fn dense(n: usize, nodes: usize, runs: &[Run], ridge: f64, b: &[[f64; 1]]) -> Vec<f64> {
+    fn dense(n: usize, runs: &[Run], ridge: f64, b: &[[f64; 1]]) -> Vec<f64> {
         let mut l = nalgebra::DMatrix::<f64>::zeros(n, n);
         let mut sets = crate::union_find::UnionFind::new(n);
         for r in runs {
@@ -305,7 +305,6 @@ mod tests {
         for g in sets.roots().collect::<Vec<_>>() {
             l[(g, g)] += ridge;
         }
-        let _ = nodes;
         let rhs = nalgebra::DVector::from_iterator(n, b.iter().map(|v| v[0]));
         l.cholesky()
             .expect("SPD")
@@ -340,7 +339,7 @@ mod tests {
             }
             // Nodes no run reaches stay with their gauge alone.
             let b: Vec<[f64; 1]> = (0..n).map(|_| [rng.uniform() - 0.5]).collect();
-            let want = dense(n, nodes, &runs, 1.3, &b);
+            let want = dense(n, &runs, 1.3, &b);
             let mut cache = CachedPattern::default();
             let k = KronReduced::new(n, nodes, &runs, 1.3, &mut cache).expect("factorised");
             let mut got = b.clone();
@@ -365,7 +364,7 @@ mod tests {
         let k = KronReduced::new(5, 1, &runs, 1.0, &mut cache).expect("factorised");
         assert_eq!(k.components(), 2);
         let b = vec![[0.3], [-0.1], [0.2], [-0.5], [0.5]];
-        let want = dense(5, 1, &runs, 1.0, &b);
+        let want = dense(5, &runs, 1.0, &b);
         let mut got = b.clone();
         k.solve(&mut got);
         for (g, w) in got.iter().zip(&want) {

@@ -372,9 +372,7 @@ impl Reconstructor {
         stop: &dyn Fn() -> bool,
     ) -> Result<Network, Unreconstructed> {
         let mut net = self.run_bare_until(curves, p, stop)?;
-        if !p.defer_uncertainty {
-            self.uncertainty(&mut net, p);
-        }
+        self.uncertainty_unless_deferred(&mut net, p);
         Ok(net)
     }
 
@@ -422,6 +420,14 @@ impl Reconstructor {
         net.report.timings_ms.uncertainty = t0.elapsed().as_secs_f64() * 1e3;
     }
 
+    /// [`uncertainty`](Self::uncertainty), unless `p` defers it to the caller
+    /// ([`NetworkParams::defer_uncertainty`]).
+    pub(crate) fn uncertainty_unless_deferred(&mut self, net: &mut Network, p: &NetworkParams) {
+        if !p.defer_uncertainty {
+            self.uncertainty(net, p);
+        }
+    }
+
     /// As [`run`](Self::run), with the regression warm-started from the previous run's
     /// frames (curves unchanged since): the optimum is the same, but not to the last bit.
     /// Measured on a growing scan it starts lower but takes as many iterations (Gauss–Newton
@@ -433,9 +439,7 @@ impl Reconstructor {
         p: &NetworkParams,
     ) -> Result<Network, Unreconstructed> {
         let (mut net, _) = self.run_inner(curves, p, true, &[], false, &|| false)?;
-        if !p.defer_uncertainty {
-            self.uncertainty(&mut net, p);
-        }
+        self.uncertainty_unless_deferred(&mut net, p);
         Ok(net)
     }
 
@@ -449,9 +453,7 @@ impl Reconstructor {
         slides: &[(usize, u32)],
     ) -> Result<(Network, Vec<Option<f64>>), Unreconstructed> {
         let (mut net, s) = self.run_inner(curves, p, false, slides, false, &|| false)?;
-        if !p.defer_uncertainty {
-            self.uncertainty(&mut net, p);
-        }
+        self.uncertainty_unless_deferred(&mut net, p);
         Ok((net, s.iter().map(|x| x.map(|x| x.sigma)).collect()))
     }
 

@@ -161,15 +161,10 @@ pub fn estimate_yaw(form: &super::poisson::YawForm) -> Option<YawEstimate> {
 /// Turns every frame of `curves` (and the frames arriving at their kinks) back by the yaw
 /// `est`, about its own N.
 pub fn apply_yaw(curves: &mut [UniformCurve], est: &YawEstimate) {
-    let back = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -est.yaw_deg.to_radians());
-    for c in curves {
-        for q in c.q.iter_mut() {
-            *q *= back;
-        }
-        for (_, q) in c.kinks.iter_mut() {
-            *q *= back;
-        }
-    }
+    turn(
+        curves,
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -est.yaw_deg.to_radians()),
+    );
 }
 
 /// The frame pairs at the nodes the regression ties ([`regression::tied`]): every two frames
@@ -296,7 +291,15 @@ pub fn estimate(curves: &[UniformCurve]) -> Option<MountingEstimate> {
 /// Turns every frame of `curves` (and the frames arriving at their kinks) back by `est`, in
 /// its own axes.
 pub fn apply(curves: &mut [UniformCurve], est: &MountingEstimate) {
-    let back = offset(est.roll_deg.to_radians(), est.pitch_deg.to_radians()).inverse();
+    turn(
+        curves,
+        offset(est.roll_deg.to_radians(), est.pitch_deg.to_radians()).inverse(),
+    );
+}
+
+/// Every frame of `curves` (and the frames arriving at their kinks) turned by `back` in its
+/// own axes (`q · back`).
+fn turn(curves: &mut [UniformCurve], back: UnitQuaternion<f64>) {
     for c in curves {
         for q in c.q.iter_mut() {
             *q *= back;

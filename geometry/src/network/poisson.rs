@@ -280,13 +280,13 @@ fn edges(
 /// onto the `nodes` ([`KronReduced`]): the edges' least squares is a weighted graph Laplacian
 /// (`edges` in the order [`edges`] gives them).
 fn runs(curves: &[UniformCurve], var_of: &[Vec<usize>], edges: &[Edge], nodes: usize) -> Vec<Run> {
+    let w: Vec<f64> = edges.iter().map(|e| e.w).collect();
     let mut out = Vec::new();
     let mut k = 0;
     for (c, vars) in curves.iter().zip(var_of) {
         let m = c.q.len().saturating_sub(1);
-        let w: Vec<f64> = edges[k..k + m].iter().map(|e| e.w).collect();
+        out.extend(Run::along(vars, &w[k..k + m], nodes));
         k += m;
-        out.extend(Run::along(vars, &w, nodes));
     }
     out
 }

@@ -57,9 +57,7 @@ pub fn run_joined_until(
     // passes end with (unless `p` defers it to the caller).
     let mut net = r.run_bare_until(curves, p, stop)?;
     if !js.enabled() {
-        if !p.defer_uncertainty {
-            r.uncertainty(&mut net, p);
-        }
+        r.uncertainty_unless_deferred(&mut net, p);
         return Ok(net);
     }
     let t0 = Instant::now();
@@ -142,9 +140,7 @@ pub fn run_joined_until(
     net.report.joins_refused = refused;
     net.report.join_passes = state.passes;
     net.report.timings_ms.join = t0.elapsed().as_secs_f64() * 1e3;
-    if !p.defer_uncertainty {
-        r.uncertainty(&mut net, p);
-    }
+    r.uncertainty_unless_deferred(&mut net, p);
     Ok(net)
 }
 
