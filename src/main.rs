@@ -17,6 +17,7 @@ use std::path::Path;
 use std::time::Duration;
 
 fn main() {
+    sfs::shutdown::default_signals();
     sfs_geometry::sparse_llt::single_threaded();
     let cli = match Cli::try_parse() {
         Ok(c) => c,

@@ -62,3 +62,17 @@ impl Shutdown {
         }
     }
 }
+
+/// SIGINT and SIGTERM back to their default (the process ends) until the daemon's own
+/// handlers take them: a shell that starts a command in the background leaves SIGINT ignored
+/// (POSIX), and a signal before the handlers are in place would then be lost. Called first
+/// thing in `main`, before any thread starts; nothing is written yet, so ending is safe.
+pub fn default_signals() {
+    for sig in [libc::SIGINT, libc::SIGTERM] {
+        // SAFETY: sets a disposition to the default; no thread runs yet and no handler of ours
+        // is replaced.
+        unsafe {
+            libc::signal(sig, libc::SIG_DFL);
+        }
+    }
+}

@@ -314,7 +314,16 @@ async fn issue_48_the_token_stays_with_the_phone() {
 /// `sfs run --phone 127.0.0.1:0 --session SESSION`, its standard error to `stderr` (for the
 /// tests that watch it start or fail, not [`Daemon`], which waits until it serves).
 fn phone_daemon(session: &std::path::Path, stderr: std::process::Stdio) -> std::process::Child {
-    sfs()
+    phone_daemon_command(session, stderr).spawn().unwrap()
+}
+
+/// The command of [`phone_daemon`], not started.
+fn phone_daemon_command(
+    session: &std::path::Path,
+    stderr: std::process::Stdio,
+) -> std::process::Command {
+    let mut command = sfs();
+    command
         .args([
             "--log",
             "warn",
@@ -326,9 +335,8 @@ fn phone_daemon(session: &std::path::Path, stderr: std::process::Stdio) -> std::
         .arg(session)
         .stdin(std::process::Stdio::null())
         .stdout(std::process::Stdio::null())
-        .stderr(stderr)
-        .spawn()
-        .unwrap()
+        .stderr(stderr);
+    command
 }
 
 /// The daemon on a session directory whose `name` is `target` (a FIFO or a device): an error
@@ -601,7 +609,18 @@ fn issue_48_sigint_stops_the_phone_daemon_at_any_moment() {
     let dir = tmpdir("phone-sigint");
     for (k, after_ms) in [0u64, 5, 20, 50, 100, 300].into_iter().enumerate() {
         let session = dir.join(format!("s{k}"));
-        let mut child = phone_daemon(&session, std::process::Stdio::null());
+        // Started as a terminal or systemd starts it. A shell's background job (this suite run
+        // with `&`) inherits SIGINT ignored: the daemon takes it back first thing in `main`
+        // (`shutdown::default_signals`), but a signal before `main` would be lost.
+        let mut command = phone_daemon_command(&session, std::process::Stdio::null());
+        // SAFETY: only async-signal-safe calls between fork and exec.
+        unsafe {
+            std::os::unix::process::CommandExt::pre_exec(&mut command, || {
+                libc::signal(libc::SIGINT, libc::SIG_DFL);
+                Ok(())
+            });
+        }
+        let mut child = command.spawn().unwrap();
         std::thread::sleep(Duration::from_millis(after_ms));
         // SAFETY: kill sends a signal to a child of ours.
         unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
