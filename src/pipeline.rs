@@ -325,7 +325,8 @@ pub fn exact(surface: &SurfaceParams) -> SurfaceParams {
 /// `network` with the noise of `device` (the Morphorider's when unknown), what the nodes'
 /// uncertainty is calibrated with (`sfs_geometry::network::marginals::NoisePrior`), and the
 /// test its slips are named by (`SlipTest`: a wheel's milder; a phone's strict, its milder
-/// showings named and kept).
+/// showings named and kept), and for a wheel the spread of its curves' scales, which the loops
+/// then estimate (`curve_scale`).
 pub fn for_device(
     network: &NetworkParams,
     device: Option<device_protocol::DeviceKind>,
@@ -341,6 +342,12 @@ pub fn for_device(
         slips: match device {
             Some(device_protocol::DeviceKind::Phone) => SlipTest::PHONE,
             _ => SlipTest::WHEEL,
+        },
+        // A wheel reads each curve a little long or short; a phone's lengths are measured
+        // per segment or come from its speed (no scale common to a curve).
+        curve_scale_sigma: match device {
+            Some(device_protocol::DeviceKind::Phone) => None,
+            _ => Some(sfs_geometry::network::curve_scale::WHEEL_SIGMA),
         },
         ..*network
     }

@@ -59,6 +59,9 @@
 //! estimate_mounting = true           # the device's mounting offset (roll, pitch) from the
 //!                                    #   normals at the nodes, its yaw from the loops;
 //!                                    #   false: frames as measured
+//! estimate_curve_scales = true       # Morphorider: each curve's distance scale (its wheel
+//!                                    #   reads a pass ~1 % long or short) from the loops;
+//!                                    #   false: distances as measured
 //! repair_slips = true                # a segment the loops name a slip is lengthened by
 //!                                    #   their estimate; false: kept as measured
 //! bend_fraction = 0.5                # bending smoothing length ℓ₂ in h (or bend_length in m)

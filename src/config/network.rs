@@ -13,6 +13,7 @@ pub struct NetworkToml {
     pub alpha: Option<f64>,
     pub regression: Option<bool>,
     pub estimate_mounting: Option<bool>,
+    pub estimate_curve_scales: Option<bool>,
     pub repair_slips: Option<bool>,
     pub bend_length: Option<f64>,
     pub bend_fraction: Option<f64>,
@@ -55,6 +56,7 @@ impl ConfigFile {
         }
         p.no_regression = n.regression == Some(false);
         p.no_mounting = n.estimate_mounting == Some(false);
+        p.no_curve_scales = n.estimate_curve_scales == Some(false);
         p.no_slip_repair = n.repair_slips == Some(false);
         if let Some(x) = check("bend_length", n.bend_length, 0.0, 100.0)? {
             p.regression.bend_length = Some(x);

@@ -238,6 +238,48 @@ impl<'a> KronReduced<'a> {
         self.components
     }
 
+    /// Step 1 of [`solve`](Self::solve) for the runs `which` alone: adds to `node_b` (#nodes
+    /// by K) what their interiors' part of `b` (#unknowns by K) brings to the node system
+    /// (`−L_NI T⁻¹ b_I`), and returns `Σ b_Iᵀ T⁻¹ b_I` over them (summed over the K columns).
+    /// The interiors' block of `L` is block diagonal (runs meet only at nodes), so for
+    /// right-hand sides `b`, `b'` on the interiors of different runs (and any nodes)
+    /// `bᵀ L⁻¹ b' = b̃ᵀ S⁻¹ b̃'` with `b̃` so reduced, and `bᵀ L⁻¹ b = b̃ᵀ S⁻¹ b̃` plus the
+    /// returned sum ([`solve_nodes`](Self::solve_nodes) applies `S⁻¹`).
+    pub fn reduce<const K: usize>(
+        &self,
+        b: &[[f64; K]],
+        which: std::ops::Range<usize>,
+        node_b: &mut [[f64; K]],
+    ) -> f64 {
+        let mut energy = 0.0;
+        let mut z: Vec<[f64; K]> = Vec::new();
+        for (run, t) in self.runs[which.clone()].iter().zip(&self.blocks[which]) {
+            z.clear();
+            z.extend(run.interior.iter().map(|&v| b[v]));
+            t.solve(&mut z);
+            energy += run
+                .interior
+                .iter()
+                .zip(&z)
+                .map(|(&v, zv)| b[v].iter().zip(zv).map(|(x, y)| x * y).sum::<f64>())
+                .sum::<f64>();
+            if let (Some(a), Some(first)) = (run.start, z.first()) {
+                axpy(&mut node_b[a], run.weights[0], first);
+            }
+            if let (Some(e), Some(last), Some(&w)) = (run.end, z.last(), run.weights.last()) {
+                axpy(&mut node_b[e], w, last);
+            }
+        }
+        energy
+    }
+
+    /// `node_b ← S⁻¹ node_b` (#nodes by K): step 2 of [`solve`](Self::solve).
+    pub fn solve_nodes<const K: usize>(&self, node_b: &mut [[f64; K]]) {
+        if self.nodes > 0 {
+            self.factor.solve(node_b);
+        }
+    }
+
     /// `b ← L⁻¹ b` (#unknowns by K).
     pub fn solve<const K: usize>(&self, b: &mut [[f64; K]]) {
         let mut z: Vec<[f64; K]> = Vec::new();

@@ -6,6 +6,8 @@
 //! - [`closure`]: node tags the network's loops refuse (a mistyped or half-lost index) are
 //!   detached from their node.
 //! - [`regression`]: the frames regressed on SO(3)ᴺ over the whole network.
+//! - [`curve_scale`]: a wheel's scale per curve (each pass read a little long or short),
+//!   estimated from the loops and applied to the distances.
 //! - [`poisson`]: positions of the whole network from its tangents, nodes shared; solved on
 //!   the nodes by [`kron`] reduction (each run of samples between tags eliminated exactly).
 //! - [`crease`]: the other face of each crease curve, from the curves at its nodes.
@@ -21,6 +23,7 @@
 
 pub mod closure;
 pub mod crease;
+pub mod curve_scale;
 pub mod join;
 pub mod kron;
 pub mod marginals;
@@ -60,6 +63,13 @@ pub struct NetworkParams {
     pub local_window: usize,
     /// The device's noise where the loops cannot tell it ([`marginals`]).
     pub noise: marginals::NoisePrior,
+    /// The prior spread of each curve's distance scale, a fraction (a wheel's rolling radius
+    /// changes from pass to pass): where set, the loops estimate a scale per curve before the
+    /// positions are solved ([`curve_scale`]); `None`: the distances as measured.
+    pub curve_scale_sigma: Option<f64>,
+    /// Keep the distances as measured even where [`curve_scale_sigma`](Self::curve_scale_sigma)
+    /// is set (the configuration's `estimate_curve_scales = false`).
+    pub no_curve_scales: bool,
     /// Leave the nodes' uncertainty to [`Reconstructor::uncertainty`] (a live update publishes
     /// the curves first, issue 51): the network comes without it.
     pub defer_uncertainty: bool,
@@ -85,6 +95,9 @@ pub struct NetworkReport {
     pub mounting_yaw: Option<mounting::YawEstimate>,
     /// Largest angle between the normals of two curves at a shared node, degrees.
     pub max_node_normal_angle_deg: f64,
+    /// Each curve's distance scale estimated from the loops and applied (`1 + s` times its
+    /// measured distances), by scan index ([`curve_scale`]); empty where not estimated.
+    pub curve_scales: std::collections::BTreeMap<usize, f64>,
     /// The regression's iterations and energies.
     pub regression: RegressionReport,
     /// The regression moved only the frames near what changed since the last run
@@ -303,6 +316,9 @@ pub struct Reconstructor {
     /// The yaw the last run estimated from the loops ([`mounting::estimate_yaw`]): a live
     /// update keeps it, so that the frames it does not regress again stay turned alike.
     yaw: Option<mounting::YawEstimate>,
+    /// Each curve's distance scale the last full run estimated from the loops
+    /// ([`curve_scale`]), by scan index: a live update keeps them.
+    curve_scales: HashMap<usize, f64>,
     /// Curves pre-filtered by the last run (not taken from the cache).
     pub prefiltered_last: usize,
     /// The last run's curves as regressed: what its network's uncertainty is computed from
@@ -551,6 +567,7 @@ impl Reconstructor {
         }
         let regression = self.regress(&mut uniform, p, warm);
         let t2 = Instant::now();
+        let curve_scales = self.curve_scales(&mut uniform, p);
         // Each slide's curve (position) and the tag's position in its nodes.
         let at: Vec<Option<(usize, usize)>> = slides
             .iter()
@@ -608,6 +625,7 @@ impl Reconstructor {
                 || (p.local_window > 0 && from_prior),
             regression,
             closure_misfit_m: closure.misfit_m,
+            curve_scales,
             closure: closure.curves,
             timings_ms: Timings {
                 prefilter: (t1 - t0).as_secs_f64() * 1e3,
@@ -641,6 +659,45 @@ impl Reconstructor {
     /// ([`NetworkParams::local_window`]) after a first run. It keeps the last run's yaw.
     fn local(&self, p: &NetworkParams) -> bool {
         p.local_window > 0 && !self.regressed_nodes.is_empty()
+    }
+
+    /// Each curve's distance scale from the loops ([`curve_scale`]), where
+    /// [`NetworkParams::curve_scale_sigma`] asks for it, applied to `uniform`: estimated by a
+    /// full run, kept by a live update (a curve the last full run did not have keeps its
+    /// distances). The scales applied, by scan index (none where not estimated).
+    fn curve_scales(
+        &mut self,
+        uniform: &mut [UniformCurve],
+        p: &NetworkParams,
+    ) -> std::collections::BTreeMap<usize, f64> {
+        let Some(sigma) = p.curve_scale_sigma.filter(|_| !p.no_curve_scales) else {
+            self.curve_scales.clear();
+            return Default::default();
+        };
+        if !self.local(p) {
+            self.curve_scales.clear();
+            match self.poisson.scale_form(uniform) {
+                Ok(form) => {
+                    let lengths: Vec<f64> = uniform.iter().map(|u| u.length()).collect();
+                    if let Some(s) = curve_scale::estimate(&form, sigma, &lengths) {
+                        self.curve_scales
+                            .extend(uniform.iter().map(|u| u.index).zip(s.iter().copied()));
+                    }
+                }
+                Err(e) => tracing::debug!("no curve scales: {e}"),
+            }
+        }
+        let scales: Vec<f64> = uniform
+            .iter()
+            .map(|u| self.curve_scales.get(&u.index).copied().unwrap_or(0.0))
+            .collect();
+        curve_scale::apply(uniform, &scales);
+        uniform
+            .iter()
+            .zip(scales)
+            .filter(|(u, _)| self.curve_scales.contains_key(&u.index))
+            .map(|(u, s)| (u.index, s))
+            .collect()
     }
 
     /// The yaw about N of `uniform`'s frames, from the loops ([`mounting::estimate_yaw`]).

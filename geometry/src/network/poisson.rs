@@ -78,12 +78,29 @@ pub struct YawForm {
     pub loops: usize,
 }
 
+/// The loops' misfit as a function of a scale per curve ([`PoissonSolver::scale_form`]): each
+/// curve's edge data `h t` read `(1 + s_c) h t`, the misfit is
+/// `chi2(s) = chi2 + 2 bᵀ s + sᵀ H s` (the same weights as [`Misfit::chi2`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScaleForm {
+    /// `H`, #curves by #curves, symmetric positive semi-definite. A scale common to every
+    /// curve only scales the misfit (`chi2(t 1) = (1 + t)² chi2`): `H 1 = b`, `1ᵀ b = chi2`.
+    pub h: nalgebra::DMatrix<f64>,
+    /// `b`, one per curve (in the order of the curves solved).
+    pub b: nalgebra::DVector<f64>,
+    /// The misfit as measured (`s = 0`).
+    pub chi2: f64,
+    /// The network's cycle rank ([`Misfit::loops`]).
+    pub loops: usize,
+}
+
 /// Keeps the symbolic factorisation between solves.
 #[derive(Debug, Default)]
 pub struct PoissonSolver {
     pattern: CachedPattern,
 }
 
+#[derive(Clone, Copy)]
 struct Edge {
     a: usize,
     b: usize,
@@ -144,6 +161,89 @@ impl PoissonSolver {
         }
         Ok(YawForm {
             per_curve,
+            loops: (used + f.components()).saturating_sub(n),
+        })
+    }
+
+    /// The loops' misfit with each curve's distances scaled ([`ScaleForm`]): the residual
+    /// of data `v` is `P v` (`P` the least squares' projection), linear in the data, so with
+    /// `r_c` the residual of curve `c`'s edge data alone, `H_cd = ⟨r_c, r_d⟩ = ⟨v_c, r_d⟩`
+    /// and `b_c = ⟨v_c, r⟩`. One factorisation and a solve per curve.
+    pub fn scale_form(&mut self, curves: &[UniformCurve]) -> Result<ScaleForm, SolveError> {
+        let (node_var, var_of, n) = unknowns(curves);
+        let nodes = node_var.len();
+        let (edges, edge_at) = edges(curves, &var_of, &Vector3::x());
+        let (runs, run_starts) = runs_by_curve(curves, &var_of, &edges, nodes);
+        let f = KronReduced::new(n, nodes, &runs, ridge(&edges), &mut self.pattern)?;
+        let k = curves.len();
+        // Each curve's edges: a range of `edges`.
+        let mut start = vec![0usize; k + 1];
+        for &(ci, _) in &edge_at {
+            start[ci + 1] += 1;
+        }
+        for c in 0..k {
+            start[c + 1] += start[c];
+        }
+        let own = |c: usize| edges[start[c]..start[c + 1]].iter().filter(|e| e.a != e.b);
+        // The misfit and b from one whole solve.
+        let mut x = vec![[0.0; 3]; n];
+        add_rhs(&mut x, &edges);
+        f.solve(&mut x);
+        let residual = |e: &Edge| e.v - (Vector3::from(x[e.b]) - Vector3::from(x[e.a]));
+        let chi2: f64 = edges
+            .iter()
+            .filter(|e| e.a != e.b)
+            .map(|e| e.w * residual(e).norm_squared())
+            .sum();
+        let b = nalgebra::DVector::from_iterator(
+            k,
+            (0..k).map(|c| own(c).map(|e| e.w * e.v.dot(&residual(e))).sum()),
+        );
+        // H_cd = ⟨v_c, v_d⟩ − g_cᵀ L⁻¹ g_d (g_c: curve c's right-hand side), through the node
+        // system: each curve's right-hand side reduced onto the nodes and solved there.
+        let mut h = nalgebra::DMatrix::zeros(k, k);
+        let mut g = vec![[0.0; 3]; n];
+        let mut reduced: Vec<Vec<(usize, [f64; 3])>> = Vec::with_capacity(k);
+        let mut solved: Vec<Vec<[f64; 3]>> = Vec::with_capacity(k);
+        for c in 0..k {
+            add_rhs(&mut g, &edges[start[c]..start[c + 1]]);
+            let mut nb: Vec<[f64; 3]> = g[..nodes].to_vec();
+            let interior = f.reduce(&g, run_starts[c]..run_starts[c + 1], &mut nb);
+            for e in own(c) {
+                g[e.a] = [0.0; 3];
+                g[e.b] = [0.0; 3];
+            }
+            h[(c, c)] = own(c).map(|e| e.w * e.v.norm_squared()).sum::<f64>() - interior;
+            let mut y = nb.clone();
+            f.solve_nodes(&mut y);
+            // Curve c's reduced right-hand side lives on its own nodes.
+            reduced.push(
+                nb.into_iter()
+                    .enumerate()
+                    .filter(|(_, v)| v.iter().any(|&x| x != 0.0))
+                    .collect::<Vec<_>>(),
+            );
+            solved.push(y);
+        }
+        let dot = |a: &[(usize, [f64; 3])], b: &[[f64; 3]]| -> f64 {
+            a.iter()
+                .map(|&(i, p)| p[0] * b[i][0] + p[1] * b[i][1] + p[2] * b[i][2])
+                .sum()
+        };
+        for c in 0..k {
+            for d in c..k {
+                let v = dot(&reduced[c], &solved[d]);
+                h[(c, d)] -= v;
+                if d != c {
+                    h[(d, c)] -= v;
+                }
+            }
+        }
+        let used = edges.iter().filter(|e| e.a != e.b).count();
+        Ok(ScaleForm {
+            h,
+            b,
+            chi2,
             loops: (used + f.components()).saturating_sub(n),
         })
     }
@@ -280,15 +380,27 @@ fn edges(
 /// onto the `nodes` ([`KronReduced`]): the edges' least squares is a weighted graph Laplacian
 /// (`edges` in the order [`edges`] gives them).
 fn runs(curves: &[UniformCurve], var_of: &[Vec<usize>], edges: &[Edge], nodes: usize) -> Vec<Run> {
+    runs_by_curve(curves, var_of, edges, nodes).0
+}
+
+/// As [`runs`], with where each curve's runs start in them (#curves + 1 offsets).
+fn runs_by_curve(
+    curves: &[UniformCurve],
+    var_of: &[Vec<usize>],
+    edges: &[Edge],
+    nodes: usize,
+) -> (Vec<Run>, Vec<usize>) {
     let w: Vec<f64> = edges.iter().map(|e| e.w).collect();
     let mut out = Vec::new();
+    let mut starts = vec![0];
     let mut k = 0;
     for (c, vars) in curves.iter().zip(var_of) {
         let m = c.q.len().saturating_sub(1);
         out.extend(Run::along(vars, &w[k..k + m], nodes));
+        starts.push(out.len());
         k += m;
     }
-    out
+    (out, starts)
 }
 
 /// The weight of the gauge on the lowest unknown of each connected component: the edges' mean
@@ -510,6 +622,71 @@ mod tests {
         // Same topology again: the symbolic factorisation is reused.
         s.solve(&[c]).unwrap();
         assert_eq!(s.symbolic_count(), 1);
+    }
+
+    /// The scale form is the misfit of the curves scaled and solved again, and a scale common
+    /// to every curve scales the misfit (`H 1 = b`).
+    #[test]
+    fn the_scale_form_is_the_misfit_of_the_scaled_curves() {
+        let mut curves = vec![
+            circle(1.0, 200, 0, (0, 1)),
+            circle(0.9, 180, 1, (0, 1)),
+            circle(1.1, 240, 2, (0, 1)),
+        ];
+        // Frames turned a little along each curve, differently: the loops misfit.
+        for (k, c) in curves.iter_mut().enumerate() {
+            for (j, q) in c.q.iter_mut().enumerate() {
+                let a = 0.05 * ((j as f64) * 0.05 + k as f64).sin();
+                *q *= UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a);
+            }
+        }
+        let mut solver = PoissonSolver::new();
+        let form = solver.scale_form(&curves).unwrap();
+        let chi2 = solver.solve(&curves).unwrap().misfit.chi2;
+        assert!(chi2 > 1e-6, "the loops misfit: {chi2}");
+        assert!(
+            (form.chi2 - chi2).abs() <= 1e-9 * chi2,
+            "{} {chi2}",
+            form.chi2
+        );
+        let ones = nalgebra::DVector::from_element(3, 1.0);
+        let h1 = &form.h * &ones;
+        assert!((h1 - &form.b).norm() <= 1e-8 * form.b.norm(), "H 1 = b");
+        assert!((form.h.clone() - form.h.transpose()).norm() <= 1e-9 * form.h.norm());
+        // The least squares solved again with each curve's edge data scaled (the weights
+        // as they were: the form's model).
+        let (node_var, var_of, n) = unknowns(&curves);
+        let (edges0, edge_at) = edges(&curves, &var_of, &Vector3::x());
+        let runs = runs(&curves, &var_of, &edges0, node_var.len());
+        let mut cache = CachedPattern::default();
+        let f = KronReduced::new(n, node_var.len(), &runs, ridge(&edges0), &mut cache).unwrap();
+        for s in [[0.01, -0.02, 0.005], [-0.03, 0.0, 0.02]] {
+            let s = nalgebra::DVector::from_row_slice(&s);
+            let scaled: Vec<Edge> = edges0
+                .iter()
+                .zip(&edge_at)
+                .map(|(e, &(ci, _))| Edge {
+                    v: e.v * (1.0 + s[ci]),
+                    ..*e
+                })
+                .collect();
+            let mut x = vec![[0.0; 3]; n];
+            add_rhs(&mut x, &scaled);
+            f.solve(&mut x);
+            let direct: f64 = scaled
+                .iter()
+                .filter(|e| e.a != e.b)
+                .map(|e| {
+                    e.w * (e.v - (Vector3::from(x[e.b]) - Vector3::from(x[e.a]))).norm_squared()
+                })
+                .sum();
+            let predicted =
+                form.chi2 + 2.0 * form.b.dot(&s) + (s.transpose() * &form.h * &s)[(0, 0)];
+            assert!(
+                (predicted - direct).abs() <= 1e-8 * direct,
+                "{predicted} against {direct}"
+            );
+        }
     }
 
     #[test]
