@@ -68,6 +68,12 @@ pub struct NoisePrior {
     /// Drift the loops cannot see, m²/m (a stretch of length ℓ drifts by `√(floor × ℓ)` per
     /// axis besides).
     pub floor: f64,
+    /// The spread of a curve's distance scale the loops do not see, a fraction: a wheel's
+    /// curves each read a little long or short, and the loops take out their differences
+    /// ([`super::curve_scale`]) but never their mean, the network's size. A node `r` from its
+    /// part's centre is then off by `σ_size r`, `σ_size` this spread over the curves'
+    /// (length-weighted) `√#curves`. 0 for a device whose lengths have no common scale.
+    pub size: f64,
 }
 
 impl NoisePrior {
@@ -77,6 +83,7 @@ impl NoisePrior {
         dof: 2.0,
         loop_share: 1.0,
         floor: 4e-6,
+        size: 0.005,
     };
     /// The phone's.
     pub const PHONE: NoisePrior = NoisePrior {
@@ -84,6 +91,7 @@ impl NoisePrior {
         dof: 2.0,
         loop_share: 0.875,
         floor: 3e-6,
+        size: 0.0,
     };
 }
 
@@ -94,8 +102,9 @@ impl Default for NoisePrior {
 }
 
 impl NoisePrior {
-    /// With the environment's `SFS_CALIBRATE_LOOP_SHARE` and `SFS_CALIBRATE_FLOOR` in place
-    /// of `loop_share` and `floor`: for the calibration runs only (BENCHMARKS.md "Trust").
+    /// With the environment's `SFS_CALIBRATE_LOOP_SHARE`, `SFS_CALIBRATE_FLOOR` and
+    /// `SFS_CALIBRATE_SIZE` in place of `loop_share`, `floor` and `size`: for the calibration
+    /// runs only (BENCHMARKS.md "Trust").
     pub fn overridden(mut self) -> Self {
         if let Some(v) = std::env::var("SFS_CALIBRATE_LOOP_SHARE")
             .ok()
@@ -108,6 +117,12 @@ impl NoisePrior {
             .and_then(|v| v.parse().ok())
         {
             self.floor = v;
+        }
+        if let Some(v) = std::env::var("SFS_CALIBRATE_SIZE")
+            .ok()
+            .and_then(|v| v.parse().ok())
+        {
+            self.size = v;
         }
         self
     }
@@ -403,8 +418,18 @@ impl MarginalsSolver {
         }
         f.solve(&mut lv);
         rigid.finish(&lv);
+        // The network's size, which no loop sees: a node `r` from its part's centre is off by
+        // `σ_size r` besides.
+        let lengths: Vec<f64> = curves.iter().map(|c| c.length()).collect();
+        let total: f64 = lengths.iter().sum();
+        let size = if total > 0.0 {
+            prior.size * lengths.iter().map(|l| l * l).sum::<f64>().sqrt() / total
+        } else {
+            0.0
+        };
+        let size_var = |arm: Vector3<f64>| (size * size) * arm.norm_squared();
         for (i, &id) in node_ids.iter().enumerate() {
-            let var = rigid.cov(i, i, sigma_diag[i]).trace().max(0.0);
+            let var = rigid.cov(i, i, sigma_diag[i]).trace().max(0.0) + size_var(rigid.arm(i));
             out.nodes.insert(id, var.sqrt());
         }
         out.noise.sigma_rms_m = rms(out.nodes.values().copied());
@@ -419,10 +444,22 @@ impl MarginalsSolver {
             } else {
                 0.0
             };
+            // The part's centre, from the node at the segment's start.
+            let centre = pos[sg.a] - rigid.arm(sg.a);
+            let point = |j: usize| {
+                positions.curves[sg.curve]
+                    .points
+                    .get(j)
+                    .map_or(0.0, |p| size_var(p - centre))
+            };
             let mut r_a = 0.0;
             for j in sg.i0..=sg.i1 {
                 let (al, be, bridge) = chain_bridge(r_a, sg.r - r_a);
-                let var = al * al * caa + be * be * cbb + 2.0 * al * be * cab + 3.0 * s2 * bridge;
+                let var = al * al * caa
+                    + be * be * cbb
+                    + 2.0 * al * be * cab
+                    + 3.0 * s2 * bridge
+                    + point(j);
                 if let Some(x) = points[sg.curve].get_mut(j) {
                     *x = var.max(0.0).sqrt();
                 }
@@ -729,12 +766,14 @@ mod tests {
         // Monte Carlo over seeded captures of the grid: the predicted σ (from each capture's
         // own loops) against the nodes' true errors once the rigid motion is removed.
         let mut rng = Rng::new(49);
-        // The loops' variance alone: no prior, no floor, all of it moving the nodes.
+        // The loops' variance alone: no prior, no floor, all of it moving the nodes, and no
+        // scale unseen (the noise here is of the tangents only).
         let prior = NoisePrior {
             tau2: 1e-6,
             dof: 1e-9,
             loop_share: 1.0,
             floor: 0.0,
+            size: 0.0,
         };
         let (mut err2, mut sig2, mut within2, mut count) = (0.0, 0.0, 0usize, 0usize);
         let mut solver = MarginalsSolver::new();
@@ -766,5 +805,32 @@ mod tests {
         let coverage = within2 as f64 / count as f64;
         assert!((0.9..1.1).contains(&ratio), "RMS error / RMS σ = {ratio}");
         assert!(coverage > 0.9, "within 2σ: {coverage}");
+    }
+
+    /// The size no loop sees adds `σ_size r` at a node `r` from the centre, with `σ_size` the
+    /// prior's spread over the curves' `√#curves` (here equal lengths: `size / √#curves`).
+    #[test]
+    fn the_unseen_size_adds_with_the_distance_from_the_centre() {
+        let mut rng = Rng::new(7);
+        let (curves, _) = grid(0.02, &mut rng);
+        let base = NoisePrior::MORPHORIDER;
+        let sized = NoisePrior { size: 0.01, ..base };
+        let sigma = |prior: &NoisePrior| {
+            let mut p = PoissonSolver::new().solve(&curves).unwrap();
+            let u = MarginalsSolver::new().run(&curves, &mut p, prior).unwrap();
+            (u.nodes, p.nodes)
+        };
+        let (without, nodes) = sigma(&NoisePrior { size: 0.0, ..base });
+        let (with, _) = sigma(&sized);
+        let centre = nodes.values().sum::<Vector3<f64>>() / nodes.len() as f64;
+        let size = 0.01 / (curves.len() as f64).sqrt();
+        for (k, x) in &nodes {
+            let added = with[k].powi(2) - without[k].powi(2);
+            let want = (size * (x - centre).norm()).powi(2);
+            assert!(
+                (added - want).abs() <= 1e-9 + 1e-6 * want,
+                "node {k}: {added} for {want}"
+            );
+        }
     }
 }
