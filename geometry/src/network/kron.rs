@@ -251,18 +251,32 @@ impl<'a> KronReduced<'a> {
         which: std::ops::Range<usize>,
         node_b: &mut [[f64; K]],
     ) -> f64 {
-        let mut energy = 0.0;
+        self.reduce_runs(b, which, node_b, true)
+    }
+
+    /// Step 1 for the runs `which`: their `−L_NI T⁻¹ b_I` added to `node_b`, and with
+    /// `energy`, `Σ b_Iᵀ T⁻¹ b_I` over them (else 0).
+    fn reduce_runs<const K: usize>(
+        &self,
+        b: &[[f64; K]],
+        which: std::ops::Range<usize>,
+        node_b: &mut [[f64; K]],
+        energy: bool,
+    ) -> f64 {
+        let mut sum = 0.0;
         let mut z: Vec<[f64; K]> = Vec::new();
         for (run, t) in self.runs[which.clone()].iter().zip(&self.blocks[which]) {
             z.clear();
             z.extend(run.interior.iter().map(|&v| b[v]));
             t.solve(&mut z);
-            energy += run
-                .interior
-                .iter()
-                .zip(&z)
-                .map(|(&v, zv)| b[v].iter().zip(zv).map(|(x, y)| x * y).sum::<f64>())
-                .sum::<f64>();
+            if energy {
+                sum += run
+                    .interior
+                    .iter()
+                    .zip(&z)
+                    .map(|(&v, zv)| b[v].iter().zip(zv).map(|(x, y)| x * y).sum::<f64>())
+                    .sum::<f64>();
+            }
             if let (Some(a), Some(first)) = (run.start, z.first()) {
                 axpy(&mut node_b[a], run.weights[0], first);
             }
@@ -270,7 +284,7 @@ impl<'a> KronReduced<'a> {
                 axpy(&mut node_b[e], w, last);
             }
         }
-        energy
+        sum
     }
 
     /// `node_b ← S⁻¹ node_b` (#nodes by K): step 2 of [`solve`](Self::solve).
@@ -284,20 +298,8 @@ impl<'a> KronReduced<'a> {
     pub fn solve<const K: usize>(&self, b: &mut [[f64; K]]) {
         let mut z: Vec<[f64; K]> = Vec::new();
         let mut node_b: Vec<[f64; K]> = b[..self.nodes].to_vec();
-        for (run, t) in self.runs.iter().zip(&self.blocks) {
-            z.clear();
-            z.extend(run.interior.iter().map(|&v| b[v]));
-            t.solve(&mut z);
-            if let (Some(a), Some(first)) = (run.start, z.first()) {
-                axpy(&mut node_b[a], run.weights[0], first);
-            }
-            if let (Some(e), Some(last), Some(&w)) = (run.end, z.last(), run.weights.last()) {
-                axpy(&mut node_b[e], w, last);
-            }
-        }
-        if self.nodes > 0 {
-            self.factor.solve(&mut node_b);
-        }
+        self.reduce_runs(b, 0..self.runs.len(), &mut node_b, false);
+        self.solve_nodes(&mut node_b);
         for (run, t) in self.runs.iter().zip(&self.blocks) {
             if run.interior.is_empty() {
                 continue;
