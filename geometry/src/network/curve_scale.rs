@@ -62,7 +62,7 @@ pub fn estimate(form: &ScaleForm, sigma: f64, lengths: &[f64]) -> Option<DVector
     let mut noise = form.chi2 / dof;
     let mut s = DVector::zeros(k);
     for _ in 0..MAX_ITERATIONS {
-        if !(noise > 0.0 && noise.is_finite()) {
+        if !positive(noise) {
             return None;
         }
         s = solve(form, sigma, lengths, total, noise)?;

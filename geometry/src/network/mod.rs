@@ -687,17 +687,16 @@ impl Reconstructor {
                 Err(e) => tracing::debug!("no curve scales: {e}"),
             }
         }
+        let applied: std::collections::BTreeMap<usize, f64> = uniform
+            .iter()
+            .filter_map(|u| Some((u.index, *self.curve_scales.get(&u.index)?)))
+            .collect();
         let scales: Vec<f64> = uniform
             .iter()
-            .map(|u| self.curve_scales.get(&u.index).copied().unwrap_or(0.0))
+            .map(|u| applied.get(&u.index).copied().unwrap_or(0.0))
             .collect();
         curve_scale::apply(uniform, &scales);
-        uniform
-            .iter()
-            .zip(scales)
-            .filter(|(u, _)| self.curve_scales.contains_key(&u.index))
-            .map(|(u, s)| (u.index, s))
-            .collect()
+        applied
     }
 
     /// The yaw about N of `uniform`'s frames, from the loops ([`mounting::estimate_yaw`]).

@@ -189,12 +189,9 @@ impl PoissonSolver {
         let mut x = vec![[0.0; 3]; n];
         add_rhs(&mut x, &edges);
         f.solve(&mut x);
-        let residual = |e: &Edge| e.v - (Vector3::from(x[e.b]) - Vector3::from(x[e.a]));
-        let chi2: f64 = edges
-            .iter()
-            .filter(|e| e.a != e.b)
-            .map(|e| e.w * residual(e).norm_squared())
-            .sum();
+        let x: Vec<Vector3<f64>> = x.into_iter().map(Vector3::from).collect();
+        let measured = misfit(curves, &edges, &edge_at, &x, &[], &[], &[], f.components());
+        let residual = |e: &Edge| e.v - (x[e.b] - x[e.a]);
         let b = nalgebra::DVector::from_iterator(
             k,
             (0..k).map(|c| own(c).map(|e| e.w * e.v.dot(&residual(e))).sum()),
@@ -239,12 +236,11 @@ impl PoissonSolver {
                 }
             }
         }
-        let used = edges.iter().filter(|e| e.a != e.b).count();
         Ok(ScaleForm {
             h,
             b,
-            chi2,
-            loops: (used + f.components()).saturating_sub(n),
+            chi2: measured.chi2,
+            loops: measured.loops,
         })
     }
 
