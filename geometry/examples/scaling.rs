@@ -23,8 +23,9 @@
 //! then, after the network without meridian 1, the update that adds it as the live worker
 //! runs it:
 //! - `curves`: the network reconstructed (pre-filter, the loop-closure test, the regression
-//!   local to 10 samples either side of the new curve's nodes as the daemon's
-//!   `LIVE_LOCAL_WINDOW`, Poisson: what the view's `curves` event publishes);
+//!   local to 3 samples either side of the new curve's nodes as the daemon's
+//!   `LIVE_LOCAL_WINDOW` (10 before issue 51), Poisson: what the view's `curves` event
+//!   publishes);
 //! - `surface`: the nodes' uncertainty (left to the second phase since issue 51) and the
 //!   surface, provisional (τ = 0.5, after the surface of the network without the meridian);
 //! - `update`: both (what `network.glb` waits for);
@@ -153,7 +154,7 @@ fn phases(net: &NetworkSegments, runs: usize) -> (usize, [f64; 4]) {
     let without: Vec<Curve> = curves.iter().filter(|c| c.index != 1).cloned().collect();
     let (np, sp) = (
         NetworkParams {
-            local_window: 10,
+            local_window: 3,
             ..NetworkParams::default()
         },
         SurfaceParams {

@@ -67,7 +67,7 @@
 //! bend_fraction = 0.5                # bending smoothing length ℓ₂ in h (or bend_length in m)
 //! stretch_length = 0.0               # stretching smoothing length ℓ₁, m
 //! xi = 1e4                           # weight of the node normal consistency
-//! local_window = 10                  # live: samples either side of the new curve's nodes
+//! local_window = 3                   # live: samples either side of the new curve's nodes
 //!                                    # regressed again (0: the whole network every update)
 //! join_distance = 0.015              # a node tagged on one curve joins another curve passing
 //!                                    #   within this, m (0: no joins, no proposals)

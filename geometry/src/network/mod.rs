@@ -58,8 +58,10 @@ pub struct NetworkParams {
     /// Live updates (issue 19): when > 0, a run after the first moves only the frames of the
     /// curves that changed since the last run and those within this many samples of the
     /// nodes they pass through ([`RegressionSolver::run_local`]); the others keep the last
-    /// run's. The result is then provisional ([`NetworkReport::provisional`]): close to the
-    /// whole network's regression, not equal to it. Default 0: the whole network every run.
+    /// run's. Such a run also keeps the last run's mounting and yaw, and its loop-closure test
+    /// tests the tags and segments of those curves only ([`closure::Scope::tested`], issue
+    /// 51). The result is then provisional ([`NetworkReport::provisional`]): close to the
+    /// whole network's, not equal to it. Default 0: the whole network every run.
     pub local_window: usize,
     /// The device's noise where the loops cannot tell it ([`marginals`]).
     pub noise: marginals::NoisePrior,
@@ -130,6 +132,9 @@ pub struct NetworkReport {
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct Timings {
     pub prefilter: f64,
+    /// The loop-closure test of the tags and segments ([`closure`]).
+    pub closure: f64,
+    /// The regression on SO(3), with the mounting's and curves' scales' estimates around it.
     pub regression: f64,
     pub poisson: f64,
     /// The uncertainty of the nodes and points ([`marginals`]).
@@ -313,9 +318,14 @@ pub struct Reconstructor {
     /// The tags the last closure test moved: where a live update's test starts
     /// ([`closure::check_from`]).
     closure_moved: Vec<closure::Moved>,
+    /// The mounting the last run estimated ([`mounting::estimate`]): a live update keeps it.
+    mounting: Option<mounting::MountingEstimate>,
     /// The yaw the last run estimated from the loops ([`mounting::estimate_yaw`]): a live
     /// update keeps it, so that the frames it does not regress again stay turned alike.
     yaw: Option<mounting::YawEstimate>,
+    /// Each curve's tags in the last loop test of the whole network, by scan index: a live
+    /// update, which tests its new curves only, gives the others these.
+    closure_tags: HashMap<usize, Vec<closure::TagMisfit>>,
     /// Each curve's distance scale the last full run estimated from the loops
     /// ([`curve_scale`]), by scan index: a live update keeps them.
     curve_scales: HashMap<usize, f64>,
@@ -516,18 +526,24 @@ impl Reconstructor {
                 interrupted: false,
             });
         }
+        // A live update (a local regression) keeps the last run's mounting, as its yaw below:
+        // the frames it does not regress again were regressed under it (and its estimate
+        // pairs every two frames at a node: a grid's poles, 2 450 pairs at 100 curves).
+        let local = self.local(p);
         let mounting = if p.no_mounting {
             None
+        } else if local {
+            self.mounting
         } else {
             mounting::estimate(&uniform)
         };
+        self.mounting = mounting;
         if let Some(est) = mounting.filter(|e| e.applied) {
             mounting::apply(&mut uniform, &est);
         }
         // The yaw about N, from the loops' misfit with the tags as typed, so that the closure
         // test sees the misfit the yaw leaves; a live update (a local regression) keeps the
         // last run's, so that the frames it does not regress again stay turned alike.
-        let local = self.local(p);
         if p.no_mounting {
             self.yaw = None;
         } else if !local {
@@ -546,12 +562,39 @@ impl Reconstructor {
             &[]
         };
         let from_prior = !prior.is_empty();
+        // A live update tests the tags and segments of the curves it regresses whole (new, or
+        // with their ties changed) and of those at the nodes of curves undone (issue 51).
+        let tested = local.then(|| self.tested_in_update(&uniform, prior));
+        let scope = closure::Scope {
+            prior,
+            tested: tested.as_ref(),
+        };
+        let tc = Instant::now();
         let mut closure =
-            closure_check(curves, &mut uniform, p, &joined, prior, stop, &mut warnings);
+            closure_check(curves, &mut uniform, p, &joined, scope, stop, &mut warnings);
+        let closure_ms = tc.elapsed().as_secs_f64() * 1e3;
         if closure.interrupted {
             return Err(Unreconstructed::interrupted());
         }
         self.closure_moved = std::mem::take(&mut closure.moved);
+        if let Some(tested) = &tested {
+            // The other curves' tags as the last whole test found them (the view's marks).
+            for m in closure
+                .curves
+                .iter_mut()
+                .filter(|m| !tested.contains(&m.curve))
+            {
+                if let Some(tags) = self.closure_tags.get(&m.curve) {
+                    m.tags.clone_from(tags);
+                }
+            }
+        } else {
+            self.closure_tags = closure
+                .curves
+                .iter()
+                .map(|m| (m.curve, m.tags.clone()))
+                .collect();
+        }
         // Tags the closure test moved, or segments it lengthened, misfit the loops no more:
         // what they say of the yaw then is added.
         let changed = !closure.detached.is_empty() || closure.slips.iter().any(|s| s.lengthened);
@@ -629,7 +672,8 @@ impl Reconstructor {
             closure: closure.curves,
             timings_ms: Timings {
                 prefilter: (t1 - t0).as_secs_f64() * 1e3,
-                regression: (t2 - t1).as_secs_f64() * 1e3,
+                closure: closure_ms,
+                regression: (t2 - t1).as_secs_f64() * 1e3 - closure_ms,
                 poisson: (t3 - t2).as_secs_f64() * 1e3,
                 ..Default::default()
             },
@@ -655,8 +699,46 @@ impl Reconstructor {
         ))
     }
 
+    /// The curves (scan indices) a live update's loop test tests ([`closure::Scope::tested`]):
+    /// those whose tags are not the last run's (new curves; ties changed, once the tags the
+    /// last test moved, `prior`, are put back as it left them), and those that pass a node of
+    /// a curve the last run had and this one has not (undone: their loops changed).
+    fn tested_in_update(
+        &self,
+        uniform: &[UniformCurve],
+        prior: &[closure::Moved],
+    ) -> std::collections::BTreeSet<usize> {
+        let in_use: std::collections::HashSet<usize> = uniform.iter().map(|u| u.index).collect();
+        let gone: std::collections::HashSet<u32> = self
+            .regressed_nodes
+            .iter()
+            .filter(|(k, _)| !in_use.contains(k))
+            .flat_map(|(_, nodes)| nodes.iter().map(|x| x.1))
+            .collect();
+        let moved_to = |curve: usize, typed: u32, now: u32| {
+            prior
+                .iter()
+                .any(|m| m.curve == curve && m.node == typed && m.detached.kept_as == now)
+        };
+        uniform
+            .iter()
+            .filter(|u| {
+                let same = self.regressed_nodes.get(&u.index).is_some_and(|last| {
+                    last.len() == u.nodes.len()
+                        && last
+                            .iter()
+                            .zip(&u.nodes)
+                            .all(|(l, n)| l.0 == n.0 && (l.1 == n.1 || moved_to(u.index, n.1, l.1)))
+                });
+                !same || u.nodes.iter().any(|n| gone.contains(&n.1))
+            })
+            .map(|u| u.index)
+            .collect()
+    }
+
     /// Whether a run with `p` is a live update: a local regression
-    /// ([`NetworkParams::local_window`]) after a first run. It keeps the last run's yaw.
+    /// ([`NetworkParams::local_window`]) after a first run. It keeps the last run's mounting
+    /// and yaw, and tests only its new curves' tags.
     fn local(&self, p: &NetworkParams) -> bool {
         p.local_window > 0 && !self.regressed_nodes.is_empty()
     }
@@ -826,7 +908,7 @@ fn closure_check(
     uniform: &mut [UniformCurve],
     p: &NetworkParams,
     joined: &[u32],
-    prior: &[closure::Moved],
+    scope: closure::Scope,
     stop: &dyn Fn() -> bool,
     warnings: &mut Vec<NetworkWarning>,
 ) -> closure::ClosureReport {
@@ -849,7 +931,7 @@ fn closure_check(
             &p.slips,
             !p.no_slip_repair,
             joined,
-            prior,
+            scope,
             stop,
         )
     };

@@ -77,14 +77,10 @@ impl UniformCurve {
         self.kinks.iter().any(|k| k.0 == j)
     }
 
-    /// The step of the edge from sample `j` to `j + 1`.
+    /// The step of the edge from sample `j` to `j + 1` (the nodes' samples increase along
+    /// the curve: a binary search).
     pub fn edge_h(&self, j: usize) -> f64 {
-        let seg = self
-            .nodes
-            .iter()
-            .rposition(|&(i, _)| i <= j)
-            .unwrap_or(0)
-            .min(self.h.len().saturating_sub(1));
+        let seg = segment_of(&self.nodes, self.h.len().max(1), j);
         self.h[seg]
     }
 
@@ -227,12 +223,11 @@ pub fn prefilter_with_kinks(
 }
 
 /// The segment (between two node tags) that uniform sample `j` lies in: the last whose start
-/// node is at or before it, of `segments`.
+/// node is at or before it, of `segments` (the nodes' samples increase: a binary search).
 fn segment_of(nodes: &[(usize, u32)], segments: usize, j: usize) -> usize {
     nodes
-        .iter()
-        .rposition(|&(i, _)| i <= j)
-        .unwrap_or(0)
+        .partition_point(|&(i, _)| i <= j)
+        .saturating_sub(1)
         .min(segments - 1)
 }
 
