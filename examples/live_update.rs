@@ -92,8 +92,9 @@ fn main() {
         };
         let (r, tm) = (&net.report, &net.report.timings_ms);
         println!(
-            "{m} → {n} curves: the update {update_ms:.0} ms (pre-filter {:.1}, loop closure and regression {:.1}, Poisson {:.1}, uncertainty {:.1}, join passes {:.1} ms; {} passes, {} parts, {} frames moved of {}); the network before it {ready:.1} s",
+            "{m} → {n} curves: the update {update_ms:.0} ms (pre-filter {:.1}, loop closure {:.1}, regression {:.1}, Poisson {:.1}, uncertainty {:.1}, join passes {:.1} ms; {} passes, {} parts, {} frames moved of {}); the network before it {ready:.1} s",
             tm.prefilter,
+            tm.closure,
             tm.regression,
             tm.poisson,
             tm.uncertainty,

@@ -555,13 +555,26 @@ impl Columns {
     }
 }
 
-/// The loop test of every tag and segment of `curves` (`tested`: only of the curves it says,
-/// by position, and of the tags that share a node with one of theirs that stands out; see
-/// [`Scope::tested`]).
+/// What a restricted loop test tests ([`drops`]): the tags and segments of some curves (by
+/// position in the slice), and some tags by themselves (`(curve position, tag)`).
+#[derive(Debug, Clone, Copy)]
+struct Subset<'a> {
+    curves: &'a [bool],
+    tags: &'a [(usize, usize)],
+}
+
+impl Subset<'_> {
+    fn has_tag(&self, ci: usize, tag: usize) -> bool {
+        self.curves[ci] || self.tags.contains(&(ci, tag))
+    }
+}
+
+/// The loop test of every tag and segment of `curves` (`tested`: only of those it says, and
+/// of the tags that share a node with one of theirs that stands out; see [`Scope::tested`]).
 fn drops(
     curves: &[UniformCurve],
     uncertain: &dyn Fn(usize, usize) -> bool,
-    tested: Option<&[bool]>,
+    tested: Option<Subset>,
 ) -> Option<Drops> {
     let mut var: BTreeMap<u32, usize> = BTreeMap::new();
     let mut ids = Vec::new();
@@ -663,9 +676,13 @@ fn drops(
     let tested = tested.filter(|t| {
         let mut at_nodes: Vec<usize> = segs
             .iter()
-            .filter(|s| t[s.curve])
+            .filter(|s| t.curves[s.curve])
             .flat_map(|s| [s.a, s.b])
             .collect();
+        for key in t.tags {
+            let list = at.get(key).map_or(&[][..], |l| l.as_slice());
+            at_nodes.extend(list.iter().flat_map(|&(si, _)| [segs[si].a, segs[si].b]));
+        }
         at_nodes.sort_unstable();
         at_nodes.dedup();
         at_nodes.len() <= COLUMNS_MIN.max(n / 20)
@@ -794,11 +811,11 @@ fn drops(
             let mut columns = Columns::default();
             let chosen: Vec<AtTag> = at
                 .iter()
-                .filter(|((ci, _), _)| tested[*ci])
+                .filter(|((ci, tag), _)| tested.has_tag(*ci, *tag))
                 .map(prepare)
                 .collect();
             let seg_list: Vec<usize> = (0..segs.len())
-                .filter(|&si| tested[segs[si].curve])
+                .filter(|&si| tested.curves[segs[si].curve])
                 .collect();
             columns.add(
                 &f,
@@ -829,7 +846,7 @@ fn drops(
             let mates: Vec<AtTag> = at
                 .iter()
                 .filter(|((ci, tag), _)| {
-                    !tested[*ci] && loud.contains(&var[&curves[*ci].nodes[*tag].1])
+                    !tested.has_tag(*ci, *tag) && loud.contains(&var[&curves[*ci].nodes[*tag].1])
                 })
                 .map(prepare)
                 .collect();
@@ -881,9 +898,20 @@ pub struct LoopFit {
 
 /// For each of `tags` (`(curve position in curves, tag position in its nodes)`), how the
 /// loops it closes fit beside the others ([`LoopFit`]); `None` for a tag that frees nothing
-/// (its node held by its curve alone) or where the network has no loop.
-pub fn loop_test(curves: &[UniformCurve], tags: &[(usize, usize)]) -> Vec<Option<LoopFit>> {
-    let Some(d) = drops(curves, &|_, _| false, None) else {
+/// (its node held by its curve alone) or where the network has no loop. With `alone`, only
+/// those tags are tested, by solves (a live update's join passes, issue 51), not every tag of
+/// the network by a selected inversion: the same figures but for their last bits.
+pub fn loop_test(
+    curves: &[UniformCurve],
+    tags: &[(usize, usize)],
+    alone: bool,
+) -> Vec<Option<LoopFit>> {
+    let none = vec![false; curves.len()];
+    let subset = alone.then_some(Subset {
+        curves: &none,
+        tags,
+    });
+    let Some(d) = drops(curves, &|_, _| false, subset) else {
         return vec![None; tags.len()];
     };
     let length = |energy_per_dof: f64| (energy_per_dof.max(0.0) / d.mean_c).sqrt();
@@ -1147,10 +1175,12 @@ pub fn check_from(
     stop: &dyn Fn() -> bool,
 ) -> ClosureReport {
     let prior = scope.prior;
-    let tested: Option<Vec<bool>> = scope
+    let tested_curves: Option<Vec<bool>> = scope
         .tested
         .map(|t| curves.iter().map(|c| t.contains(&c.index)).collect());
-    let tested = tested.as_deref();
+    let tested = tested_curves
+        .as_deref()
+        .map(|curves| Subset { curves, tags: &[] });
     let mut out = ClosureReport::default();
     let tags: usize = curves.iter().map(|c| c.nodes.len()).sum();
     let most = MAX_DETACHED.max((MAX_DETACHED_SHARE * tags as f64) as usize);
@@ -1602,6 +1632,25 @@ mod tests {
             );
             assert!(o.detached.is_empty(), "{o:?}");
             assert_eq!(other[2].nodes[2].1, 9);
+        }
+    }
+
+    /// Issue 51: a live update's join pass asks how its joins' loops fit of those tags alone
+    /// ([`loop_test`] with `alone`): the figures of the whole network's test, by solves.
+    #[test]
+    fn issue_51_the_loop_test_of_a_few_tags_alone_is_the_whole_tests() {
+        for seed in 1..=3 {
+            let g = grid(8, 1.0, seed);
+            let tags = [(2, 3), (10, 4), (15, 0)];
+            let whole = loop_test(&g, &tags, false);
+            let alone = loop_test(&g, &tags, true);
+            assert_eq!(whole.len(), 3);
+            for (w, a) in whole.iter().zip(&alone) {
+                let (w, a) = (w.expect("a loop"), a.expect("a loop"));
+                assert!((w.own_m - a.own_m).abs() <= 1e-9 * w.own_m, "{w:?} {a:?}");
+                let (wo, ao) = (w.others_m.unwrap(), a.others_m.unwrap());
+                assert!((wo - ao).abs() <= 1e-9 * wo, "{w:?} {a:?}");
+            }
         }
     }
 

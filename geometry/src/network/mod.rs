@@ -624,7 +624,7 @@ impl Reconstructor {
         let fits = if found.is_empty() {
             Vec::new()
         } else {
-            closure::loop_test(&uniform, &found)
+            closure::loop_test(&uniform, &found, local)
         };
         let samples: Vec<(usize, usize)> = found
             .iter()
