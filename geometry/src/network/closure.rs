@@ -1558,22 +1558,18 @@ mod tests {
     fn issue_51_a_live_updates_test_of_its_new_curve_finds_what_the_whole_test_does() {
         let quiet = |_: usize, _: usize| false;
         for seed in 1..=3 {
-            let tested: std::collections::BTreeSet<usize> = [5].into();
-            let only = |t| Scope {
-                prior: &[],
-                tested: Some(t),
+            // A live update's test of the curve `curve` alone.
+            let live_test = |g: &mut [UniformCurve], curve: usize| {
+                let tested: std::collections::BTreeSet<usize> = [curve].into();
+                let scope = Scope {
+                    prior: &[],
+                    tested: Some(&tested),
+                };
+                check_from(g, quiet, &SlipTest::STRICT, false, &[], scope, &|| false)
             };
             let clean = grid(8, 1.0, seed);
             let full = check(&mut clean.clone(), quiet, &SlipTest::STRICT, false, &[]);
-            let part = check_from(
-                &mut clean.clone(),
-                quiet,
-                &SlipTest::STRICT,
-                false,
-                &[],
-                only(&tested),
-                &|| false,
-            );
+            let part = live_test(&mut clean.clone(), 5);
             assert_eq!(part.misfit_m, full.misfit_m);
             assert_eq!(part.curves.len(), full.curves.len());
             for (p, f) in part.curves.iter().zip(&full.curves) {
@@ -1600,16 +1596,7 @@ mod tests {
             let mut whole = wrong.clone();
             let w = check(&mut whole, quiet, &SlipTest::STRICT, false, &[]);
             let mut live = wrong.clone();
-            let two: std::collections::BTreeSet<usize> = [2].into();
-            let l = check_from(
-                &mut live,
-                quiet,
-                &SlipTest::STRICT,
-                false,
-                &[],
-                only(&two),
-                &|| false,
-            );
+            let l = live_test(&mut live, 2);
             let key = |r: &ClosureReport| -> Vec<_> {
                 r.detached
                     .iter()
@@ -1621,15 +1608,7 @@ mod tests {
             assert_eq!(live[2].nodes, whole[2].nodes);
             assert_eq!(live[2].nodes[2].1, 18);
             let mut other = wrong.clone();
-            let o = check_from(
-                &mut other,
-                quiet,
-                &SlipTest::STRICT,
-                false,
-                &[],
-                only(&tested),
-                &|| false,
-            );
+            let o = live_test(&mut other, 5);
             assert!(o.detached.is_empty(), "{o:?}");
             assert_eq!(other[2].nodes[2].1, 9);
         }

@@ -377,23 +377,42 @@ impl Layout {
     }
 }
 
+/// A restricted problem's variables: the free ones first, in their order, then each fixed one
+/// a kept term touches, as the terms first touch it.
+struct Numbering {
+    /// The variable of the whole problem behind each.
+    of: Vec<usize>,
+    /// The number of each variable of the whole problem (`usize::MAX`: none yet).
+    new: Vec<usize>,
+}
+
+impl Numbering {
+    fn of(free: &[bool]) -> Numbering {
+        let of: Vec<usize> = (0..free.len()).filter(|&v| free[v]).collect();
+        let mut new = vec![usize::MAX; free.len()];
+        for (k, &v) in of.iter().enumerate() {
+            new[v] = k;
+        }
+        Numbering { of, new }
+    }
+
+    /// The number of variable `v` of the whole problem, given it on first touch.
+    fn map(&mut self, v: usize) -> usize {
+        if self.new[v] == usize::MAX {
+            self.new[v] = self.of.len();
+            self.of.push(v);
+        }
+        self.new[v]
+    }
+}
+
 /// [`restrict`]`(&problem(curves), free)`, built over the curves with a free frame and the
 /// frames at their nodes only: the same variables in the same order, the same terms in the
 /// same order (the same arithmetic after it).
 fn local_problem(curves: &[UniformCurve], layout: &Layout, free: &[bool]) -> (Problem, Vec<usize>) {
-    let mut of: Vec<usize> = (0..layout.total).filter(|&v| free[v]).collect();
-    let movable = of.len();
-    let mut new = vec![usize::MAX; layout.total];
-    for (k, &v) in of.iter().enumerate() {
-        new[v] = k;
-    }
-    let mut map = |v: usize| -> usize {
-        if new[v] == usize::MAX {
-            new[v] = of.len();
-            of.push(v);
-        }
-        new[v]
-    };
+    let mut numbering = Numbering::of(free);
+    let movable = numbering.of.len();
+    let mut map = |v: usize| numbering.map(v);
     // The curves with a free frame (no term of another touches one but a node pair).
     let touched: Vec<usize> = (0..curves.len())
         .filter(|&k| (0..curves[k].q.len()).any(|j| free[layout.var(k, j)]))
@@ -485,6 +504,7 @@ fn local_problem(curves: &[UniformCurve], layout: &Layout, free: &[bool]) -> (Pr
         };
         (*c.q[j].to_rotation_matrix().matrix(), w.max(1e-4))
     };
+    let of = numbering.of;
     let (a, w) = of.iter().map(|&v| target(v)).unzip();
     (
         Problem {
@@ -881,19 +901,9 @@ fn optimise(
 /// of its variables. What [`local_problem`] builds without the whole problem (its test).
 #[cfg(test)]
 fn restrict(pb: &Problem, free: &[bool]) -> (Problem, Vec<usize>) {
-    let mut of: Vec<usize> = (0..pb.a.len()).filter(|&v| free[v]).collect();
-    let movable = of.len();
-    let mut new = vec![usize::MAX; pb.a.len()];
-    for (k, &v) in of.iter().enumerate() {
-        new[v] = k;
-    }
-    let mut map = |v: usize| -> usize {
-        if new[v] == usize::MAX {
-            new[v] = of.len();
-            of.push(v);
-        }
-        new[v]
-    };
+    let mut numbering = Numbering::of(free);
+    let movable = numbering.of.len();
+    let mut map = |v: usize| numbering.map(v);
     let edges: Vec<(usize, usize, f64)> = pb
         .edges
         .iter()
@@ -912,6 +922,7 @@ fn restrict(pb: &Problem, free: &[bool]) -> (Problem, Vec<usize>) {
         .filter(|q| free[q.0] || free[q.1])
         .map(|&(i, j)| (map(i), map(j)))
         .collect();
+    let of = numbering.of;
     let sub = Problem {
         a: of.iter().map(|&v| pb.a[v]).collect(),
         movable,
