@@ -708,13 +708,7 @@ impl Reconstructor {
         uniform: &[UniformCurve],
         prior: &[closure::Moved],
     ) -> std::collections::BTreeSet<usize> {
-        let in_use: std::collections::HashSet<usize> = uniform.iter().map(|u| u.index).collect();
-        let gone: std::collections::HashSet<u32> = self
-            .regressed_nodes
-            .iter()
-            .filter(|(k, _)| !in_use.contains(k))
-            .flat_map(|(_, nodes)| nodes.iter().map(|x| x.1))
-            .collect();
+        let gone = self.nodes_of_curves_gone(uniform);
         let moved_to = |curve: usize, typed: u32, now: u32| {
             prior
                 .iter()
@@ -730,10 +724,25 @@ impl Reconstructor {
                             .zip(&u.nodes)
                             .all(|(l, n)| l.0 == n.0 && (l.1 == n.1 || moved_to(u.index, n.1, l.1)))
                 });
-                !same || u.nodes.iter().any(|n| gone.contains(&n.1))
+                !same || u.nodes.iter().any(|n| gone.binary_search(&n.1).is_ok())
             })
             .map(|u| u.index)
             .collect()
+    }
+
+    /// The nodes of the curves the last run regressed that `uniform` has not (undone, or now
+    /// left out): their ties went with them. Sorted, each once.
+    fn nodes_of_curves_gone(&self, uniform: &[UniformCurve]) -> Vec<u32> {
+        let in_use: std::collections::HashSet<usize> = uniform.iter().map(|u| u.index).collect();
+        let mut gone: Vec<u32> = self
+            .regressed_nodes
+            .iter()
+            .filter(|(k, _)| !in_use.contains(k))
+            .flat_map(|(_, nodes)| nodes.iter().map(|x| x.1))
+            .collect();
+        gone.sort_unstable();
+        gone.dedup();
+        gone
     }
 
     /// Whether a run with `p` is a live update: a local regression
@@ -845,17 +854,7 @@ impl Reconstructor {
         p: &NetworkParams,
         warm: bool,
     ) -> RegressionReport {
-        // The nodes of curves that left the regressed network (a curve undone, or now left
-        // out): their ties went with them.
-        let in_use: std::collections::HashSet<usize> = uniform.iter().map(|u| u.index).collect();
-        let mut changed_nodes: Vec<u32> = self
-            .regressed_nodes
-            .iter()
-            .filter(|(k, _)| !in_use.contains(k))
-            .flat_map(|(_, nodes)| nodes.iter().map(|x| x.1))
-            .collect();
-        changed_nodes.sort_unstable();
-        changed_nodes.dedup();
+        let changed_nodes = self.nodes_of_curves_gone(uniform);
         let local = self.local(p);
         let regression = if p.no_regression {
             RegressionReport::default()

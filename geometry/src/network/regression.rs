@@ -249,88 +249,20 @@ pub(crate) fn tied(crease: bool, dot: f64) -> bool {
 }
 
 fn problem(curves: &[UniformCurve]) -> Problem {
-    let mut a = Vec::new();
-    let mut w = Vec::new();
-    let mut var_of = Vec::new();
-    let mut edges = Vec::new();
-    let mut triples = Vec::new();
-    let mut at_node: HashMap<u32, Vec<usize>> = HashMap::new();
-    let crease_nodes = crease_nodes(curves);
-    for c in curves {
-        let n = c.q.len();
-        // A loop that closes at a kink keeps its last frame (arriving) apart from its first.
-        let closed =
-            n > 2 && c.nodes.first().map(|x| x.1) == c.nodes.last().map(|x| x.1) && !c.kinked(0);
-        let base = a.len();
-        let m = if closed { n - 1 } else { n };
-        let vars: Vec<usize> = (0..n)
-            .map(|j| base + if closed { j % m } else { j })
-            .collect();
-        for (j, q) in c.q.iter().take(m).enumerate() {
-            a.push(*q.to_rotation_matrix().matrix());
-            // A closed curve's first sample stands for its last too.
-            let wj = if closed && j == 0 {
-                c.w[0].max(c.w[n - 1])
-            } else {
-                c.w[j]
-            };
-            w.push(wj.max(1e-4));
-        }
-        for j in 0..n - 1 {
-            edges.push((vars[j], vars[j + 1], c.edge_h(j)));
-        }
-        let (first, last) = if closed { (0, m) } else { (1, n - 1) };
-        for j in first..last {
-            let prev = if j == 0 { vars[m - 1] } else { vars[j - 1] };
-            let h = if j == 0 {
-                c.edge_h(m - 1).max(c.edge_h(0))
-            } else {
-                (c.edge_h(j - 1) + c.edge_h(j)) / 2.0
-            };
-            // No bending across a kink.
-            if c.kinked(j) {
-                continue;
-            }
-            triples.push((prev, vars[j], vars[j + 1], h));
-        }
-        for &(i, nd) in &c.nodes {
-            let v = vars[i];
-            let list = at_node.entry(nd).or_default();
-            if !list.contains(&v) {
-                list.push(v);
-            }
-        }
-        var_of.push(vars);
-    }
-    let mut pairs = Vec::new();
-    let mut keys: Vec<&u32> = at_node.keys().collect();
-    keys.sort();
-    for k in keys {
-        let vs = &at_node[k];
-        let crease = crease_nodes.contains(k);
-        for i in 0..vs.len() {
-            for j in i + 1..vs.len() {
-                let (ni, nj) = (a[vs[i]].column(2), a[vs[j]].column(2));
-                if !tied(crease, ni.dot(&nj)) {
-                    continue;
-                }
-                pairs.push((vs[i], vs[j]));
-            }
-        }
-    }
-    Problem {
-        movable: a.len(),
-        a,
-        w,
-        edges,
-        triples,
-        pairs,
-        var_of,
-    }
+    // Every variable free: the local problem of all of them, in the same order.
+    let layout = Layout::of(curves);
+    let (mut pb, _) = local_problem(curves, &layout, &vec![true; layout.total]);
+    pb.var_of = curves
+        .iter()
+        .enumerate()
+        .map(|(k, c)| (0..c.q.len()).map(|j| layout.var(k, j)).collect())
+        .collect();
+    pb
 }
 
-/// The variables of [`problem`] without the problem: each curve's first variable and whether
-/// it is closed (its last sample the variable of its first).
+/// The variables of [`problem`]: each curve's first variable and whether it is closed (its
+/// last sample the variable of its first; a loop that closes at a kink keeps its last frame,
+/// arriving, apart from its first).
 struct Layout {
     base: Vec<usize>,
     closed: Vec<bool>,
@@ -406,9 +338,9 @@ impl Numbering {
     }
 }
 
-/// [`restrict`]`(&problem(curves), free)`, built over the curves with a free frame and the
-/// frames at their nodes only: the same variables in the same order, the same terms in the
-/// same order (the same arithmetic after it).
+/// The problem of `curves` restricted to the variables marked in `free` (as [`restrict`] does
+/// to a whole problem), built over the curves with a free frame and the frames at their nodes
+/// only; with every variable free, the whole problem ([`problem`], without `var_of`).
 fn local_problem(curves: &[UniformCurve], layout: &Layout, free: &[bool]) -> (Problem, Vec<usize>) {
     let mut numbering = Numbering::of(free);
     let movable = numbering.of.len();
