@@ -414,25 +414,7 @@ mod tests {
 
     /// A grid Laplacian with a gauge, and explicit zeros between some far pairs.
     fn grid(k: usize) -> Matrix {
-        let n = k * k;
-        let mut entries: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
-        let mut values = vec![0.0; n];
-        let mut rng = crate::rng::Rng::new(7);
-        for i in 0..k {
-            for j in 0..k {
-                let v = i * k + j;
-                for w in [(j + 1 < k).then(|| v + 1), (i + 1 < k).then(|| v + k)]
-                    .into_iter()
-                    .flatten()
-                {
-                    let g = 0.5 + rng.uniform();
-                    values[v] += g;
-                    values[w] += g;
-                    entries.push((w, v));
-                    values.push(-g);
-                }
-            }
-        }
+        let (n, mut entries, mut values) = crate::sparse_llt::grid_laplacian(k, 7);
         values[0] += 1.0;
         let zeros = vec![(n - 1, 0), (k + 3, 2)];
         for &(r, c) in &zeros {

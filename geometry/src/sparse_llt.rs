@@ -17,7 +17,7 @@
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky,
-    SymmetricOrdering,
+    SymbolicCholeskyRaw, SymmetricOrdering,
 };
 use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Side};
@@ -77,6 +77,11 @@ impl std::fmt::Debug for SpdPattern {
         )
     }
 }
+
+/// A column of `L⁻¹ P` ([`SpdFactor::inverse_column`]): its nonzero entries, `(row, value)`
+/// in increasing row order.
+#[derive(Debug, Clone, Default)]
+pub struct InverseColumn(Vec<(usize, f64)>);
 
 /// A numeric factorisation, ready to solve.
 pub struct SpdFactor {
@@ -363,6 +368,61 @@ impl SpdFactor {
         self.values.len()
     }
 
+    /// Column `i` of `L⁻¹ P` (the factorisation `P A Pᵀ = L Lᵀ`), from which any entry of
+    /// `A⁻¹ = (L⁻¹ P)ᵀ (L⁻¹ P)` follows ([`inverse_entry`](Self::inverse_entry)): a forward
+    /// solve that visits only the path from `i`'s column up the elimination tree (a
+    /// column's parent is its first row below the diagonal), where the column's entries are.
+    /// A few entries of the inverse among a few rows (a live update's loop test at its new
+    /// curve's nodes, issue 51) then cost those paths, not a solve over every row each.
+    /// `None` for a supernodal factorisation (faer's choice for the larger systems), whose
+    /// columns are not stored one by one.
+    pub fn inverse_column(&self, i: usize) -> Option<InverseColumn> {
+        let SymbolicCholeskyRaw::Simplicial(s) = self.chol.raw() else {
+            return None;
+        };
+        let (col_ptr, rows) = (s.col_ptr(), s.row_idx());
+        let mut j = match self.chol.perm() {
+            Some(p) => *p.arrays().1.get(i)?,
+            None => i,
+        };
+        // Faer's simplicial columns hold the diagonal first, then their rows in order.
+        let mut y = vec![0.0; self.n];
+        y[j] = 1.0;
+        let mut out = Vec::new();
+        loop {
+            let (lo, hi) = (col_ptr[j], col_ptr[j + 1]);
+            let yj = std::mem::take(&mut y[j]) / self.values[lo];
+            out.push((j, yj));
+            if lo + 1 >= hi {
+                break;
+            }
+            for p in lo + 1..hi {
+                y[rows[p]] -= self.values[p] * yj;
+            }
+            j = rows[lo + 1];
+        }
+        Some(InverseColumn(out))
+    }
+
+    /// `(A⁻¹)_ij` from the columns of `i` and `j` ([`inverse_column`](Self::inverse_column)):
+    /// the dot product over the rows both paths share.
+    pub fn inverse_entry(a: &InverseColumn, b: &InverseColumn) -> f64 {
+        let (a, b) = (&a.0, &b.0);
+        let (mut p, mut q, mut sum) = (0, 0, 0.0);
+        while p < a.len() && q < b.len() {
+            match a[p].0.cmp(&b[q].0) {
+                std::cmp::Ordering::Less => p += 1,
+                std::cmp::Ordering::Greater => q += 1,
+                std::cmp::Ordering::Equal => {
+                    sum += a[p].1 * b[q].1;
+                    p += 1;
+                    q += 1;
+                }
+            }
+        }
+        sum
+    }
+
     /// Solves in place for `K` right-hand sides given row by row (`b[i][k]`).
     pub fn solve<const K: usize>(&self, b: &mut [[f64; K]]) {
         assert_eq!(b.len(), self.n);
@@ -475,6 +535,32 @@ pub fn block_order(
     Ok(amd_order)
 }
 
+/// A k×k grid's Laplacian with random conductances in [0.5, 1.5) (`seed`), no gauge: `(n,
+/// lower-triangle entries, values)`, for tests.
+#[cfg(test)]
+pub(crate) fn grid_laplacian(k: usize, seed: u64) -> (usize, Vec<(usize, usize)>, Vec<f64>) {
+    let n = k * k;
+    let mut entries: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
+    let mut values = vec![0.0; n];
+    let mut rng = crate::rng::Rng::new(seed);
+    for i in 0..k {
+        for j in 0..k {
+            let v = i * k + j;
+            for w in [(j + 1 < k).then(|| v + 1), (i + 1 < k).then(|| v + k)]
+                .into_iter()
+                .flatten()
+            {
+                let g = 0.5 + rng.uniform();
+                values[v] += g;
+                values[w] += g;
+                entries.push((w, v));
+                values.push(-g);
+            }
+        }
+    }
+    (n, entries, values)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -518,6 +604,37 @@ mod tests {
             SpdPattern::new(2, &[(0, 1)]),
             Err(SolveError::BadEntry { .. })
         ));
+    }
+
+    /// Issue 51: the entries of the inverse from two columns of `L⁻¹ P` are those of solves,
+    /// on a grid Laplacian (ordered by minimum degree: the permutation is not the identity),
+    /// and a column's path is a part of the rows.
+    #[test]
+    fn any_entry_of_the_inverse_from_two_paths_is_a_solves() {
+        let (n, entries, mut values) = grid_laplacian(12, 3);
+        values[5] += 1.0;
+        let f = SpdPattern::new(n, &entries)
+            .unwrap()
+            .factor(&values)
+            .unwrap();
+        let columns: Vec<InverseColumn> = (0..n)
+            .map(|i| f.inverse_column(i).expect("a simplicial factor"))
+            .collect();
+        for j in (0..n).step_by(5) {
+            let mut col = vec![[0.0]; n];
+            col[j][0] = 1.0;
+            f.solve(&mut col);
+            for (i, want) in col.iter().enumerate() {
+                let got = SpdFactor::inverse_entry(&columns[i], &columns[j]);
+                assert!(
+                    (got - want[0]).abs() < 1e-12,
+                    "({i}, {j}): {got} vs {}",
+                    want[0]
+                );
+            }
+        }
+        let mean = columns.iter().map(|c| c.0.len()).sum::<usize>() as f64 / n as f64;
+        assert!(mean < n as f64 / 4.0, "{mean}");
     }
 
     #[test]

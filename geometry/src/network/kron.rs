@@ -34,6 +34,7 @@
 //! ```
 
 use crate::sparse_llt::{CachedPattern, SolveError, SpdFactor};
+use std::sync::Arc;
 
 /// A run of samples along a curve between two tags (or a curve's end): its interior unknowns
 /// (no node among them), the node unknowns at its ends, and the weights of its edges in order
@@ -176,14 +177,14 @@ fn axpy<const K: usize>(y: &mut [f64; K], a: f64, x: &[f64; K]) {
 pub struct KronReduced<'a> {
     runs: &'a [Run],
     blocks: Vec<Tridiagonal>,
-    factor: SpdFactor,
+    factor: Arc<SpdFactor>,
     nodes: usize,
     components: usize,
 }
 
 impl<'a> KronReduced<'a> {
-    /// Factorises the node system (`cache` keeps its symbolic factorisation) and every run's
-    /// block; `ridge` is the gauges' weight.
+    /// Factorises the node system (`cache` keeps its symbolic factorisation, and its numeric
+    /// one for the same values again) and every run's block; `ridge` is the gauges' weight.
     pub fn new(
         n: usize,
         nodes: usize,
@@ -218,11 +219,13 @@ impl<'a> KronReduced<'a> {
                 Tridiagonal::of(r, if alone { ridge } else { 0.0 })
             })
             .collect::<Result<Vec<_>, _>>()?;
+        // Kept: the same node system again (another solve of the same curves, or after a
+        // live update's loop test on them) is not factorised again.
         let factor = if nodes > 0 {
-            cache.factor(nodes, entries, &vals)?
+            cache.factor_kept(nodes, entries, &vals, true)?
         } else {
             // No node: every run is a curve alone; a 1 by 1 system stands in for the nodes'.
-            cache.factor(1, vec![(0, 0)], &[1.0])?
+            cache.factor_kept(1, vec![(0, 0)], &[1.0], true)?
         };
         Ok(KronReduced {
             runs,

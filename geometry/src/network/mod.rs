@@ -37,6 +37,7 @@ use nalgebra::UnitQuaternion;
 use poisson::{PoissonSolver, Positions};
 use prefilter::{prefilter_with_kinks, PrefilterParams, UniformCurve};
 use regression::{RegressionParams, RegressionReport, RegressionSolver};
+use std::cell::RefCell;
 use std::collections::HashMap;
 use std::time::Instant;
 
@@ -326,6 +327,8 @@ pub struct Reconstructor {
     /// Each curve's tags in the last loop test of the whole network, by scan index: a live
     /// update, which tests its new curves only, gives the others these.
     closure_tags: HashMap<usize, Vec<closure::TagMisfit>>,
+    /// What a live update's loop test keeps between updates (its chords of each curve).
+    closure_kept: closure::Kept,
     /// Each curve's distance scale the last full run estimated from the loops
     /// ([`curve_scale`]), by scan index: a live update keeps them.
     curve_scales: HashMap<usize, f64>,
@@ -565,14 +568,27 @@ impl Reconstructor {
         // A live update tests the tags and segments of the curves it regresses whole (new, or
         // with their ties changed) and of those at the nodes of curves undone (issue 51).
         let tested = local.then(|| self.tested_in_update(&uniform, prior));
+        // It keeps the chords of the curves it saw the same, and factorises its node Laplacian
+        // as Poisson's, through Poisson's pattern: Poisson finds it kept when the curves'
+        // lengths are the same after the regression.
+        let kept = local.then(|| {
+            let mut kept = std::mem::take(&mut self.closure_kept);
+            kept.node_system = std::mem::take(self.poisson.node_pattern());
+            RefCell::new(kept)
+        });
         let scope = closure::Scope {
             prior,
             tested: tested.as_ref(),
+            kept: kept.as_ref(),
         };
         let tc = Instant::now();
         let mut closure =
             closure_check(curves, &mut uniform, p, &joined, scope, stop, &mut warnings);
         let closure_ms = tc.elapsed().as_secs_f64() * 1e3;
+        if let Some(kept) = kept {
+            self.closure_kept = kept.into_inner();
+            *self.poisson.node_pattern() = std::mem::take(&mut self.closure_kept.node_system);
+        }
         if closure.interrupted {
             return Err(Unreconstructed::interrupted());
         }
@@ -962,21 +978,23 @@ fn closure_check(
 /// crease passes through, the frames on its two faces are not compared: only pairs within
 /// [`regression::CREASE_PAIR_DEG`] count there (those the regression ties).
 pub fn max_node_normal_angle(p: &Positions) -> f64 {
-    let mut at: std::collections::BTreeMap<u32, (bool, Vec<nalgebra::Vector3<f64>>)> =
-        Default::default();
-    for c in &p.curves {
-        let crease = c.kind == crate::curve::CurveKind::Crease;
-        for &(i, n) in &c.nodes {
-            let e = at.entry(n).or_default();
-            e.0 |= crease;
-            e.1.push(c.normals[i]);
-        }
-    }
+    // Every tag's (node, on a crease, normal), grouped by node (a sort, not a map of lists:
+    // this runs at every live update over every tag).
+    let mut at: Vec<(u32, bool, nalgebra::Vector3<f64>)> = p
+        .curves
+        .iter()
+        .flat_map(|c| {
+            let crease = c.kind == crate::curve::CurveKind::Crease;
+            c.nodes.iter().map(move |&(i, n)| (n, crease, c.normals[i]))
+        })
+        .collect();
+    at.sort_by_key(|e| e.0);
     let mut worst: f64 = 0.0;
-    for (crease, ns) in at.values() {
-        for a in 0..ns.len() {
-            for b in a + 1..ns.len() {
-                let angle = ns[a].angle(&ns[b]).to_degrees();
+    for group in at.chunk_by(|a, b| a.0 == b.0) {
+        let crease = group.iter().any(|e| e.1);
+        for a in 0..group.len() {
+            for b in a + 1..group.len() {
+                let angle = group[a].2.angle(&group[b].2).to_degrees();
                 if !crease || angle < regression::CREASE_PAIR_DEG {
                     worst = worst.max(angle);
                 }

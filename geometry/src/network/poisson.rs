@@ -118,6 +118,17 @@ impl PoissonSolver {
         self.pattern.symbolic_count()
     }
 
+    /// Numeric factorisations of the node system computed so far (for tests and benchmarks).
+    pub fn numeric_count(&self) -> usize {
+        self.pattern.numeric_count()
+    }
+
+    /// The node system's pattern, with its last numeric factorisation kept (a live update's
+    /// loop test factorises through it: `closure::Scope::node_system`).
+    pub(crate) fn node_pattern(&mut self) -> &mut CachedPattern {
+        &mut self.pattern
+    }
+
     pub fn new() -> Self {
         Self::default()
     }
@@ -133,8 +144,9 @@ impl PoissonSolver {
     /// tangents' and the binormals' data ([`YawForm`]; [`super::mounting::estimate_yaw`]).
     pub fn yaw_form(&mut self, curves: &[UniformCurve]) -> Result<YawForm, SolveError> {
         let (node_var, var_of, n) = unknowns(curves);
-        let (along, edge_at) = edges(curves, &var_of, &Vector3::x());
-        let (across, _) = edges(curves, &var_of, &Vector3::y());
+        let (x, y) = (Vector3::x(), Vector3::y());
+        let (along, edge_at) = edges(curves, &var_of, &x, &axes(curves, &x));
+        let (across, _) = edges(curves, &var_of, &y, &axes(curves, &y));
         let runs = runs(curves, &var_of, &along, node_var.len());
         let f = KronReduced::new(n, node_var.len(), &runs, ridge(&along), &mut self.pattern)?;
         let mut x = [vec![[0.0; 3]; n], vec![[0.0; 3]; n]];
@@ -172,7 +184,8 @@ impl PoissonSolver {
     pub fn scale_form(&mut self, curves: &[UniformCurve]) -> Result<ScaleForm, SolveError> {
         let (node_var, var_of, n) = unknowns(curves);
         let nodes = node_var.len();
-        let (edges, edge_at) = edges(curves, &var_of, &Vector3::x());
+        let x = Vector3::x();
+        let (edges, edge_at) = edges(curves, &var_of, &x, &axes(curves, &x));
         let (runs, run_starts) = runs_by_curve(curves, &var_of, &edges, nodes);
         let f = KronReduced::new(n, nodes, &runs, ridge(&edges), &mut self.pattern)?;
         let k = curves.len();
@@ -260,11 +273,9 @@ impl PoissonSolver {
         slides: &[(usize, usize)],
     ) -> Result<(Positions, Vec<f64>), SolveError> {
         let (node_var, var_of, n) = unknowns(curves);
-        let tangents: Vec<Vec<Vector3<f64>>> = curves
-            .iter()
-            .map(|c| c.q.iter().map(|q| q * Vector3::x()).collect())
-            .collect();
-        let (edges, edge_at) = edges(curves, &var_of, &Vector3::x());
+        let x = Vector3::x();
+        let tangents = axes(curves, &x);
+        let (edges, edge_at) = edges(curves, &var_of, &x, &tangents);
         let runs = runs(curves, &var_of, &edges, node_var.len());
         let f = KronReduced::new(n, node_var.len(), &runs, ridge(&edges), &mut self.pattern)?;
         let mut rhs = vec![[0.0; 3]; n];
@@ -312,7 +323,8 @@ impl PoissonSolver {
 /// The unknowns: one per node (in index order), then one per other sample; `(node → unknown,
 /// each curve's unknown per sample, #unknowns)`.
 fn unknowns(curves: &[UniformCurve]) -> (BTreeMap<u32, usize>, Vec<Vec<usize>>, usize) {
-    let mut node_var: BTreeMap<u32, usize> = BTreeMap::new();
+    // Numbered in a hash map (looked up at every tag), returned in node order.
+    let mut node_var: std::collections::HashMap<u32, usize> = std::collections::HashMap::new();
     for c in curves {
         for &(_, n) in &c.nodes {
             let k = node_var.len();
@@ -332,7 +344,7 @@ fn unknowns(curves: &[UniformCurve]) -> (BTreeMap<u32, usize>, Vec<Vec<usize>>, 
         }
         var_of.push(v);
     }
-    (node_var, var_of, n)
+    (node_var.into_iter().collect(), var_of, n)
 }
 
 /// The data of the edge from sample `j` of `c` to the next: `h` times the mean of the frames'
@@ -347,18 +359,35 @@ fn edge_data(c: &UniformCurve, j: usize, axis: &Vector3<f64>) -> (Vector3<f64>, 
     ((c.q[j] * axis + arriving * axis) * (0.5 * h), h)
 }
 
+/// Each sample's frame's `axis` (`Vector3::x()`: the tangents), curve by curve.
+fn axes(curves: &[UniformCurve], axis: &Vector3<f64>) -> Vec<Vec<Vector3<f64>>> {
+    curves
+        .iter()
+        .map(|c| c.q.iter().map(|q| q * axis).collect())
+        .collect()
+}
+
 /// Every edge of every curve, in order along each, with its data from the frames' `axis`
-/// (`Vector3::x()`: the tangents), and the (curve position, sample) of each edge's start.
+/// (`Vector3::x()`: the tangents), given at each sample (`along`, [`axes`]) and the
+/// (curve position, sample) of each edge's start. The same data as [`edge_data`]'s.
 fn edges(
     curves: &[UniformCurve],
     var_of: &[Vec<usize>],
     axis: &Vector3<f64>,
+    along: &[Vec<Vector3<f64>>],
 ) -> (Vec<Edge>, Vec<(usize, usize)>) {
-    let mut edges = Vec::new();
-    let mut edge_at = Vec::new();
+    let total: usize = curves.iter().map(|c| c.q.len().saturating_sub(1)).sum();
+    let mut edges = Vec::with_capacity(total);
+    let mut edge_at = Vec::with_capacity(total);
     for (ci, c) in curves.iter().enumerate() {
-        for j in 0..c.q.len().saturating_sub(1) {
-            let (v, h) = edge_data(c, j, axis);
+        let a = &along[ci];
+        for (j, h) in c.edge_steps().enumerate() {
+            let arriving = if c.kinked(j + 1) {
+                c.arriving(j + 1) * axis
+            } else {
+                a[j + 1]
+            };
+            let v = (a[j] + arriving) * (0.5 * h);
             // Residual (x_b − x_a)/h − t, squared: weight 1/h² on (x_b − x_a − h t).
             edges.push(Edge {
                 a: var_of[ci][j],
@@ -402,8 +431,22 @@ fn runs_by_curve(
 /// The weight of the gauge on the lowest unknown of each connected component: the edges' mean
 /// weight, at least 1.
 fn ridge(edges: &[Edge]) -> f64 {
-    let mean_w = edges.iter().map(|e| e.w).sum::<f64>() / edges.len().max(1) as f64;
-    mean_w.max(1.0)
+    mean_weight(edges.iter().map(|e| e.w), edges.len())
+}
+
+/// [`ridge`] of the edges of `curves`, without their data (the loop-closure test's node
+/// Laplacian, shared with Poisson's in a live update: `closure::Scope::node_system`).
+pub(crate) fn gauge_weight(curves: &[UniformCurve]) -> f64 {
+    let weights = curves
+        .iter()
+        .flat_map(|c| c.edge_steps().map(|h| 1.0 / (h * h)));
+    let count = curves.iter().map(|c| c.q.len().saturating_sub(1)).sum();
+    mean_weight(weights, count)
+}
+
+/// The mean of `count` edge weights, at least 1.
+fn mean_weight(weights: impl Iterator<Item = f64>, count: usize) -> f64 {
+    (weights.sum::<f64>() / count.max(1) as f64).max(1.0)
 }
 
 /// Adds the edges' data to the right-hand side (#unknowns by 3).
@@ -454,11 +497,13 @@ fn misfit(
         h_sum += e.w.sqrt().recip();
         let mut r = x[e.b] - x[e.a] - e.v;
         // Into a sliding tag (sign −1) and out of one (sign +1).
-        if let Some(s) = slid.get(&(ci, j + 1)) {
-            r -= tangents[ci][j + 1] * *s;
-        }
-        if let Some(s) = slid.get(&(ci, j)) {
-            r += tangents[ci][j] * *s;
+        if !slid.is_empty() {
+            if let Some(s) = slid.get(&(ci, j + 1)) {
+                r -= tangents[ci][j + 1] * *s;
+            }
+            if let Some(s) = slid.get(&(ci, j)) {
+                r += tangents[ci][j] * *s;
+            }
         }
         chi2 += e.w * r.norm_squared();
         if let Some(x) = chi2_segments[ci].get_mut(seg) {
@@ -652,7 +697,13 @@ mod tests {
         // The least squares solved again with each curve's edge data scaled (the weights
         // as they were: the form's model).
         let (node_var, var_of, n) = unknowns(&curves);
-        let (edges0, edge_at) = edges(&curves, &var_of, &Vector3::x());
+        let x = Vector3::x();
+        let (edges0, edge_at) = edges(&curves, &var_of, &x, &axes(&curves, &x));
+        // The edges from the tangents along are each edge's data, to the bit.
+        for (e, &(ci, j)) in edges0.iter().zip(&edge_at) {
+            let (v, h) = edge_data(&curves[ci], j, &x);
+            assert_eq!((e.v, e.w.to_bits()), (v, (1.0 / (h * h)).to_bits()));
+        }
         let runs = runs(&curves, &var_of, &edges0, node_var.len());
         let mut cache = CachedPattern::default();
         let f = KronReduced::new(n, node_var.len(), &runs, ridge(&edges0), &mut cache).unwrap();

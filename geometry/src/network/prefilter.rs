@@ -84,6 +84,20 @@ impl UniformCurve {
         self.h[seg]
     }
 
+    /// [`edge_h`](Self::edge_h) of every edge in order (from sample 0 to 1, 1 to 2, …), in
+    /// one pass along the tags.
+    pub fn edge_steps(&self) -> impl Iterator<Item = f64> + '_ {
+        let segments = self.h.len().max(1);
+        // The tags at samples up to j (`segment_of`'s partition point).
+        let mut upto = 0;
+        (0..self.q.len().saturating_sub(1)).map(move |j| {
+            while upto < self.nodes.len() && self.nodes[upto].0 <= j {
+                upto += 1;
+            }
+            self.h[upto.saturating_sub(1).min(segments - 1)]
+        })
+    }
+
     /// Length, m.
     pub fn length(&self) -> f64 {
         self.d.last().copied().unwrap_or(0.0) - self.d.first().copied().unwrap_or(0.0)
@@ -640,6 +654,37 @@ mod tests {
         // Steps: 25 of 1 cm, then 75 of 1 cm.
         assert_eq!(u.h.len(), 2);
         assert!((u.h[0] - 0.01).abs() < 1e-12 && (u.h[1] - 0.01).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_steps_along_are_each_edges_step() {
+        let mut c = curve(2000, |u| u * u);
+        // Segments of different steps: 0.3 m at 7 mm, … (tags at 0, 0.3, 0.55, 1 m).
+        c.tags.insert(
+            1,
+            Tag {
+                node: 9,
+                d: 0.3,
+                t: 0.3,
+                uncertain: false,
+            },
+        );
+        c.tags[2].d = 0.55;
+        let u = prefilter(
+            &c,
+            &PrefilterParams {
+                h: 0.007,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(u.h.len(), 3);
+        let steps: Vec<f64> = u.edge_steps().collect();
+        assert_eq!(steps.len(), u.q.len() - 1);
+        for (j, h) in steps.iter().enumerate() {
+            assert_eq!(h.to_bits(), u.edge_h(j).to_bits(), "edge {j}");
+        }
+        assert!(u.h.windows(2).any(|w| w[0] != w[1]), "{:?}", u.h);
     }
 
     #[test]
