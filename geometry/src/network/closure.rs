@@ -1779,6 +1779,55 @@ mod tests {
 
     /// Issue 51: a live update's join pass asks how its joins' loops fit of those tags alone
     /// ([`loop_test`] with `alone`): the figures of the whole network's test, by solves.
+    /// Issue 51: the entries of the inverse a live test reads are the inverse's, from paths
+    /// on a simplicial factor (a grid) and from solves on a supernodal one (a dense matrix,
+    /// as faer factorises the larger networks).
+    #[test]
+    fn the_inverse_columns_are_found_by_paths_or_by_solves() {
+        let (grid_n, grid_entries, mut grid_values) = crate::sparse_llt::grid_laplacian(9, 5);
+        grid_values[0] += 1.0;
+        let dense_n = 200;
+        let mut dense_entries = Vec::new();
+        let mut dense_values = Vec::new();
+        let mut rng = Rng::new(9);
+        for i in 0..dense_n {
+            for j in 0..=i {
+                dense_entries.push((i, j));
+                dense_values.push(if i == j {
+                    dense_n as f64
+                } else {
+                    rng.uniform() - 0.5
+                });
+            }
+        }
+        for (n, entries, values, simplicial) in [
+            (grid_n, grid_entries, grid_values, true),
+            (dense_n, dense_entries, dense_values, false),
+        ] {
+            let f = SpdPattern::new(n, &entries)
+                .unwrap()
+                .factor(&values)
+                .unwrap();
+            assert_eq!(f.inverse_column(0).is_some(), simplicial);
+            let nodes: Vec<usize> = (0..n).step_by(11).collect();
+            let mut columns = Columns::default();
+            columns.add(&f, nodes.iter().copied());
+            for &j in &nodes {
+                let mut col = vec![[0.0]; n];
+                col[j][0] = 1.0;
+                f.solve(&mut col);
+                for &i in &nodes {
+                    let got = columns.get(i, j);
+                    assert!(
+                        (got - col[i][0]).abs() <= 1e-12,
+                        "({i}, {j}): {got} vs {:?}",
+                        col[i]
+                    );
+                }
+            }
+        }
+    }
+
     /// Issue 51: a live update's test factorises its node Laplacian through Poisson's node
     /// system's pattern, to the bit Poisson's matrix: Poisson, on the same curves, finds the
     /// factorisation kept and does not factorise again. The test's own chords of a curve
