@@ -239,8 +239,23 @@ pub fn closest_on_polyline(
     p: &[nalgebra::Vector3<f64>],
     x: &nalgebra::Vector3<f64>,
 ) -> (usize, f64, f64) {
+    let mut best = closest_among(p, x, 0..p.len().saturating_sub(1));
+    if p.len() == 1 {
+        best = (0, 0.0, (p[0] - x).norm());
+    }
+    best
+}
+
+/// As [`closest_on_polyline`], over the segments `segments` of `p` alone (each `i` the
+/// segment from point `i` to `i + 1`, in increasing order): the same result wherever the
+/// closest segment is among them.
+pub fn closest_among(
+    p: &[nalgebra::Vector3<f64>],
+    x: &nalgebra::Vector3<f64>,
+    segments: impl Iterator<Item = usize>,
+) -> (usize, f64, f64) {
     let mut best = (0, 0.0, f64::INFINITY);
-    for i in 0..p.len().saturating_sub(1) {
+    for i in segments.filter(|&i| i + 1 < p.len()) {
         let (a, b) = (p[i], p[i + 1]);
         let ab = b - a;
         let l2 = ab.norm_squared();
@@ -254,8 +269,36 @@ pub fn closest_on_polyline(
             best = (i, t, d);
         }
     }
-    if p.len() == 1 {
-        best = (0, 0.0, (p[0] - x).norm());
-    }
     best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    /// The closest point among some segments is the whole polyline's, to the bit, wherever
+    /// those segments hold it (a spiral passing a point twice: the nearer pass is kept).
+    #[test]
+    fn the_closest_among_segments_holding_it_is_the_polylines() {
+        let p: Vec<Vector3<f64>> = (0..400)
+            .map(|i| {
+                let t = i as f64 * 0.05;
+                Vector3::new(t.cos() * (1.0 + 0.01 * t), t.sin() * (1.0 + 0.01 * t), 0.0)
+            })
+            .collect();
+        for x in [Vector3::new(1.05, 0.02, 0.01), Vector3::new(-0.3, 1.0, 0.0)] {
+            let whole = closest_on_polyline(&p, &x);
+            let (j, u, d) = whole;
+            let around = j.saturating_sub(3)..(j + 4).min(p.len() - 1);
+            let got = closest_among(&p, &x, around.clone());
+            assert_eq!(
+                (got.0, got.1.to_bits(), got.2.to_bits()),
+                (j, u.to_bits(), d.to_bits())
+            );
+            // Without the closest segment, another (farther) one.
+            let other = closest_among(&p, &x, (0..p.len() - 1).filter(|i| !around.contains(i)));
+            assert!(other.2 > d);
+        }
+    }
 }

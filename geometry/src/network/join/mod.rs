@@ -331,13 +331,24 @@ struct Approach {
     tangent: Vector3<f64>,
 }
 
-/// The closest approach of `c`'s polyline to `p`.
-fn closest_approach(c: &CurvePositions, p: &Vector3<f64>) -> Option<Approach> {
+/// The closest approach of `c`'s polyline to `p`: over its segments `among` (increasing)
+/// alone where given, the same wherever the closest segment is among them.
+fn closest_approach(
+    c: &CurvePositions,
+    p: &Vector3<f64>,
+    among: Option<&[usize]>,
+) -> Option<Approach> {
     let n = c.points.len().min(c.normals.len()).min(c.d.len());
     if n < 2 {
         return None;
     }
-    let (j, u, dist) = crate::curve::closest_on_polyline(&c.points[..n], p);
+    let (j, u, dist) = match among {
+        Some(segments) => crate::curve::closest_among(&c.points[..n], p, segments.iter().copied()),
+        None => crate::curve::closest_on_polyline(&c.points[..n], p),
+    };
+    if !dist.is_finite() {
+        return None;
+    }
     let d = c.d[j] + (c.d[j + 1] - c.d[j]) * u;
     let tangent = c
         .tangents
@@ -395,6 +406,12 @@ pub fn find_joins_within(net: &Positions, p: &JoinParams, lonely_reach: f64) -> 
     });
     let cell = lonely_reach.max(p.distance_m) + steps.fold(0.0, f64::max);
     let grid = (cell > 0.0 && cell.is_finite()).then(|| grid::Grid::of(net, cell, |_| true));
+    // Each curve's largest step along (for the clearance from its nodes).
+    let steps: Vec<f64> = net
+        .curves
+        .iter()
+        .map(|c| c.d.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max))
+        .collect();
     for (node, curves) in &curves_at_nodes(net) {
         let node = *node;
         if node >= ANONYMOUS_NODE_BASE {
@@ -428,25 +445,43 @@ pub fn find_joins_within(net: &Positions, p: &JoinParams, lonely_reach: f64) -> 
         let Some(pos) = net.nodes.get(&node).filter(|_| !own.is_empty()) else {
             continue;
         };
-        let near: Option<Vec<usize>> = grid.as_ref().map(|g| {
-            let mut v: Vec<usize> = g.around(pos).map(|(ci, _)| ci).collect();
+        // The samples near the node, by curve: a segment within the reach has an end among
+        // them (a cell is the reach and a step), so the closest approach within the reach is
+        // found on the segments at them alone.
+        let near: Option<Vec<(usize, usize)>> = grid.as_ref().map(|g| {
+            let mut v: Vec<(usize, usize)> = g.around(pos).collect();
             v.sort_unstable();
             v.dedup();
             v
         });
+        let segments_near = |ci: usize| -> Option<Vec<usize>> {
+            let near = near.as_ref()?;
+            let from = near.partition_point(|x| x.0 < ci);
+            let mut segs: Vec<usize> = near[from..]
+                .iter()
+                .take_while(|x| x.0 == ci)
+                .flat_map(|&(_, j)| [j.checked_sub(1), Some(j)])
+                .flatten()
+                .collect();
+            segs.dedup();
+            Some(segs)
+        };
         let best = net
             .curves
             .iter()
             .enumerate()
             .filter(|&(ci, _)| !curves.contains(&ci))
-            .filter(|&(ci, _)| near.as_ref().is_none_or(|v| v.binary_search(&ci).is_ok()))
-            .filter_map(|(_, c)| {
+            .filter_map(|(ci, c)| {
+                let among = segments_near(ci);
+                if among.as_ref().is_some_and(|s| s.is_empty()) {
+                    return None;
+                }
                 let Approach {
                     distance: dist,
                     d,
                     faces: theirs,
                     tangent,
-                } = closest_approach(c, pos)?;
+                } = closest_approach(c, pos, among.as_deref())?;
                 // Crossing, not running alongside one of the node's curves.
                 if along
                     .iter()
@@ -461,7 +496,7 @@ pub fn find_joins_within(net: &Positions, p: &JoinParams, lonely_reach: f64) -> 
                 } else {
                     face_angle(&own, &theirs)
                 };
-                let step = c.d.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
+                let step = steps[ci];
                 let clear = c
                     .nodes
                     .iter()
