@@ -124,7 +124,7 @@ impl PoissonSolver {
     }
 
     /// The node system's pattern, with its last numeric factorisation kept (a live update's
-    /// loop test factorises through it: `closure::Scope::node_system`).
+    /// loop test factorises through it: `closure::Kept::node_system`).
     pub(crate) fn node_pattern(&mut self) -> &mut CachedPattern {
         &mut self.pattern
     }
@@ -435,7 +435,7 @@ fn ridge(edges: &[Edge]) -> f64 {
 }
 
 /// [`ridge`] of the edges of `curves`, without their data (the loop-closure test's node
-/// Laplacian, shared with Poisson's in a live update: `closure::Scope::node_system`).
+/// Laplacian, shared with Poisson's in a live update: `closure::Kept::node_system`).
 pub(crate) fn gauge_weight(curves: &[UniformCurve]) -> f64 {
     let weights = curves
         .iter()
