@@ -330,6 +330,7 @@ fn scene_errors_name_the_key() {
         ("[surface]\nkind = \"blob\"\n[[curve]]\nnormal = [0.0, 0.0, 1.0]\n", "surface.kind"),
         ("[surface]\nkind = \"sphere\"\nradius = 1.0\n[[curve]]\nnormal = [0.0, 0.0, 1.0]\noffset = 3.0\n", "curve[0]"),
         ("[surface]\nkind = \"sphere\"\nradius = 1.0\n[[curve]]\nthrough = [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [2.0, 2.0, 2.0]]\n", "curve[0]"),
+        ("[surface]\nkind = \"sphere\"\nradius = 1.0\n[[curve]]\nnormal = [0.0, 0.0, 1.0]\nclosed = true\ntag_points = true\n", "curve[0]"),
     ];
     for (i, (body, key)) in cases.iter().enumerate() {
         let p = dir.join(format!("s{i}.toml"));

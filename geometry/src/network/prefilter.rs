@@ -53,15 +53,25 @@ pub struct UniformCurve {
     /// Raw samples removed as outliers.
     pub outliers: usize,
     /// Samples at a node where the curve's tangent jumps (a crease's corner, a curve crossing
-    /// a crease: [`KINK_DEG`]), with the frame arriving there (`q` holds the one leaving);
-    /// `0` for a closed curve whose loop closes at such a node (its last sample arrives).
+    /// a crease, a corner where the device turned in place: [`KINK_DEG`]), with the frame
+    /// arriving there (`q` holds the one leaving); `0` for a closed curve whose loop closes at
+    /// such a node (its last sample arrives).
     pub kinks: Vec<(usize, UnitQuaternion<f64>)>,
 }
 
 /// At a node a crease passes through, a curve whose tangent turns by more than this (between
 /// the samples half a step to two steps before and after) has a kink there: each side is
-/// resampled from its own samples, degrees.
+/// resampled from its own samples, degrees. At any other node, only where the device also
+/// turned in place by more than this while it stood there (a boundary's corner: issue 52;
+/// rolled over a bend, it turns as it moves) or, for a loop's closing node, where its ends
+/// turn by more than [`CLOSING_KINK_DEG`].
 pub const KINK_DEG: f64 = 15.0;
+
+/// A loop closing at a node no crease passes through kinks there when its tangents leaving
+/// and arriving (compared as for [`KINK_DEG`]) turn by more than this, degrees: a boundary's
+/// corner (the independent simulator's saddle: 85°), not a tight bend (the bumpy cube's
+/// sections, closing on a rounded edge: 22°).
+pub const CLOSING_KINK_DEG: f64 = 45.0;
 
 impl UniformCurve {
     /// The frame arriving at sample `j` (the one leaving it, `q[j]`, unless a kink is there).
@@ -163,7 +173,7 @@ pub fn prefilter(c: &Curve, p: &PrefilterParams) -> Result<UniformCurve, Prefilt
 }
 
 /// Resamples one curve, allowing kinks ([`KINK_DEG`]) at the nodes `kink_nodes` (those a
-/// crease passes through).
+/// crease passes through) and at its corners turned in place.
 pub fn prefilter_with_kinks(
     c: &Curve,
     p: &PrefilterParams,
@@ -174,12 +184,12 @@ pub fn prefilter_with_kinks(
     if raw.is_empty() {
         return Err(PrefilterError::NoSamples { curve: c.index });
     }
-    let uniq = merge_duplicates(raw);
+    let (uniq, turns) = merge_duplicates(raw);
     let ds: Vec<f64> = uniq.iter().map(|u| u.0).collect();
     let spacing = quadrature_weights(&ds);
     let grid = UniformGrid::of(c, p);
     let closed = c.tags.first().map(|t| t.node) == c.tags.last().map(|t| t.node);
-    let kink_at = grid.kinks(kink_nodes, closed, &uniq, &ds);
+    let kink_at = grid.kinks(kink_nodes, closed, &uniq, &ds, &turns);
     let UniformGrid { d, nodes, hs } = grid;
     // The distances each sample's kernel may use: between the kinks around it (the standing
     // samples at a kink, turning from one way to the other, on neither side).
@@ -328,10 +338,14 @@ fn usable_samples(c: &Curve, p: &PrefilterParams) -> (Vec<RawSample>, usize) {
 }
 
 /// The samples sorted by distance, duplicates (same distance: the device stood still) made
-/// one sample: their mean orientation with their mean weight.
-fn merge_duplicates(mut raw: Vec<RawSample>) -> Vec<RawSample> {
+/// one sample: their mean orientation with their mean weight. Beside each, how far the
+/// device's tangent turned while it stood there (radians, [`turn_in_place`]; 0 for a sample
+/// alone).
+fn merge_duplicates(mut raw: Vec<RawSample>) -> (Vec<RawSample>, Vec<f64>) {
+    // A stable sort: samples of one distance stay in time order.
     raw.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut uniq: Vec<RawSample> = Vec::with_capacity(raw.len());
+    let mut turns: Vec<f64> = Vec::with_capacity(raw.len());
     let mut i = 0;
     while i < raw.len() {
         let mut j = i + 1;
@@ -340,6 +354,7 @@ fn merge_duplicates(mut raw: Vec<RawSample>) -> Vec<RawSample> {
         }
         if j - i == 1 {
             uniq.push(raw[i]);
+            turns.push(0.0);
         } else {
             let mut t = StructureTensor::new();
             for r in &raw[i..j] {
@@ -348,12 +363,42 @@ fn merge_duplicates(mut raw: Vec<RawSample>) -> Vec<RawSample> {
             let w = raw[i..j].iter().map(|r| r.2).sum::<f64>() / (j - i) as f64;
             if let Some(q) = t.mean() {
                 uniq.push((raw[i].0, q, w));
+                turns.push(turn_in_place(&raw[i..j]));
             }
         }
         i = j;
     }
-    uniq
+    (uniq, turns)
 }
+
+/// How far the device turned in place while standing at one distance (samples in time order),
+/// radians: the tangent of the last [`TURN_ENDS`] samples against the first's, turned about
+/// the first's normal. A hand that tilts the device while typing turns it about a level axis
+/// (not counted), and puts it back.
+fn turn_in_place(stand: &[RawSample]) -> f64 {
+    let k = TURN_ENDS.min(stand.len() / 2);
+    if k == 0 {
+        return 0.0;
+    }
+    let mean = |s: &[RawSample], axis: nalgebra::Vector3<f64>| -> nalgebra::Vector3<f64> {
+        s.iter().map(|r| r.1 * axis).sum::<nalgebra::Vector3<f64>>()
+    };
+    let (x, y) = (nalgebra::Vector3::x(), nalgebra::Vector3::y());
+    let (Some(t0), Some(t1)) = (
+        mean(&stand[..k], x).try_normalize(1e-12),
+        mean(&stand[stand.len() - k..], x).try_normalize(1e-12),
+    ) else {
+        return 0.0;
+    };
+    let b = mean(&stand[..k], y);
+    let Some(b0) = (b - t0 * t0.dot(&b)).try_normalize(1e-12) else {
+        return 0.0;
+    };
+    t1.dot(&b0).atan2(t1.dot(&t0)).abs()
+}
+
+/// Samples averaged at either end of a stand to tell its turn ([`turn_in_place`]).
+const TURN_ENDS: usize = 5;
 
 /// Quadrature weights of samples at distances `ds` (sorted): the kernel integrates over
 /// distance, so each sample stands for the stretch of curve around it (where the operator
@@ -407,15 +452,18 @@ impl UniformGrid {
         UniformGrid { d, nodes, hs }
     }
 
-    /// The samples (indices) at a kink: at the allowed nodes (`kink_nodes`), the mean
-    /// tangents of the raw samples `uniq` (at distances `ds`) half a step to two steps before
-    /// and after turn by more than [`KINK_DEG`].
+    /// The samples (indices) at a kink: where the mean tangents of the raw samples `uniq` (at
+    /// distances `ds`) half a step to two steps before and after turn by more than
+    /// [`KINK_DEG`], at the nodes `kink_nodes`, or at others where the samples standing there
+    /// turned in place (`turns`, per sample of `uniq`) by more than it too; at a loop's
+    /// closing node, by more than [`CLOSING_KINK_DEG`].
     fn kinks(
         &self,
         kink_nodes: &[u32],
         closed: bool,
         uniq: &[RawSample],
         ds: &[f64],
+        turns: &[f64],
     ) -> Vec<usize> {
         let (d, hs) = (&self.d, &self.hs);
         let tangent_between = |a: f64, b: f64| -> Option<nalgebra::Vector3<f64>> {
@@ -432,9 +480,6 @@ impl UniformGrid {
         let kink_cos = KINK_DEG.to_radians().cos();
         let mut kink_at: Vec<usize> = Vec::new();
         for (k, &(i, node)) in self.nodes.iter().enumerate() {
-            if !kink_nodes.contains(&node) {
-                continue;
-            }
             let last_tag = k + 1 == self.nodes.len();
             if last_tag {
                 continue;
@@ -442,6 +487,33 @@ impl UniformGrid {
             let dn = d[i];
             let hb = if k > 0 { hs[k - 1] } else { hs[hs.len() - 1] };
             let ha = hs[k];
+            // Elsewhere than on a crease, the device turned in place at the node (a corner of
+            // a boundary): its samples standing there turn by more than a kink. A loop that
+            // closes at a corner is not turned there (it sets off along one side and stops
+            // coming in along the other): its two ends' tangents alone tell, by more than a
+            // tight bend turns them ([`CLOSING_KINK_DEG`]).
+            let closing = closed && k == 0 && !kink_nodes.contains(&node);
+            if closing {
+                if let (Some(b), Some(a)) = (
+                    tangent_between(d[d.len() - 1] - 2.0 * hb, d[d.len() - 1] - 0.5 * hb),
+                    tangent_between(dn + 0.5 * ha, dn + 2.0 * ha),
+                ) {
+                    if b.dot(&a) < CLOSING_KINK_DEG.to_radians().cos() {
+                        kink_at.push(i);
+                    }
+                }
+                continue;
+            }
+            if !kink_nodes.contains(&node) {
+                let near = 0.1 * ha.min(hb);
+                let (lo, hi) = (
+                    ds.partition_point(|&x| x < dn - near),
+                    ds.partition_point(|&x| x <= dn + near),
+                );
+                if !turns[lo..hi].iter().any(|&t| t > KINK_DEG.to_radians()) {
+                    continue;
+                }
+            }
             let before = if k > 0 {
                 tangent_between(dn - 2.0 * hb, dn - 0.5 * hb)
             } else if closed {
@@ -618,14 +690,134 @@ mod tests {
         assert!(u.q[node].angle_to(&turn(std::f64::consts::FRAC_PI_2)) < 1e-9);
         assert!(u.q[node - 1].angle_to(&turn(0.0)) < 1e-9);
         assert!(u.q[node + 1].angle_to(&turn(std::f64::consts::FRAC_PI_2)) < 1e-9);
-        // Without the kink the node's frame is a blend of both ways.
-        let smooth = prefilter(&c, &p).unwrap();
-        assert!(smooth.kinks.is_empty());
-        let a = smooth.q[node].angle_to(&turn(0.0)).to_degrees();
-        assert!((20.0..70.0).contains(&a), "{a}°");
+        // Turned in place, the node kinks on any curve (issue 52), with the same frames.
+        assert_eq!(prefilter(&c, &p).unwrap(), u);
         // A node with no turn is no kink.
         let straight = prefilter_with_kinks(&curve(1000, |u| u), &p, &[1]).unwrap();
         assert!(straight.kinks.is_empty());
+    }
+
+    /// A curve of straight legs from `legs` (each `(length, frame)`), standing `stand`
+    /// samples at each node between two legs, its frame going from the leg's before to the
+    /// next one's by `during(before, after, u)` (`u` from 0 to 1); tags at every node.
+    /// Samples every millimetre, one per unit of time.
+    fn legs_curve(
+        legs: &[(f64, UnitQuaternion<f64>)],
+        stand: usize,
+        during: impl Fn(&UnitQuaternion<f64>, &UnitQuaternion<f64>, f64) -> UnitQuaternion<f64>,
+        closed: bool,
+    ) -> Curve {
+        let mut s = Samples::default();
+        let mut push = |d: f64, q: UnitQuaternion<f64>| {
+            s.t.push(s.t.len() as f64);
+            s.d.push(d);
+            s.q.push([q.w, q.i, q.j, q.k]);
+            s.flags.push(0);
+            s.w.push(1.0);
+        };
+        let mut tags = vec![0.0];
+        let mut d0 = 0.0;
+        for (k, &(len, q)) in legs.iter().enumerate() {
+            let n = (len * 1000.0).round() as usize;
+            // (A leg after a stand begins a millimetre on.)
+            for i in usize::from(k > 0)..n {
+                push(d0 + len * i as f64 / n as f64, q);
+            }
+            d0 += len;
+            tags.push(d0);
+            if let Some((_, next)) = legs.get(k + 1) {
+                for i in 0..=stand {
+                    push(d0, during(&q, next, i as f64 / stand as f64));
+                }
+            } else {
+                push(d0, q);
+            }
+        }
+        let nodes = tags.len();
+        Curve {
+            index: 0,
+            kind: crate::curve::CurveKind::Boundary,
+            closed,
+            tags: tags
+                .iter()
+                .enumerate()
+                .map(|(k, &d)| Tag {
+                    node: if closed && k + 1 == nodes {
+                        0
+                    } else {
+                        k as u32
+                    },
+                    d,
+                    t: 0.0,
+                    uncertain: false,
+                })
+                .collect(),
+            segment_lengths: vec![None; nodes - 1],
+            samples: s,
+        }
+    }
+
+    /// Issue 52: the independent simulator's saddle has a boundary with corners (no crease):
+    /// the operator turns the device in place at each corner node. Each corner kinks, the
+    /// loop's closing corner too (its two ends' tangents), and the frames either side of a
+    /// corner are their side's: before, the kernel blended them at each corner, and the
+    /// network cut its corners (the saddle's with true orientations and distances: 0.074–0.079 %
+    /// of the diagonal, 0.002–0.027 % with the kinks).
+    #[test]
+    fn issue_52_a_corner_turned_in_place_kinks_without_a_crease() {
+        let turn = |a: f64| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a);
+        let right = std::f64::consts::FRAC_PI_2;
+        // A square's four sides, 0.3 m each, turning left at each corner.
+        let legs: Vec<_> = (0..4).map(|k| (0.3, turn(right * k as f64))).collect();
+        let c = legs_curve(&legs, 60, |a, b, u| a.slerp(b, u), true);
+        let u = prefilter(&c, &PrefilterParams::default()).unwrap();
+        let corners: Vec<usize> = u.nodes[..4].iter().map(|n| n.0).collect();
+        let kinked: Vec<usize> = u.kinks.iter().map(|k| k.0).collect();
+        assert_eq!(kinked, corners);
+        for (k, &j) in corners.iter().enumerate() {
+            let leaving = turn(right * k as f64);
+            let arriving = turn(right * ((k + 3) % 4) as f64);
+            assert!(u.q[j].angle_to(&leaving) < 1e-9, "corner {k} leaving");
+            // (The loop arrives at its closing corner at its last sample.)
+            let (arrived, before) = match j {
+                0 => (u.q[u.q.len() - 1], u.q[u.q.len() - 2]),
+                _ => (u.arriving(j), u.q[j - 1]),
+            };
+            assert!(arrived.angle_to(&arriving) < 1e-9, "corner {k} arriving");
+            assert!(u.q[j + 1].angle_to(&leaving) < 1e-9);
+            assert!(before.angle_to(&arriving) < 1e-9);
+        }
+        // The same corners taken rolling (the device turned without standing): no kink but
+        // the closing corner, whose ends' tangents are 90° apart.
+        let rolled = legs_curve(&legs, 1, |a, _, _| *a, true);
+        let u = prefilter(&rolled, &PrefilterParams::default()).unwrap();
+        assert_eq!(u.kinks.iter().map(|k| k.0).collect::<Vec<_>>(), vec![0]);
+    }
+
+    /// What is not a corner turned in place: the device rolled over a ridge (its frame pitched
+    /// 30° about its second axis while it stood at the node: a hand tilting it while typing,
+    /// the next leg going down the other side); a loop closing on a bend of 30° (the bumpy
+    /// cube's sections, closing on a rounded edge: 22°).
+    #[test]
+    fn a_tilt_standing_and_a_loop_closing_on_a_bend_are_no_kinks() {
+        let pitch = |a: f64| UnitQuaternion::from_axis_angle(&Vector3::y_axis(), a);
+        let ridge = [(0.3, pitch(0.0)), (0.3, pitch(30f64.to_radians()))];
+        let c = legs_curve(&ridge, 60, |a, b, u| a.slerp(b, u), false);
+        let u = prefilter(&c, &PrefilterParams::default()).unwrap();
+        assert!(u.kinks.is_empty(), "{:?}", u.kinks);
+        // At a crease node, the same bend kinks (the tangents alone).
+        let u = prefilter_with_kinks(&c, &PrefilterParams::default(), &[1]).unwrap();
+        assert_eq!(u.kinks.len(), 1);
+        // Four legs turning 10° at each node as the device rolls on, the loop's ends meeting
+        // at 30°: no kink.
+        let turn = |a: f64| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a);
+        let legs: Vec<_> = [0.0, 10.0, 20.0, 30.0]
+            .iter()
+            .map(|a: &f64| (0.3, turn(a.to_radians())))
+            .collect();
+        let c = legs_curve(&legs, 1, |a, _, _| *a, true);
+        let u = prefilter(&c, &PrefilterParams::default()).unwrap();
+        assert!(u.kinks.is_empty(), "{:?}", u.kinks);
     }
 
     #[test]

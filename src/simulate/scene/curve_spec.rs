@@ -31,6 +31,10 @@ pub(super) struct CurveToml {
     pub(super) crease: bool,
     #[serde(default)]
     pub(super) guide: bool,
+    /// A polyline's points are nodes too (the operator tags each corner where it stands to
+    /// turn), besides its crossings.
+    #[serde(default)]
+    pub(super) tag_points: bool,
 }
 
 pub(super) fn section_kind() -> String {
@@ -45,6 +49,8 @@ pub(super) struct Piece {
     pub(super) closed: bool,
     pub(super) plane: Option<(Vector3<f64>, f64)>,
     pub(super) kind: CurveKind,
+    /// Points declared nodes (a polyline's `tag_points`), besides the crossings.
+    pub(super) nodes: Vec<Vector3<f64>>,
 }
 
 pub(super) fn v3(a: [f64; 3]) -> Vector3<f64> {
@@ -131,6 +137,8 @@ pub enum CurveError {
     NotFaces,
     #[error("a polyline needs `points`, at least two")]
     NoPoints,
+    #[error("tag_points needs kind = \"polyline\"")]
+    TagPointsNotPolyline,
     #[error("polyline segment {0} does not lie on a face")]
     OffFaces(usize),
     #[error(
@@ -194,10 +202,14 @@ pub(super) fn piece(
             closed: true,
             plane: None,
             kind: c.kind()?,
+            nodes: Vec::new(),
         });
     }
     if c.kind == "polyline" {
         return polyline(s, c, h);
+    }
+    if c.tag_points {
+        return Err(CurveError::TagPointsNotPolyline);
     }
     if c.kind != "section" {
         return Err(CurveError::UnknownKind(c.kind.clone()));
@@ -266,6 +278,7 @@ pub(super) fn piece(
         closed,
         plane: Some((normal, offset)),
         kind: c.kind()?,
+        nodes: Vec::new(),
     })
 }
 
@@ -340,6 +353,10 @@ pub(super) fn polyline(s: &Surface, c: &CurveToml, h: f64) -> Result<Piece, Curv
         closed: c.closed,
         plane: None,
         kind: c.kind()?,
+        nodes: match c.tag_points {
+            true => corners[..corners.len() - usize::from(c.closed)].to_vec(),
+            false => Vec::new(),
+        },
     })
 }
 

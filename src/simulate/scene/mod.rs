@@ -30,7 +30,7 @@
 //! `flip_normals`). A curve may also be `kind = "mesh-boundary"`: the mesh's boundary loop;
 //! or, on a box or gable, `kind = "polyline"` through `points` (straight between them,
 //! `closed` back to the first), whose normal is its face's; along an edge, `rest` (a
-//! direction) picks the face the device rests on. The operator stops at a node where a curve
+//! direction) picks the face the device rests on; `tag_points = true` makes its points nodes. The operator stops at a node where a curve
 //! turns sharply about the normal and turns the device in place. Open arcs run `from` → `to` (the points are snapped onto the section; with two ways
 //! round a loop, the one through `via`, else the shorter); open pieces without `from`/`to`
 //! run end to end. Nodes: every crossing of two curves and every end of an open curve.
@@ -92,6 +92,10 @@ pub const BUILTIN: &[(&str, &str)] = &[
     ),
     ("relief", include_str!("../../../config/scenes/relief.toml")),
     ("roof", include_str!("../../../config/scenes/roof.toml")),
+    (
+        "roof-loop",
+        include_str!("../../../config/scenes/roof-loop.toml"),
+    ),
     (
         "sphere-cube",
         include_str!("../../../config/scenes/sphere-cube.toml"),

@@ -19,6 +19,7 @@ pub(super) fn network(s: &Surface, pieces: Vec<Piece>, h: f64) -> Result<Network
             cand.push(a.points[0]);
             cand.push(*a.points.last().expect("non-empty"));
         }
+        cand.extend(&a.nodes);
         for b in pieces.iter().skip(i + 1) {
             cand.extend(crossings(s, a, b, tol));
         }
