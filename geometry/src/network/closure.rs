@@ -2062,20 +2062,34 @@ mod tests {
         assert!(scale_segment(c, seg, 1.0 - f));
     }
 
+    /// A test that names up to three slips on the grids and lengthens them.
+    const LENGTHENS: SlipTest = SlipTest {
+        share: 0.2,
+        ratio: 10.0,
+        vs_tag: SLIP_VS_TAG,
+        short: SLIP_SHORT,
+        max: 3,
+        before_detach: false,
+        named_from: None,
+    };
+
+    /// Each `(curve, segment)` of `named` has its step of `exact` back within 1.5 %.
+    fn given_back(g: &[UniformCurve], exact: &[Vec<f64>], named: &[(usize, usize)], seed: u64) {
+        for &(c, k) in named {
+            let back = g[c].h[k] / exact[c][k];
+            assert!(
+                (back - 1.0).abs() < 0.015,
+                "seed {seed}: curve {c} segment {k}: {back}"
+            );
+        }
+    }
+
     /// Issue 49: two segments read short on two curves: each named in turn, lengthened by the
     /// loops' estimate before the next is looked for, their steps given back within 1.5 %;
     /// the strict test of [`detach_outlier_tags`] names one and lengthens nothing.
     #[test]
     fn issue_49_slips_are_named_and_lengthened_one_after_another() {
-        let test = SlipTest {
-            share: 0.2,
-            ratio: 10.0,
-            vs_tag: SLIP_VS_TAG,
-            short: SLIP_SHORT,
-            max: 3,
-            before_detach: false,
-            named_from: None,
-        };
+        let test = LENGTHENS;
         for seed in 1..=5 {
             let mut g = grid(4, 0.5, seed);
             let exact: Vec<Vec<f64>> = g.iter().map(|c| c.h.clone()).collect();
@@ -2096,13 +2110,7 @@ mod tests {
             named.sort_unstable();
             assert_eq!(named, vec![(2, 0), (5, 1)], "seed {seed}: {r:?}");
             assert!(r.slips.iter().all(|s| s.lengthened), "{r:?}");
-            for (c, k) in named {
-                let back = g[c].h[k] / exact[c][k];
-                assert!(
-                    (back - 1.0).abs() < 0.015,
-                    "seed {seed}: curve {c} segment {k}: {back}"
-                );
-            }
+            given_back(&g, &exact, &named, seed);
             assert!(r.detached.is_empty(), "seed {seed}: {r:?}");
         }
     }
@@ -2115,15 +2123,7 @@ mod tests {
     /// chain, which the loops cannot tell apart, still name none.
     #[test]
     fn issue_52_two_slips_of_one_loop_explaining_as_much_are_both_named() {
-        let test = SlipTest {
-            share: 0.2,
-            ratio: 10.0,
-            vs_tag: SLIP_VS_TAG,
-            short: SLIP_SHORT,
-            max: 3,
-            before_detach: false,
-            named_from: None,
-        };
+        let test = LENGTHENS;
         for seed in 1..=5 {
             let mut g = grid(4, 0.5, seed);
             let exact: Vec<Vec<f64>> = g.iter().map(|c| c.h.clone()).collect();
@@ -2135,13 +2135,7 @@ mod tests {
             let mut named: Vec<(usize, usize)> = r.slips.iter().map(|s| (s.curve, s.tag)).collect();
             named.sort_unstable();
             assert_eq!(named, vec![(2, 1), (5, 1)], "seed {seed}: {r:?}");
-            for (c, k) in named {
-                let back = g[c].h[k] / exact[c][k];
-                assert!(
-                    (back - 1.0).abs() < 0.015,
-                    "seed {seed}: curve {c} segment {k}: {back}"
-                );
-            }
+            given_back(&g, &exact, &named, seed);
             // A node of curve 5 alone halfway from node 5 to node 9: its two halves are in
             // line, and either one 12 % short explains the loops alike. Named neither.
             let mut g = grid(4, 0.5, seed);
