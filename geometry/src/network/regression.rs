@@ -373,7 +373,9 @@ fn local_problem(curves: &[UniformCurve], layout: &Layout, free: &[bool]) -> (Pr
                 layout.var(k, j - 1)
             };
             let (mid, next) = (layout.var(k, j), layout.var(k, j + 1));
-            if c.kinked(j) || !(free[prev] || free[mid] || free[next]) {
+            // Not across a kink: at one, the frame held is the one leaving it, so the bend
+            // before it would read the corner's whole turn (the frame arriving is no variable).
+            if c.kinked(j) || c.kinked(j + 1) || !(free[prev] || free[mid] || free[next]) {
                 continue;
             }
             let h = if j == 0 {
@@ -1167,6 +1169,49 @@ mod tests {
             },
             truth,
         )
+    }
+
+    /// Issue 52: a curve that kinks at its middle node (a corner turned in place: the frame
+    /// turns 90° about its normal there) keeps exact frames exact. Before, the bend of the
+    /// frame just before the kink was read with the frame leaving it, and pulled it 45°
+    /// towards the corner's turn.
+    #[test]
+    fn issue_52_a_kink_bends_no_frame_before_it() {
+        let n = 200;
+        let h = 0.005;
+        let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2);
+        let exact: Vec<UnitQuaternion<f64>> = (0..=n)
+            .map(|j| {
+                if j < n / 2 {
+                    UnitQuaternion::identity()
+                } else {
+                    turn
+                }
+            })
+            .collect();
+        let mut curves = vec![UniformCurve {
+            index: 0,
+            kind: crate::curve::CurveKind::Boundary,
+            d: (0..=n).map(|j| j as f64 * h).collect(),
+            q: exact.clone(),
+            nodes: vec![(0, 0), (n / 2, 1), (n, 2)],
+            h: vec![h, h],
+            w: vec![1.0; n + 1],
+            outliers: 0,
+            kinks: vec![(n / 2, UnitQuaternion::identity())],
+        }];
+        let p = RegressionParams {
+            bend_length: Some(0.03),
+            ..Default::default()
+        };
+        RegressionSolver::new().run(&mut curves, &p);
+        let worst = curves[0]
+            .q
+            .iter()
+            .zip(&exact)
+            .map(|(q, t)| q.angle_to(t).to_degrees())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-6, "a frame {worst}° off");
     }
 
     #[test]
