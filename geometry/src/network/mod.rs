@@ -818,8 +818,9 @@ impl Reconstructor {
     }
 
     /// Every curve resampled ([`prefilter_with_kinks`]: curves may kink at the nodes a crease
-    /// passes through, and where the device turned in place), from the cache where the curve and its kinks are unchanged; a curve
-    /// that cannot be is left out (a warning). Forgets the curves no longer in `curves`.
+    /// passes through, and where the device turned in place), from the cache where the curve
+    /// and its kinks are unchanged; a curve that cannot be is left out (a warning). Forgets
+    /// the curves no longer in `curves`.
     fn prefilter_all(
         &mut self,
         curves: &[Curve],

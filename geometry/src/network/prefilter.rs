@@ -487,24 +487,16 @@ impl UniformGrid {
             let dn = d[i];
             let hb = if k > 0 { hs[k - 1] } else { hs[hs.len() - 1] };
             let ha = hs[k];
-            // Elsewhere than on a crease, the device turned in place at the node (a corner of
-            // a boundary): its samples standing there turn by more than a kink. A loop that
-            // closes at a corner is not turned there (it sets off along one side and stops
-            // coming in along the other): its two ends' tangents alone tell, by more than a
-            // tight bend turns them ([`CLOSING_KINK_DEG`]).
-            let closing = closed && k == 0 && !kink_nodes.contains(&node);
-            if closing {
-                if let (Some(b), Some(a)) = (
-                    tangent_between(d[d.len() - 1] - 2.0 * hb, d[d.len() - 1] - 0.5 * hb),
-                    tangent_between(dn + 0.5 * ha, dn + 2.0 * ha),
-                ) {
-                    if b.dot(&a) < CLOSING_KINK_DEG.to_radians().cos() {
-                        kink_at.push(i);
-                    }
-                }
-                continue;
-            }
-            if !kink_nodes.contains(&node) {
+            // On a crease, the tangents alone tell. Elsewhere the device turned in place at
+            // the node (a corner of a boundary): its samples standing there turn by more than
+            // a kink. A loop that closes at a corner is not turned there (it sets off along one
+            // side and stops coming in along the other): its two ends' tangents alone tell, by
+            // more than a tight bend turns them ([`CLOSING_KINK_DEG`]).
+            let limit_cos = if kink_nodes.contains(&node) {
+                kink_cos
+            } else if closed && k == 0 {
+                CLOSING_KINK_DEG.to_radians().cos()
+            } else {
                 let near = 0.1 * ha.min(hb);
                 let (lo, hi) = (
                     ds.partition_point(|&x| x < dn - near),
@@ -513,7 +505,8 @@ impl UniformGrid {
                 if !turns[lo..hi].iter().any(|&t| t > KINK_DEG.to_radians()) {
                     continue;
                 }
-            }
+                kink_cos
+            };
             let before = if k > 0 {
                 tangent_between(dn - 2.0 * hb, dn - 0.5 * hb)
             } else if closed {
@@ -524,7 +517,7 @@ impl UniformGrid {
             };
             let after = tangent_between(dn + 0.5 * ha, dn + 2.0 * ha);
             if let (Some(b), Some(a)) = (before, after) {
-                if b.dot(&a) < kink_cos {
+                if b.dot(&a) < limit_cos {
                     kink_at.push(i);
                 }
             }
