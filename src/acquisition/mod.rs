@@ -246,6 +246,11 @@ pub struct Acquisition {
     array: BTreeMap<u16, ArraySensor>,
     /// Per-curve segment lengths received after the curve ended (phone).
     late_lengths: BTreeMap<usize, BTreeMap<u16, f64>>,
+    /// The last finished phone curve's index and, for each of its tags, how far the device
+    /// went between its set-off and the tag's Enter (m; 0 but for a tag entered late): a
+    /// segment length arriving after the curve ended keeps those tags where the device
+    /// stood ([`phone::rescale_segments`]).
+    late_went: Option<(usize, Vec<f64>)>,
     /// The log's rate limit for the warnings.
     warned: crate::warning::LogLimiter,
     /// Counts the sensor models taken from HELLOs (an open curve notes the one of its
@@ -320,6 +325,7 @@ impl Acquisition {
             gap: false,
             array: BTreeMap::new(),
             late_lengths: BTreeMap::new(),
+            late_went: None,
             warned: Default::default(),
             model_generation: 0,
             turned: 0.0,
@@ -855,7 +861,11 @@ impl Acquisition {
             curve.segment_lengths[s as usize] = Some(l);
         }
         if self.kind == Some(DeviceKind::Phone) {
-            phone::rescale_segments(curve);
+            let went = match &self.late_went {
+                Some((i, went)) if *i == index => &went[..],
+                _ => &[],
+            };
+            phone::rescale_segments(curve, went);
         }
         Some(Update::CurveUpdated(index))
     }

@@ -160,6 +160,13 @@ impl Acquisition {
                     .or_else(|| from_cfg.and_then(|v| v.get(k).copied()));
             }
             self.phone_distances(&mut curve, &motion);
+            let mut went = vec![0.0; curve.tags.len()];
+            for l in &motion.late {
+                if let Some(w) = went.get_mut(l.tag) {
+                    *w = l.distance;
+                }
+            }
+            self.late_went = Some((o.index, went));
         } else if n > 0 {
             self.wheel_distances(&mut curve, &wheel, &o.typing);
         }
