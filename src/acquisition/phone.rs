@@ -303,19 +303,24 @@ fn stand_between_pulses(
 }
 
 /// The stretches of a phone curve between its stands: from the Enter of each tag to the first
-/// digit of the next (its Enter where no typing is known). `tags` are `(node, Enter time, _)`,
-/// `typing` the `(first digit, Enter)` of every tag typed, in order, undone ones included.
+/// digit typed after it (the next tag's Enter where no typing is known). `tags` are `(node,
+/// Enter time, _)`, `typing` the `(first digit, Enter)` of every tag typed, in order, undone
+/// ones included: an index typed wrong at the next node and undone with `U` is typed standing
+/// there, so the stretch ends at its first digit, not at the first digit of the index typed
+/// again (our field profile's wrong index undone at a curve's second node: the bowl's seed
+/// 5 had the segment's last 3.5 s of standing taken for moving).
 fn stretches(tags: &[(u32, f64, bool)], typing: &[(f64, f64)]) -> Vec<(f64, f64)> {
     let mut k = 0;
     tags.windows(2)
         .map(|p| {
-            // Both in time order: the typing that ends at the next tag's Enter.
-            while k < typing.len() && typing[k].1 < p[1].1 {
+            // Both in time order: the first typing that ends after this tag's Enter, if it
+            // ends by the next tag's.
+            while k < typing.len() && typing[k].1 <= p[0].1 {
                 k += 1;
             }
             let next = typing
                 .get(k)
-                .filter(|ty| ty.1 == p[1].1)
+                .filter(|ty| ty.1 <= p[1].1)
                 .map_or(p[1].1, |ty| ty.0);
             (p[0].1, next)
         })
@@ -536,6 +541,21 @@ mod tests {
         let mut none = vec![false; t.len()];
         clip_to_intervals(&t, &mut none, &[(1.0, 2.0)], 2.0);
         assert!(none.iter().all(|m| !m));
+    }
+
+    /// Issue 52: an index typed wrong at a node and undone with `U` is typed standing there:
+    /// the stretch before the node ends at its first digit, not at the first digit of the
+    /// index typed again.
+    #[test]
+    fn issue_52_a_stretch_ends_at_the_first_digit_typed_at_its_node_undone_or_not() {
+        let tags = [(0, 0.0, false), (1, 10.0, false), (2, 20.0, false)];
+        let typed = [(-1.0, 0.0), (8.5, 10.0), (18.0, 20.0)];
+        assert_eq!(stretches(&tags, &typed), [(0.0, 8.5), (10.0, 18.0)]);
+        // At node 1 a wrong index typed from 6 s, entered at 7 s and undone, then node 1's.
+        let undone = [(-1.0, 0.0), (6.0, 7.0), (8.5, 10.0), (18.0, 20.0)];
+        assert_eq!(stretches(&tags, &undone), [(0.0, 6.0), (10.0, 18.0)]);
+        // No typing known for a tag: its Enter.
+        assert_eq!(stretches(&tags, &typed[..2]), [(0.0, 8.5), (10.0, 20.0)]);
     }
 
     /// A phone curve sampled at `t` with tags entered at 0, 2 and 4 s (nodes 0, 1, 2) and
