@@ -587,26 +587,32 @@ mod tests {
         }
     }
 
-    /// Issue 49: a phone tag entered late is placed where the device set off: its segment
-    /// lengths count from Enter to Enter, so the one before gives the distance the device went
-    /// while the index was typed to the typing; the samples after the set-off go on linearly to
-    /// the Enter.
-    #[test]
-    fn issue_49_a_late_phone_tag_is_placed_where_the_device_set_off() {
+    /// Samples every 10 ms over 4 s, the speed shape moving on (0.2, 1.4) and (2.2, 3.6) s
+    /// (tags entered at 0, 2 and 4 s: [`three_tags`]), and the second tag entered late: its
+    /// index typed from 1.5 s, the device set off at 1.6 s and went 4 cm by its Enter.
+    fn late_second_tag() -> (Vec<f64>, Vec<f64>, [LateTag; 1]) {
         let t: Vec<f64> = (0..=400).map(|i| i as f64 * 0.01).collect();
-        // Moving on (0.2, 1.4) and (2.2, 3.6) s; tags entered at 0, 2 and 4 s; the second's
-        // index typed from 1.5 s, the device set off at 1.6 s and went 4 cm by its Enter.
-        let speed: Vec<f64> = t
+        let speed = t
             .iter()
             .map(|&x| f64::from(u8::from((0.2..1.4).contains(&x) || (2.2..3.6).contains(&x))))
             .collect();
-        let curve = |lengths: Vec<Option<f64>>| three_tags(&t, lengths);
         let late = [LateTag {
             tag: 1,
             from: 1.6,
             to: 2.0,
             distance: 0.04,
         }];
+        (t, speed, late)
+    }
+
+    /// Issue 49: a phone tag entered late is placed where the device set off: its segment
+    /// lengths count from Enter to Enter, so the one before gives the distance the device went
+    /// while the index was typed to the typing; the samples after the set-off go on linearly to
+    /// the Enter.
+    #[test]
+    fn issue_49_a_late_phone_tag_is_placed_where_the_device_set_off() {
+        let (t, speed, late) = late_second_tag();
+        let curve = |lengths: Vec<Option<f64>>| three_tags(&t, lengths);
         let at = |c: &Curve, x: f64| interp(&c.samples.t, &c.samples.d, x);
         // Measured, Enter to Enter: 0.34 m and 0.26 m.
         let mut c = curve(vec![Some(0.34), Some(0.26)]);
@@ -640,17 +646,7 @@ mod tests {
     /// its twin's 0.20 %).
     #[test]
     fn issue_52_a_late_tag_stays_where_the_device_set_off_when_its_lengths_come_late() {
-        let t: Vec<f64> = (0..=400).map(|i| i as f64 * 0.01).collect();
-        let speed: Vec<f64> = t
-            .iter()
-            .map(|&x| f64::from(u8::from((0.2..1.4).contains(&x) || (2.2..3.6).contains(&x))))
-            .collect();
-        let late = [LateTag {
-            tag: 1,
-            from: 1.6,
-            to: 2.0,
-            distance: 0.04,
-        }];
+        let (t, speed, late) = late_second_tag();
         let mut in_time = three_tags(&t, vec![Some(0.34), Some(0.26)]);
         distances_by_speed(&mut in_time, &speed, 0.05, &late);
         let mut c = three_tags(&t, vec![None, None]);
