@@ -354,6 +354,13 @@ pub fn phone_distances(c: &mut Curve, nominal_speed: f64) {
     distances_by_speed(c, &moving, nominal_speed, &[]);
 }
 
+/// The way from a tag's Enter to where the device stood at the next tag, m, of a segment
+/// measured `len` from Enter to Enter, the next tag entered `went` on from where it stood (a
+/// late Enter: that stretch is the typing's). At least half the length.
+fn to_stand(len: f64, went: f64) -> f64 {
+    (len - went).max(0.5 * len)
+}
+
 /// Phone: a curve's distances made again after a segment's length arrived late: each
 /// segment's distances, as its speed shape spread them, scaled to the length now known.
 /// `went` (one per tag, m; empty for none) is how far the device went between a tag's
@@ -371,7 +378,7 @@ pub(super) fn rescale_segments(c: &mut Curve, went: &[f64]) {
     for k in 0..n - 1 {
         // Segment k: the typing after tag k's set-off, then the way to tag k+1.
         let way = match c.segment_lengths.get(k).copied().flatten() {
-            Some(len) => (len - went(k + 1)).max(0.5 * len),
+            Some(len) => to_stand(len, went(k + 1)),
             None => old[k + 1] - old[k] - went(k),
         };
         new[k + 1] = new[k] + went(k) + way;
@@ -435,8 +442,7 @@ pub(super) fn distances_by_speed(
     enter[0] = went(0);
     for k in 0..nt - 1 {
         let len = match c.segment_lengths.get(k).copied().flatten() {
-            // Enter to Enter: the late tag's own stretch is the typing's.
-            Some(len) => (len - went(k + 1)).max(0.5 * len),
+            Some(len) => to_stand(len, went(k + 1)),
             None => nominal_speed * (tag_tau[k + 1] - tag_tau[k]),
         };
         at[k + 1] = enter[k] + len;

@@ -257,16 +257,16 @@ pub fn fit_stretch(t: &[f64], along: &[f64], trend: bool) -> Option<Stretch> {
     // The weaker end's own pulse, when it is fitted again with the other's speed.
     let mut weak: Option<Ramp> = None;
     let mut stop_after = t0;
+    // Once one end is fitted with the other's speed (below), that other end is the one
+    // believed, and fitted again it stays a pulse of about that speed: a far weaker one is
+    // not taken for it (a start of the believed speed put where the signal carries less
+    // leaves a dip behind it that looks like a small stop: the independent simulator's rough
+    // bumpy cube with the phone, seed 41, a segment's 0.18 m spread over 0.5 s of its 4 s,
+    // the capture 0.49 % against 0.13–0.21 % for its siblings), unless a set-off of the
+    // cruise's size after the stop put it out of place.
+    let believed = |r: &Ramp, speed: Option<f64>| speed.is_none_or(|c| r.c >= AGREE * c);
     for _ in 0..4 {
-        // The start before the stop's ramp ends, the stop after the start's begins. Once
-        // one end is fitted with the other's speed (below), that other end is the one
-        // believed, and fitted again it stays a pulse of about that speed: a far weaker one
-        // is not taken for it (a start of the believed speed put where the signal carries
-        // less leaves a dip behind it that looks like a small stop: the independent
-        // simulator's rough bumpy cube with the phone, seed 41, a segment's 0.18 m spread
-        // over 0.5 s of its 4 s, the capture 0.49 % against 0.13–0.21 % for its siblings),
-        // unless a set-off of the cruise's size after the stop put it out of place.
-        let believed = |r: &Ramp, speed: Option<f64>| speed.is_none_or(|c| r.c >= AGREE * c);
+        // The start before the stop's ramp ends, the stop after the start's begins.
         let hi = stop.at + stop.tau;
         let y = without(t, along, &stop, -1.0);
         start = best_pulse(t, &y, 1.0, (t0, hi), t1, fixed.0, trend)

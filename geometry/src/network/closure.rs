@@ -2073,6 +2073,13 @@ mod tests {
         named_from: None,
     };
 
+    /// The `(curve, segment)` of each slip the test named, in order.
+    fn named_slips(r: &ClosureReport) -> Vec<(usize, usize)> {
+        let mut named: Vec<(usize, usize)> = r.slips.iter().map(|s| (s.curve, s.tag)).collect();
+        named.sort_unstable();
+        named
+    }
+
     /// Each `(curve, segment)` of `named` has its step of `exact` back within 1.5 %.
     fn given_back(g: &[UniformCurve], exact: &[Vec<f64>], named: &[(usize, usize)], seed: u64) {
         for &(c, k) in named {
@@ -2106,8 +2113,7 @@ mod tests {
             );
             assert!(strict.iter().zip(&g).all(|(a, b)| a.h == b.h));
             let r = check(&mut g, |_, _| false, &test, true, &[]);
-            let mut named: Vec<(usize, usize)> = r.slips.iter().map(|s| (s.curve, s.tag)).collect();
-            named.sort_unstable();
+            let named = named_slips(&r);
             assert_eq!(named, vec![(2, 0), (5, 1)], "seed {seed}: {r:?}");
             assert!(r.slips.iter().all(|s| s.lengthened), "{r:?}");
             given_back(&g, &exact, &named, seed);
@@ -2132,8 +2138,7 @@ mod tests {
             shorten(&mut g[5], 1, 0.10);
             shorten(&mut g[2], 1, 0.10);
             let r = check(&mut g, |_, _| false, &test, true, &[]);
-            let mut named: Vec<(usize, usize)> = r.slips.iter().map(|s| (s.curve, s.tag)).collect();
-            named.sort_unstable();
+            let named = named_slips(&r);
             assert_eq!(named, vec![(2, 1), (5, 1)], "seed {seed}: {r:?}");
             given_back(&g, &exact, &named, seed);
             // A node of curve 5 alone halfway from node 5 to node 9: its two halves are in
