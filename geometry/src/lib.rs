@@ -19,11 +19,13 @@
 //! - Shared tools: [`sparse_llt`], the sparse Cholesky with a cached symbolic factorisation
 //!   ([`sparse_llt::SpdPattern`]) reused while only values change, and its candidate
 //!   fill-reducing order for networks of crossing curves, [`nested_dissection`]; [`union_find`], connected
-//!   components; [`rng`], the seeded random numbers of the tests and the simulator.
+//!   components; [`rng`], the seeded random numbers of the tests and the simulator;
+//!   [`f_test`], Fisher's F test (whether a fit explains more than chance would).
 //!
 //! Feature `serde`: `Serialize`/`Deserialize` for the input curves and the reports.
 
 pub mod curve;
+pub mod f_test;
 pub mod nested_dissection;
 pub mod network;
 pub mod qmethod;

@@ -9,8 +9,9 @@
 //! The misfit is a quadratic form in the curves' scales `s` (each curve's edge data
 //! `(1 + s_c) h t`, [`super::poisson::ScaleForm`]). The estimate is the least misfit with a
 //! prior on each scale (the device's spread, `sigma`), the misfit weighed by the noise the
-//! loops show (`chi2 / (loops − curves)` per degree of freedom left), and the length-weighted
-//! mean scale held
+//! loops show (`chi2 / (loops − curves)` per degree of freedom left; `3 loops − curves`
+//! where that leaves none, [`degrees_of_freedom`], and then only scales an F test finds
+//! significant), and the length-weighted mean scale held
 //! at 0: a scale common to every curve only scales the misfit, so the loops would shrink the
 //! network to a point, and the network's size is the wheel's calibration, not theirs.
 //!
@@ -31,6 +32,7 @@
 
 use super::poisson::ScaleForm;
 use super::prefilter::UniformCurve;
+use crate::f_test;
 use nalgebra::{DMatrix, DVector};
 
 /// A wheel's spread of scale from curve to curve: the independent simulator's rough
@@ -39,21 +41,18 @@ use nalgebra::{DMatrix, DVector};
 pub const WHEEL_SIGMA: f64 = 0.01;
 
 /// The scale of each curve (in the order of `form`), `None` with fewer than two curves, no
-/// more loops than curves, or a singular system. `sigma` is the prior spread of a curve's
-/// scale (a fraction), `lengths` each curve's length (m), the weights of the mean held at 0.
+/// degree of freedom left ([`degrees_of_freedom`]), scales that explain the misfit no better
+/// than chance where the loops are no more than the curves, or a singular system. `sigma` is the prior
+/// spread of a curve's scale (a fraction), `lengths` each curve's length (m), the weights of
+/// the mean held at 0.
 pub fn estimate(form: &ScaleForm, sigma: f64, lengths: &[f64]) -> Option<DVector<f64>> {
     let k = form.b.len();
     let total: f64 = lengths.iter().sum();
-    // With as many scales as loops, nothing tells them from the noise.
     let positive = |x: f64| x.is_finite() && x > 0.0;
-    if k < 2 || form.loops <= k || !positive(sigma) || lengths.len() != k || !positive(total) {
+    if k < 2 || !positive(sigma) || lengths.len() != k || !positive(total) {
         return None;
     }
-    // A loop's misfit is 3-D, but one cause mostly makes it (a curve's heading turns it within
-    // the surface, one direction): a degree of freedom per loop, not three. Counting three
-    // trusts the loops three times as much: measured, hardly better on our captures, and worse
-    // where a network has barely more loops than curves (BENCHMARKS.md, Field accuracy III).
-    let dof = (form.loops - k) as f64;
+    let dof = degrees_of_freedom(form.loops, k)? as f64;
     // The noise per degree of freedom is what the loops leave once the scales are fitted
     // (the residual variance's unbiased estimate), found with them: from the misfit as
     // measured, then each fit's residual, to a fixed point. Floored, so that exact data
@@ -74,8 +73,46 @@ pub fn estimate(form: &ScaleForm, sigma: f64, lengths: &[f64]) -> Option<DVector
             break;
         }
     }
-    s.iter().all(|x| x.is_finite()).then_some(s)
+    if !s.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    // Counted three a loop, the loops trust more than their one cause earns: the scales are
+    // kept only where they explain the misfit better than chance would (on our field
+    // profile's roof, the headings near a magnet made most of it, and scales fitted to
+    // them were 0.3–0.5 % the wrong way).
+    if form.loops <= k {
+        let left = noise * dof;
+        let f = ((form.chi2 - left).max(0.0) / (k - 1) as f64) / (left / dof);
+        let chance = f_test::upper_tail(f, (k - 1) as f64, dof);
+        if chance.is_nan() || chance > SIGNIFICANCE {
+            return None;
+        }
+    }
+    Some(s)
 }
+
+/// The degrees of freedom the loops leave once `curves` scales are fitted: one per loop, or,
+/// where that leaves none, three per loop; `None` where even three leave none.
+///
+/// A loop's misfit is 3-D, but one cause mostly makes it (a curve's heading turns it within
+/// the surface, one direction): a degree of freedom per loop. Counting three trusts the loops
+/// three times as much: measured, hardly better where the one count leaves some, and worse
+/// where a network has barely more loops than curves (BENCHMARKS.md, Field accuracy III).
+/// Where it leaves none (the box: twelve curves, eleven loops), the misfit's three
+/// components are what there is, and [`estimate`] then keeps the scales only where an F test
+/// says they explain the misfit ([`SIGNIFICANCE`]).
+pub fn degrees_of_freedom(loops: usize, curves: usize) -> Option<usize> {
+    if loops > curves {
+        Some(loops - curves)
+    } else {
+        (3 * loops).checked_sub(curves).filter(|&d| d > 0)
+    }
+}
+
+/// Where the loops are no more than the curves, the chance (Fisher's F test, the `curves − 1`
+/// free scales against the degrees of freedom left) below which the scales' share of the
+/// misfit is taken as theirs, not the noise's.
+pub const SIGNIFICANCE: f64 = 0.01;
 
 /// Most rounds of the noise's fixed point ([`estimate`]).
 const MAX_ITERATIONS: usize = 50;
@@ -137,15 +174,45 @@ mod tests {
     }
 
     /// A misfit a common scale would explain (the network's size) moves no curve, and with
-    /// no more loops than curves nothing is estimated.
+    /// no degree of freedom left nothing is estimated.
     #[test]
     fn a_common_scale_is_left_to_the_wheels_calibration() {
         // Two independent curves, each explaining its share of the misfit by shrinking.
         let f = form(&[2.0, 0.0, 0.0, 2.0], &[2.0, 2.0], 4.0, 10);
         let s = estimate(&f, 0.01, &[1.0, 1.0]).unwrap();
         assert!(s.iter().all(|x| x.abs() < 1e-12), "{s}");
-        let few = form(&[2.0, 0.0, 0.0, 2.0], &[2.0, -2.0], 4.0, 2);
+        let few = form(&[2.0, 0.0, 0.0, 2.0], &[2.0, -2.0], 4.0, 0);
         assert!(estimate(&few, 0.01, &[1.0, 1.0]).is_none());
         assert!(estimate(&f, 0.0, &[1.0, 1.0]).is_none());
+    }
+
+    /// One per loop where that leaves some; three per loop where it leaves none (issue 52:
+    /// the box's 12 curves and 11 loops had no estimate); none where even three leave none.
+    #[test]
+    fn three_per_loop_only_where_one_per_loop_leaves_none() {
+        assert_eq!(degrees_of_freedom(4, 3), Some(1));
+        assert_eq!(degrees_of_freedom(40, 20), Some(20));
+        assert_eq!(degrees_of_freedom(11, 12), Some(21));
+        assert_eq!(degrees_of_freedom(3, 3), Some(6));
+        assert_eq!(degrees_of_freedom(1, 3), None);
+        assert_eq!(degrees_of_freedom(0, 2), None);
+    }
+
+    /// With no more loops than curves, scales are kept only where they explain the misfit
+    /// better than chance: three curves, three loops, the misfit all one curve's scale, then
+    /// hardly any of it.
+    #[test]
+    fn with_few_loops_only_scales_that_explain_the_misfit_are_kept() {
+        let h = [1e4, 0.0, 0.0, 0.0, 1e4, 0.0, 0.0, 0.0, 1e4];
+        // Curve 0 reads 0.4 % long against the others: b = −H s, chi2 = sᵀHs + what is left.
+        let explained = form(&h, &[40.0, -20.0, -20.0], 0.24 + 1e-4, 3);
+        let s = estimate(&explained, 0.01, &[1.0, 1.0, 1.0]).expect("kept");
+        assert!(s[0] < -0.003 && s[1] > 0.001 && s[2] > 0.001, "{s}");
+        // The same misfit, of which a scale would explain a thousandth.
+        let noise = form(&h, &[0.4, -0.2, -0.2], 0.24, 3);
+        assert!(estimate(&noise, 0.01, &[1.0, 1.0, 1.0]).is_none());
+        // With more loops than curves the scales are not tested (as before).
+        let more = form(&h, &[0.4, -0.2, -0.2], 0.24, 10);
+        assert!(estimate(&more, 0.01, &[1.0, 1.0, 1.0]).is_some());
     }
 }
