@@ -393,14 +393,28 @@ fn capture_joined_mid_packet_reports_partial_start() {
 
 /// The long fuzzing run of the decoder: `FUZZ_CASES` (default 2 000) random streams mixing
 /// valid frames, corrupted frames and raw garbage, fed in random chunks. Run by `.ci/run`
-/// with a large count.
+/// with a large count. In two halves, which cargo runs at once on two cores (the filter
+/// `fuzz_decoder_mixed_streams` runs both).
 #[test]
-fn fuzz_decoder_mixed_streams() {
-    use proptest::test_runner::{Config, TestRunner};
-    let cases: u32 = std::env::var("FUZZ_CASES")
+fn fuzz_decoder_mixed_streams_first_half() {
+    fuzz_decoder_mixed_streams(fuzz_cases().div_ceil(2));
+}
+
+/// The other half of `FUZZ_CASES` ([`fuzz_decoder_mixed_streams_first_half`]).
+#[test]
+fn fuzz_decoder_mixed_streams_second_half() {
+    fuzz_decoder_mixed_streams(fuzz_cases() / 2);
+}
+
+fn fuzz_cases() -> u32 {
+    std::env::var("FUZZ_CASES")
         .ok()
         .and_then(|s| s.parse().ok())
-        .unwrap_or(2_000);
+        .unwrap_or(2_000)
+}
+
+fn fuzz_decoder_mixed_streams(cases: u32) {
+    use proptest::test_runner::{Config, TestRunner};
     let mut runner = TestRunner::new(Config {
         cases,
         failure_persistence: None,
