@@ -42,9 +42,9 @@ pub const WHEEL_SIGMA: f64 = 0.01;
 
 /// The scale of each curve (in the order of `form`), `None` with fewer than two curves, no
 /// degree of freedom left ([`degrees_of_freedom`]), scales that explain the misfit no better
-/// than chance where the loops are no more than the curves, or a singular system. `sigma` is the prior
-/// spread of a curve's scale (a fraction), `lengths` each curve's length (m), the weights of
-/// the mean held at 0.
+/// than chance where the loops are no more than the curves, or a singular system. `sigma` is
+/// the prior spread of a curve's scale (a fraction), `lengths` each curve's length (m), the
+/// weights of the mean held at 0.
 pub fn estimate(form: &ScaleForm, sigma: f64, lengths: &[f64]) -> Option<DVector<f64>> {
     let k = form.b.len();
     let total: f64 = lengths.iter().sum();
@@ -76,9 +76,9 @@ pub fn estimate(form: &ScaleForm, sigma: f64, lengths: &[f64]) -> Option<DVector
     if !s.iter().all(|x| x.is_finite()) {
         return None;
     }
-    // Counted three a loop, the loops trust more than their one cause earns: the scales are
-    // kept only where they explain the misfit better than chance would (on our field
-    // profile's roof, the headings near a magnet made most of it, and scales fitted to
+    // Counted three a loop, the loops are trusted more than their one main cause earns: the
+    // scales are kept only where they explain the misfit better than chance would (on our
+    // field profile's roof, the headings near a magnet made most of it, and scales fitted to
     // them were 0.3–0.5 % the wrong way).
     if form.loops <= k {
         let left = noise * dof;
