@@ -458,10 +458,11 @@ fn issue_52_each_curves_scale_is_estimated_from_the_loops() {
             .map(|c| c.samples.d.last().unwrap() - c.samples.d[0])
             .collect();
         let alternate = |k: usize| if k.is_multiple_of(2) { 0.015 } else { -0.015 };
+        let total: f64 = lengths.iter().sum();
         let mean = (0..lengths.len())
             .map(|k| alternate(k) * lengths[k])
             .sum::<f64>()
-            / lengths.iter().sum::<f64>();
+            / total;
         let mut put: Vec<f64> = (0..lengths.len()).map(|k| alternate(k) - mean).collect();
         // No loop sees a scale common to the box's upright curves either (a box stretched
         // upright is still a box): that part of what is put in is left out.
@@ -471,7 +472,6 @@ fn issue_52_each_curves_scale_is_estimated_from_the_loops() {
                 .iter()
                 .all(|&[w, x, y, z]| (2.0 * (x * z - w * y)).abs() > 0.99)
         };
-        let total: f64 = lengths.iter().sum();
         let up_length: f64 = (exact.curves.iter().zip(&lengths))
             .filter(|(c, _)| upright(c))
             .map(|(_, l)| l)

@@ -11,8 +11,7 @@
 //! prior on each scale (the device's spread, `sigma`), the misfit weighed by the noise the
 //! loops show (`chi2 / (loops − curves)` per degree of freedom left; `3 loops − curves`
 //! where that leaves none, [`degrees_of_freedom`], and then only scales an F test finds
-//! significant), and the length-weighted mean scale held
-//! at 0: a scale common to every curve only scales the misfit, so the loops would shrink the
+//! significant), and the length-weighted mean scale held at 0: a scale common to every curve only scales the misfit, so the loops would shrink the
 //! network to a point, and the network's size is the wheel's calibration, not theirs.
 //!
 //! ```
@@ -80,7 +79,7 @@ pub fn estimate(form: &ScaleForm, sigma: f64, lengths: &[f64]) -> Option<DVector
     // scales are kept only where they explain the misfit better than chance would (on our
     // field profile's roof, the headings near a magnet made most of it, and scales fitted to
     // them were 0.3–0.5 % the wrong way).
-    if form.loops <= k {
+    if three_per_loop(form.loops, k) {
         let left = noise * dof;
         let f = ((form.chi2 - left).max(0.0) / (k - 1) as f64) / (left / dof);
         let chance = f_test::upper_tail(f, (k - 1) as f64, dof);
@@ -102,11 +101,17 @@ pub fn estimate(form: &ScaleForm, sigma: f64, lengths: &[f64]) -> Option<DVector
 /// components are what there is, and [`estimate`] then keeps the scales only where an F test
 /// says they explain the misfit ([`SIGNIFICANCE`]).
 pub fn degrees_of_freedom(loops: usize, curves: usize) -> Option<usize> {
-    if loops > curves {
-        Some(loops - curves)
-    } else {
+    if three_per_loop(loops, curves) {
         (3 * loops).checked_sub(curves).filter(|&d| d > 0)
+    } else {
+        Some(loops - curves)
     }
+}
+
+/// Whether the loops' misfit is counted three degrees of freedom a loop: where one a loop
+/// leaves none ([`degrees_of_freedom`]; [`estimate`] then tests the scales).
+fn three_per_loop(loops: usize, curves: usize) -> bool {
+    loops <= curves
 }
 
 /// Where the loops are no more than the curves, the chance (Fisher's F test, the `curves − 1`
