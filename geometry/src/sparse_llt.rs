@@ -368,38 +368,78 @@ impl SpdFactor {
         self.values.len()
     }
 
+    /// Factorised by supernodes (faer's choice for the larger systems), not column by column.
+    pub fn supernodal(&self) -> bool {
+        matches!(self.chol.raw(), SymbolicCholeskyRaw::Supernodal(_))
+    }
+
     /// Column `i` of `L⁻¹ P` (the factorisation `P A Pᵀ = L Lᵀ`), from which any entry of
     /// `A⁻¹ = (L⁻¹ P)ᵀ (L⁻¹ P)` follows ([`inverse_entry`](Self::inverse_entry)): a forward
     /// solve that visits only the path from `i`'s column up the elimination tree (a
-    /// column's parent is its first row below the diagonal), where the column's entries are.
-    /// A few entries of the inverse among a few rows (a live update's loop test at its new
-    /// curve's nodes, issue 51) then cost those paths, not a solve over every row each.
-    /// `None` for a supernodal factorisation (faer's choice for the larger systems), whose
-    /// columns are not stored one by one.
+    /// column's parent is its first row below the diagonal; of a supernodal factor, faer's
+    /// choice for the larger systems, a supernode's is the supernode of its first row below
+    /// its own), where the column's entries are. A few entries of the inverse among a few
+    /// rows (a live update's loop test at its new curve's nodes, issue 51) then cost those
+    /// paths, not a solve over every row each. `None` for a row out of range.
     pub fn inverse_column(&self, i: usize) -> Option<InverseColumn> {
-        let SymbolicCholeskyRaw::Simplicial(s) = self.chol.raw() else {
-            return None;
-        };
-        let (col_ptr, rows) = (s.col_ptr(), s.row_idx());
         let mut j = match self.chol.perm() {
             Some(p) => *p.arrays().1.get(i)?,
             None => i,
         };
-        // Faer's simplicial columns hold the diagonal first, then their rows in order.
+        if j >= self.n {
+            return None;
+        }
         let mut y = vec![0.0; self.n];
         y[j] = 1.0;
         let mut out = Vec::new();
-        loop {
-            let (lo, hi) = (col_ptr[j], col_ptr[j + 1]);
-            let yj = std::mem::take(&mut y[j]) / self.values[lo];
-            out.push((j, yj));
-            if lo + 1 >= hi {
-                break;
+        match self.chol.raw() {
+            SymbolicCholeskyRaw::Simplicial(s) => {
+                let (col_ptr, rows) = (s.col_ptr(), s.row_idx());
+                // Faer's simplicial columns hold the diagonal first, then their rows in order.
+                loop {
+                    let (lo, hi) = (col_ptr[j], col_ptr[j + 1]);
+                    let yj = std::mem::take(&mut y[j]) / self.values[lo];
+                    out.push((j, yj));
+                    if lo + 1 >= hi {
+                        break;
+                    }
+                    for p in lo + 1..hi {
+                        y[rows[p]] -= self.values[p] * yj;
+                    }
+                    j = rows[lo + 1];
+                }
             }
-            for p in lo + 1..hi {
-                y[rows[p]] -= self.values[p] * yj;
+            SymbolicCholeskyRaw::Supernodal(s) => {
+                // Each supernode's columns `begin..end` are one column-major block: its
+                // diagonal block's rows, then its rows below (`pattern`, in order).
+                let (begin, end, at) =
+                    (s.supernode_begin(), s.supernode_end(), s.col_ptr_for_val());
+                let of = |col: usize| begin.partition_point(|&b| b <= col) - 1;
+                let mut sn = of(j);
+                let mut first = j - begin[sn];
+                loop {
+                    let (start, size) = (begin[sn], end[sn] - begin[sn]);
+                    let pattern = s.supernode(sn).pattern();
+                    let rows = size + pattern.len();
+                    let block = &self.values[at[sn]..at[sn + 1]];
+                    for c in first..size {
+                        let col = &block[c * rows..(c + 1) * rows];
+                        let yc = std::mem::take(&mut y[start + c]) / col[c];
+                        out.push((start + c, yc));
+                        for (r, l) in (c + 1..size).zip(&col[c + 1..size]) {
+                            y[start + r] -= l * yc;
+                        }
+                        for (&row, l) in pattern.iter().zip(&col[size..]) {
+                            y[row] -= l * yc;
+                        }
+                    }
+                    // The rest of the path: every row reached is in the first one's
+                    // supernode or above it.
+                    let Some(&next) = pattern.first() else { break };
+                    sn = of(next);
+                    first = next - begin[sn];
+                }
             }
-            j = rows[lo + 1];
         }
         Some(InverseColumn(out))
     }
