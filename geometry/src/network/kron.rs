@@ -34,58 +34,101 @@
 //! ```
 
 use crate::sparse_llt::{CachedPattern, SolveError, SpdFactor};
+use std::borrow::Cow;
+use std::ops::Range;
 use std::sync::Arc;
 
-/// A run of samples along a curve between two tags (or a curve's end): its interior unknowns
-/// (no node among them), the node unknowns at its ends, and the weights of its edges in order
-/// (`interior.len() − 1` between the interior samples, one more for each end present).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Run {
+/// A run of samples along one curve between two tags (or a curve's end), in the curve's own
+/// sample indices: the samples of the tags at its ends, and the samples between them. Its
+/// edges are those from its first sample to its last ([`edges`](Self::edges)). It depends
+/// on the curve's tags alone, so a curve's spans are kept with it while its tags stay.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Span {
     pub start: Option<usize>,
     pub end: Option<usize>,
-    pub interior: Vec<usize>,
-    pub weights: Vec<f64>,
+    pub interior: Range<usize>,
 }
 
-impl Run {
-    /// The runs of one curve: `vars` its unknown at each sample (the nodes' below `nodes`),
-    /// `weights` its edges' (`vars.len() − 1`). A run between two tags of the same sample
-    /// unknown (an edge of a node to itself) has no interior and no edge: it constrains
-    /// nothing and is left out.
-    pub fn along(vars: &[usize], weights: &[f64], nodes: usize) -> Vec<Run> {
-        let mut runs = Vec::new();
-        let mut cur = Run {
-            start: None,
-            end: None,
-            interior: Vec::new(),
-            weights: Vec::new(),
-        };
-        for (j, &v) in vars.iter().enumerate() {
-            if j > 0 {
-                cur.weights.push(weights[j - 1]);
-            }
-            if v < nodes {
-                cur.end = Some(v);
-                let done = std::mem::replace(
-                    &mut cur,
-                    Run {
-                        start: Some(v),
-                        end: None,
-                        interior: Vec::new(),
-                        weights: Vec::new(),
-                    },
-                );
-                if j > 0 && !(done.interior.is_empty() && done.start == done.end) {
-                    runs.push(done);
+impl Span {
+    /// The spans of a curve of `node_at.len()` samples, `node_at[j]` the node tagged at
+    /// sample `j` (if any). A span between two tags of the same node on adjacent samples (an
+    /// edge of a node to itself) has no interior and no edge: it constrains nothing and is
+    /// left out.
+    pub fn along<T: PartialEq + Copy>(node_at: &[Option<T>]) -> Vec<Span> {
+        let mut spans = Vec::new();
+        let mut from: Option<usize> = None;
+        for (j, at) in node_at.iter().enumerate() {
+            if let Some(node) = at {
+                let first = from.map_or(0, |s| s + 1);
+                let to_itself = from.is_some_and(|s| node_at[s] == Some(*node));
+                if j > 0 && !(first == j && to_itself) {
+                    spans.push(Span {
+                        start: from,
+                        end: Some(j),
+                        interior: first..j,
+                    });
                 }
-            } else {
-                cur.interior.push(v);
+                from = Some(j);
             }
         }
-        if !cur.interior.is_empty() {
-            runs.push(cur);
+        let first = from.map_or(0, |s| s + 1);
+        if first < node_at.len() {
+            spans.push(Span {
+                start: from,
+                end: None,
+                interior: first..node_at.len(),
+            });
         }
-        runs
+        spans
+    }
+
+    /// Its edges (edge `j`: from sample `j` to `j + 1`): `interior.len() − 1`, one more for
+    /// each end present.
+    pub fn edges(&self) -> Range<usize> {
+        let first = self.start.unwrap_or(self.interior.start);
+        let last = self.end.unwrap_or(self.interior.end.saturating_sub(1));
+        first..last.max(first)
+    }
+}
+
+/// A run of samples between two tags (or a curve's end) in a network's unknowns: the node
+/// unknowns at its ends, its interior unknowns (consecutive: no node among them), and the
+/// weights of its edges in order (`interior.len() − 1` between the interior samples, one more
+/// for each end present).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Run<'w> {
+    pub start: Option<usize>,
+    pub end: Option<usize>,
+    pub interior: Range<usize>,
+    pub weights: &'w [f64],
+}
+
+impl<'w> Run<'w> {
+    /// The runs of one curve: `vars` its unknown at each sample (the nodes' below `nodes`,
+    /// the others numbered consecutively along it), `weights` its edges' (`vars.len() − 1`).
+    /// See [`Span::along`].
+    pub fn along(vars: &[usize], weights: &'w [f64], nodes: usize) -> Vec<Run<'w>> {
+        let node_at: Vec<Option<usize>> = vars.iter().map(|&v| (v < nodes).then_some(v)).collect();
+        Span::along(&node_at)
+            .iter()
+            .map(|s| Run::of(s, vars, weights))
+            .collect()
+    }
+
+    /// `span` of a curve in a network's unknowns: `vars` the curve's unknown at each sample
+    /// (the others than its tags' numbered consecutively along it), `weights` its edges'.
+    pub fn of(span: &Span, vars: &[usize], weights: &'w [f64]) -> Run<'w> {
+        let interior = match span.interior.clone() {
+            r if r.is_empty() => 0..0,
+            r => vars[r.start]..vars[r.end - 1] + 1,
+        };
+        debug_assert_eq!(interior.len(), span.interior.len(), "consecutive unknowns");
+        Run {
+            start: span.start.map(|s| vars[s]),
+            end: span.end.map(|e| vars[e]),
+            interior,
+            weights: &weights[span.edges()],
+        }
     }
 
     /// The series conductance between its two ends; `None` when it has not two distinct ends
@@ -104,7 +147,7 @@ impl Run {
 
 /// One run's tridiagonal block `T` factorised as `L D Lᵀ` (unit lower bidiagonal `L`).
 #[derive(Debug, Clone)]
-struct Tridiagonal {
+pub struct Tridiagonal {
     /// The pivots `D`.
     d: Vec<f64>,
     /// `L`'s subdiagonal (`len − 1`).
@@ -112,8 +155,9 @@ struct Tridiagonal {
 }
 
 impl Tridiagonal {
-    /// Of the run's interior, with `ridge` added to its first unknown (a gauge).
-    fn of(run: &Run, ridge: f64) -> Result<Self, SolveError> {
+    /// Of the run's interior, with `ridge` added to its first unknown (a gauge): the ridge
+    /// of a run with no node at all ([`KronReduced::new`]'s).
+    pub fn of(run: &Run, ridge: f64) -> Result<Self, SolveError> {
         let m = run.interior.len();
         let off = usize::from(run.start.is_some());
         // Edge k of the interior (between interior k and k+1) is weights[off + k]; the edge
@@ -142,7 +186,7 @@ impl Tridiagonal {
             }
             if !(diag.is_finite() && diag > 0.0) {
                 return Err(SolveError::NonPositivePivot {
-                    index: run.interior[k],
+                    index: run.interior.start + k,
                 });
             }
             d.push(diag);
@@ -175,8 +219,8 @@ fn axpy<const K: usize>(y: &mut [f64; K], a: f64, x: &[f64; K]) {
 /// (see the module's documentation), with one gauge per connected component: on its lowest
 /// node, or on the first sample of a run with no node at all.
 pub struct KronReduced<'a> {
-    runs: &'a [Run],
-    blocks: Vec<Tridiagonal>,
+    runs: &'a [Run<'a>],
+    blocks: Vec<Cow<'a, Tridiagonal>>,
     factor: Arc<SpdFactor>,
     nodes: usize,
     components: usize,
@@ -188,11 +232,38 @@ impl<'a> KronReduced<'a> {
     pub fn new(
         n: usize,
         nodes: usize,
-        runs: &'a [Run],
+        runs: &'a [Run<'a>],
         ridge: f64,
         cache: &mut CachedPattern,
     ) -> Result<Self, SolveError> {
-        debug_assert!(runs.iter().flat_map(|r| &r.interior).all(|&v| v < n));
+        let blocks = runs
+            .iter()
+            .map(|r| Tridiagonal::of(r, Self::run_ridge(r, ridge)).map(Cow::Owned))
+            .collect::<Result<Vec<_>, _>>()?;
+        Self::with_blocks(n, nodes, runs, blocks, ridge, cache)
+    }
+
+    /// The ridge of a run's block: `ridge` for a run with no node at all (its gauge).
+    pub fn run_ridge(run: &Run, ridge: f64) -> f64 {
+        if run.start.is_none() && run.end.is_none() {
+            ridge
+        } else {
+            0.0
+        }
+    }
+
+    /// As [`new`](Self::new), with every run's block given (`Tridiagonal::of(run,
+    /// Self::run_ridge(run, ridge))`, kept from an earlier solve of the same curve).
+    pub fn with_blocks(
+        n: usize,
+        nodes: usize,
+        runs: &'a [Run<'a>],
+        blocks: Vec<Cow<'a, Tridiagonal>>,
+        ridge: f64,
+        cache: &mut CachedPattern,
+    ) -> Result<Self, SolveError> {
+        debug_assert!(runs.iter().all(|r| r.interior.end <= n));
+        debug_assert_eq!(blocks.len(), runs.len());
         let mut sets = crate::union_find::UnionFind::new(nodes);
         let edges: Vec<(usize, usize, f64)> = runs.iter().filter_map(Run::conductance).collect();
         for &(a, b, _) in &edges {
@@ -210,15 +281,10 @@ impl<'a> KronReduced<'a> {
         for &g in &gauges {
             vals[g] += ridge;
         }
-        let mut free = 0;
-        let blocks = runs
+        let free = runs
             .iter()
-            .map(|r| {
-                let alone = r.start.is_none() && r.end.is_none();
-                free += usize::from(alone);
-                Tridiagonal::of(r, if alone { ridge } else { 0.0 })
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+            .filter(|r| r.start.is_none() && r.end.is_none())
+            .count();
         // Kept: the same node system again (another solve of the same curves, or after a
         // live update's loop test on them) is not factorised again.
         let factor = if nodes > 0 {
@@ -270,14 +336,13 @@ impl<'a> KronReduced<'a> {
         let mut z: Vec<[f64; K]> = Vec::new();
         for (run, t) in self.runs[which.clone()].iter().zip(&self.blocks[which]) {
             z.clear();
-            z.extend(run.interior.iter().map(|&v| b[v]));
+            z.extend_from_slice(&b[run.interior.clone()]);
             t.solve(&mut z);
             if energy {
-                sum += run
-                    .interior
+                sum += b[run.interior.clone()]
                     .iter()
                     .zip(&z)
-                    .map(|(&v, zv)| b[v].iter().zip(zv).map(|(x, y)| x * y).sum::<f64>())
+                    .map(|(bv, zv)| bv.iter().zip(zv).map(|(x, y)| x * y).sum::<f64>())
                     .sum::<f64>();
             }
             if let (Some(a), Some(first)) = (run.start, z.first()) {
@@ -299,26 +364,22 @@ impl<'a> KronReduced<'a> {
 
     /// `b ← L⁻¹ b` (#unknowns by K).
     pub fn solve<const K: usize>(&self, b: &mut [[f64; K]]) {
-        let mut z: Vec<[f64; K]> = Vec::new();
         let mut node_b: Vec<[f64; K]> = b[..self.nodes].to_vec();
         self.reduce_runs(b, 0..self.runs.len(), &mut node_b, false);
         self.solve_nodes(&mut node_b);
         for (run, t) in self.runs.iter().zip(&self.blocks) {
-            if run.interior.is_empty() {
+            // Runs meet only at nodes: each interior is solved in place.
+            let z = &mut b[run.interior.clone()];
+            if z.is_empty() {
                 continue;
             }
-            z.clear();
-            z.extend(run.interior.iter().map(|&v| b[v]));
             if let Some(a) = run.start {
                 axpy(&mut z[0], run.weights[0], &node_b[a]);
             }
             if let (Some(e), Some(&w), Some(last)) = (run.end, run.weights.last(), z.last_mut()) {
                 axpy(last, w, &node_b[e]);
             }
-            t.solve(&mut z);
-            for (&v, zv) in run.interior.iter().zip(&z) {
-                b[v] = *zv;
-            }
+            t.solve(z);
         }
         b[..self.nodes].copy_from_slice(&node_b);
     }
@@ -337,7 +398,7 @@ mod tests {
             let chain: Vec<usize> = r
                 .start
                 .into_iter()
-                .chain(r.interior.iter().copied())
+                .chain(r.interior.clone())
                 .chain(r.end)
                 .collect();
             for (w, e) in r.weights.iter().zip(chain.windows(2)) {
@@ -368,7 +429,7 @@ mod tests {
             // Nodes 0..5; curves through some of them with samples between.
             let nodes = 5;
             let mut n = nodes;
-            let mut runs = Vec::new();
+            let mut curves = Vec::new();
             for _ in 0..(2 + case % 4) {
                 let len = 3 + (rng.uniform() * 12.0) as usize;
                 let vars: Vec<usize> = (0..len)
@@ -382,8 +443,12 @@ mod tests {
                     })
                     .collect();
                 let w: Vec<f64> = (1..len).map(|_| 0.5 + rng.uniform() * 2.0).collect();
-                runs.extend(Run::along(&vars, &w, nodes));
+                curves.push((vars, w));
             }
+            let runs: Vec<Run> = curves
+                .iter()
+                .flat_map(|(vars, w)| Run::along(vars, w, nodes))
+                .collect();
             // Nodes no run reaches stay with their gauge alone.
             let b: Vec<[f64; 1]> = (0..n).map(|_| [rng.uniform() - 0.5]).collect();
             let want = dense(n, &runs, 1.3, &b);

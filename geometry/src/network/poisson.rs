@@ -7,11 +7,13 @@
 //! is the Laplacian of the nodes alone, its symbolic factorisation kept and reused while the
 //! pattern (the network's topology) stays the same.
 
-use super::kron::{KronReduced, Run};
+use super::kron::{KronReduced, Run, Span, Tridiagonal};
 use super::prefilter::UniformCurve;
 use crate::sparse_llt::{CachedPattern, SolveError};
-use nalgebra::Vector3;
-use std::collections::BTreeMap;
+use nalgebra::{UnitQuaternion, Vector3};
+use std::borrow::Cow;
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
 
 /// Positions and normals of one reconstructed curve.
 #[derive(Debug, Clone, PartialEq)]
@@ -94,10 +96,105 @@ pub struct ScaleForm {
     pub loops: usize,
 }
 
-/// Keeps the symbolic factorisation between solves.
+/// Keeps the symbolic factorisation between solves, and what [`solve`](Self::solve) reads of
+/// each curve while the curve stays the same (issue 51: a live update changes a few curves of
+/// many).
 #[derive(Debug, Default)]
 pub struct PoissonSolver {
     pattern: CachedPattern,
+    /// The last solve's curves' [`Prepared`], by scan index.
+    prepared: HashMap<usize, Arc<Prepared>>,
+    /// Curves prepared anew so far (for tests and benchmarks).
+    prepared_count: usize,
+}
+
+/// What Poisson reads of one curve and nothing else: its tangents and normals, its edges'
+/// weights and data, its runs between tags and their factorised blocks. Kept while the
+/// curve's frames, steps, tags and kinks are the same to the bit ([`Prepared::of_same`]): the
+/// same arithmetic on the same bits, so a kept one is what would be found again.
+#[derive(Debug, Default)]
+struct Prepared {
+    q: Vec<UnitQuaternion<f64>>,
+    h: Vec<f64>,
+    nodes: Vec<(usize, u32)>,
+    kinks: Vec<(usize, UnitQuaternion<f64>)>,
+    tangents: Vec<Vector3<f64>>,
+    normals: Vec<Vector3<f64>>,
+    /// Each edge's weight `1/h²` (edge `j`: from sample `j` to `j + 1`).
+    w: Vec<f64>,
+    /// Each edge's data `h t` ([`edge_data`]).
+    v: Vec<Vector3<f64>>,
+    spans: Vec<Span>,
+    /// Each span's block; `None` for a span with no node (its ridge is the network's gauge).
+    blocks: Vec<Option<Tridiagonal>>,
+}
+
+impl Prepared {
+    /// Found again for `c`, whose unknown at each sample is `vars` (for the blocks' errors),
+    /// in the buffers of the curve's last (a live update: no memory asked of the system, none
+    /// given back).
+    fn refill(&mut self, c: &UniformCurve, vars: &[usize]) -> Result<(), SolveError> {
+        let x = Vector3::x();
+        self.q.clone_from(&c.q);
+        self.h.clone_from(&c.h);
+        self.nodes.clone_from(&c.nodes);
+        self.kinks.clone_from(&c.kinks);
+        self.tangents.clear();
+        self.tangents.extend(c.q.iter().map(|q| q * x));
+        self.normals.clear();
+        self.normals.extend(c.q.iter().map(|q| q * Vector3::z()));
+        curve_edges(c, &x, &self.tangents, &mut self.w, &mut self.v);
+        let mut node_at = vec![None; c.q.len()];
+        for &(i, nd) in &c.nodes {
+            if let Some(at) = node_at.get_mut(i) {
+                *at = Some(nd);
+            }
+        }
+        self.spans = Span::along(&node_at);
+        self.blocks.clear();
+        for s in &self.spans {
+            let run = Run::of(s, vars, &self.w);
+            let alone = run.start.is_none() && run.end.is_none();
+            let block = (!alone).then(|| Tridiagonal::of(&run, 0.0)).transpose()?;
+            self.blocks.push(block);
+        }
+        Ok(())
+    }
+
+    /// Found from the same frames, steps, tags and kinks as `c`'s, to the bit.
+    fn of_same(&self, c: &UniformCurve) -> bool {
+        let bits = |a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>| {
+            a.coords
+                .iter()
+                .zip(b.coords.iter())
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        };
+        self.nodes == c.nodes
+            && self.h.len() == c.h.len()
+            && self
+                .h
+                .iter()
+                .zip(&c.h)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+            && self.q.len() == c.q.len()
+            && self.q.iter().zip(&c.q).all(|(a, b)| bits(a, b))
+            && self.kinks.len() == c.kinks.len()
+            && (self.kinks.iter().zip(&c.kinks)).all(|(a, b)| a.0 == b.0 && bits(&a.1, &b.1))
+    }
+
+    /// Its edges in a network's unknowns (`vars`: its unknown at each sample).
+    fn edges<'a>(&'a self, vars: &'a [usize]) -> impl Iterator<Item = Edge> + 'a {
+        self.w
+            .iter()
+            .zip(&self.v)
+            .enumerate()
+            .map(move |(j, (&w, &v))| Edge {
+                a: vars[j],
+                b: vars[j + 1],
+                w,
+                v,
+            })
+    }
 }
 
 #[derive(Clone, Copy)]
@@ -121,6 +218,12 @@ impl PoissonSolver {
     /// Numeric factorisations of the node system computed so far (for tests and benchmarks).
     pub fn numeric_count(&self) -> usize {
         self.pattern.numeric_count()
+    }
+
+    /// Curves whose edges and runs were found anew so far, the others kept from the solve
+    /// before (for tests and benchmarks).
+    pub fn prepared_count(&self) -> usize {
+        self.prepared_count
     }
 
     /// The node system's pattern, with its last numeric factorisation kept (a live update's
@@ -147,11 +250,12 @@ impl PoissonSolver {
         let (x, y) = (Vector3::x(), Vector3::y());
         let (along, edge_at) = edges(curves, &var_of, &x, &axes(curves, &x));
         let (across, _) = edges(curves, &var_of, &y, &axes(curves, &y));
-        let runs = runs(curves, &var_of, &along, node_var.len());
+        let w: Vec<f64> = along.iter().map(|e| e.w).collect();
+        let runs = runs(curves, &var_of, &w, node_var.len());
         let f = KronReduced::new(n, node_var.len(), &runs, ridge(&along), &mut self.pattern)?;
         let mut x = [vec![[0.0; 3]; n], vec![[0.0; 3]; n]];
         for (x, e) in x.iter_mut().zip([&along, &across]) {
-            add_rhs(x, e);
+            add_rhs(x, e.iter().copied());
             f.solve(x);
         }
         let mut per_curve = vec![nalgebra::Matrix2::<f64>::zeros(); curves.len()];
@@ -186,7 +290,8 @@ impl PoissonSolver {
         let nodes = node_var.len();
         let x = Vector3::x();
         let (edges, edge_at) = edges(curves, &var_of, &x, &axes(curves, &x));
-        let (runs, run_starts) = runs_by_curve(curves, &var_of, &edges, nodes);
+        let w: Vec<f64> = edges.iter().map(|e| e.w).collect();
+        let (runs, run_starts) = runs_by_curve(curves, &var_of, &w, nodes);
         let f = KronReduced::new(n, nodes, &runs, ridge(&edges), &mut self.pattern)?;
         let k = curves.len();
         // Each curve's edges: a range of `edges`.
@@ -200,10 +305,18 @@ impl PoissonSolver {
         let own = |c: usize| edges[start[c]..start[c + 1]].iter().filter(|e| e.a != e.b);
         // The misfit and b from one whole solve.
         let mut x = vec![[0.0; 3]; n];
-        add_rhs(&mut x, &edges);
+        add_rhs(&mut x, edges.iter().copied());
         f.solve(&mut x);
         let x: Vec<Vector3<f64>> = x.into_iter().map(Vector3::from).collect();
-        let measured = misfit(curves, &edges, &edge_at, &x, &[], &[], &[], f.components());
+        let measured = misfit(
+            curves,
+            edge_at.iter().copied().zip(edges.iter().copied()),
+            &x,
+            &[],
+            &[],
+            &[],
+            f.components(),
+        );
         let residual = |e: &Edge| e.v - (x[e.b] - x[e.a]);
         let b = nalgebra::DVector::from_iterator(
             k,
@@ -216,7 +329,7 @@ impl PoissonSolver {
         let mut reduced: Vec<Vec<(usize, [f64; 3])>> = Vec::with_capacity(k);
         let mut solved: Vec<Vec<[f64; 3]>> = Vec::with_capacity(k);
         for c in 0..k {
-            add_rhs(&mut g, &edges[start[c]..start[c + 1]]);
+            add_rhs(&mut g, edges[start[c]..start[c + 1]].iter().copied());
             let mut nb: Vec<[f64; 3]> = g[..nodes].to_vec();
             let interior = f.reduce(&g, run_starts[c]..run_starts[c + 1], &mut nb);
             for e in own(c) {
@@ -273,20 +386,41 @@ impl PoissonSolver {
         slides: &[(usize, usize)],
     ) -> Result<(Positions, Vec<f64>), SolveError> {
         let (node_var, var_of, n) = unknowns(curves);
-        let x = Vector3::x();
-        let tangents = axes(curves, &x);
-        let (edges, edge_at) = edges(curves, &var_of, &x, &tangents);
-        let runs = runs(curves, &var_of, &edges, node_var.len());
-        let f = KronReduced::new(n, node_var.len(), &runs, ridge(&edges), &mut self.pattern)?;
+        let prepared = self.prepare(curves, &var_of)?;
+        let runs: Vec<Run> = prepared
+            .iter()
+            .zip(&var_of)
+            .flat_map(|(p, vars)| p.spans.iter().map(|s| Run::of(s, vars, &p.w)))
+            .collect();
+        let ridge = mean_weight(
+            prepared.iter().flat_map(|p| p.w.iter().copied()),
+            prepared.iter().map(|p| p.w.len()).sum(),
+        );
+        // The blocks kept with their curves; a run with no node's, whose ridge is the
+        // network's gauge, found again.
+        let blocks = (prepared.iter().flat_map(|p| &p.blocks))
+            .zip(&runs)
+            .map(|(block, run)| match block {
+                Some(b) => Ok(Cow::Borrowed(b)),
+                None => Tridiagonal::of(run, KronReduced::run_ridge(run, ridge)).map(Cow::Owned),
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let f =
+            KronReduced::with_blocks(n, node_var.len(), &runs, blocks, ridge, &mut self.pattern)?;
+        let edges = || {
+            (prepared.iter().zip(&var_of).enumerate()).flat_map(|(ci, (p, vars))| {
+                p.edges(vars).enumerate().map(move |(j, e)| ((ci, j), e))
+            })
+        };
         let mut rhs = vec![[0.0; 3]; n];
-        add_rhs(&mut rhs, &edges);
+        add_rhs(&mut rhs, edges().map(|(_, e)| e));
         f.solve(&mut rhs);
         let mut x: Vec<Vector3<f64>> = rhs.iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
+        let tangents: Vec<&[Vector3<f64>]> = prepared.iter().map(|p| &p.tangents[..]).collect();
         let sigma = slide(&f, &mut x, curves, &var_of, &tangents, slides);
         let misfit = misfit(
             curves,
-            &edges,
-            &edge_at,
+            edges(),
             &x,
             &tangents,
             slides,
@@ -295,13 +429,14 @@ impl PoissonSolver {
         );
         let out_curves = curves
             .iter()
+            .zip(&prepared)
             .enumerate()
-            .map(|(ci, c)| CurvePositions {
+            .map(|(ci, (c, p))| CurvePositions {
                 index: c.index,
                 kind: c.kind,
                 points: var_of[ci].iter().map(|&v| x[v]).collect(),
-                normals: c.q.iter().map(|q| q * Vector3::z()).collect(),
-                tangents: tangents[ci].clone(),
+                normals: p.normals.clone(),
+                tangents: p.tangents.clone(),
                 across: Vec::new(),
                 nodes: c.nodes.clone(),
                 d: c.d.clone(),
@@ -317,6 +452,45 @@ impl PoissonSolver {
             },
             sigma,
         ))
+    }
+}
+
+impl PoissonSolver {
+    /// Each curve's [`Prepared`]: the last solve's where the curve is the same, else found
+    /// (`var_of`: each curve's unknowns). Only this solve's curves are kept.
+    fn prepare(
+        &mut self,
+        curves: &[UniformCurve],
+        var_of: &[Vec<usize>],
+    ) -> Result<Vec<Arc<Prepared>>, SolveError> {
+        let mut last = std::mem::take(&mut self.prepared);
+        let mut out = Vec::with_capacity(curves.len());
+        for (c, vars) in curves.iter().zip(var_of) {
+            let mut p = match last.remove(&c.index) {
+                Some(p) if p.of_same(c) => {
+                    out.push(p);
+                    continue;
+                }
+                Some(p) => p,
+                None => Arc::default(),
+            };
+            match Arc::get_mut(&mut p) {
+                Some(m) => m.refill(c, vars)?,
+                None => {
+                    let mut m = Prepared::default();
+                    m.refill(c, vars)?;
+                    p = Arc::new(m);
+                }
+            }
+            self.prepared_count += 1;
+            out.push(p);
+        }
+        self.prepared = curves
+            .iter()
+            .zip(&out)
+            .map(|(c, p)| (c.index, p.clone()))
+            .collect();
+        Ok(out)
     }
 }
 
@@ -380,19 +554,13 @@ fn edges(
     let mut edges = Vec::with_capacity(total);
     let mut edge_at = Vec::with_capacity(total);
     for (ci, c) in curves.iter().enumerate() {
-        let a = &along[ci];
-        for (j, h) in c.edge_steps().enumerate() {
-            let arriving = if c.kinked(j + 1) {
-                c.arriving(j + 1) * axis
-            } else {
-                a[j + 1]
-            };
-            let v = (a[j] + arriving) * (0.5 * h);
-            // Residual (x_b − x_a)/h − t, squared: weight 1/h² on (x_b − x_a − h t).
+        let (mut w, mut v) = (Vec::new(), Vec::new());
+        curve_edges(c, axis, &along[ci], &mut w, &mut v);
+        for (j, (w, v)) in w.into_iter().zip(v).enumerate() {
             edges.push(Edge {
                 a: var_of[ci][j],
                 b: var_of[ci][j + 1],
-                w: 1.0 / (h * h),
+                w,
                 v,
             });
             edge_at.push((ci, j));
@@ -401,21 +569,49 @@ fn edges(
     (edges, edge_at)
 }
 
+/// The edges of `c` in order (edge `j`: from sample `j` to `j + 1`): their weights `w` and
+/// their data `v` from the frames' `axis`, given at each sample (`along`). The same data as
+/// [`edge_data`]'s.
+fn curve_edges(
+    c: &UniformCurve,
+    axis: &Vector3<f64>,
+    along: &[Vector3<f64>],
+    w: &mut Vec<f64>,
+    v: &mut Vec<Vector3<f64>>,
+) {
+    w.clear();
+    v.clear();
+    for (j, h) in c.edge_steps().enumerate() {
+        let arriving = if c.kinked(j + 1) {
+            c.arriving(j + 1) * axis
+        } else {
+            along[j + 1]
+        };
+        v.push((along[j] + arriving) * (0.5 * h));
+        // Residual (x_b − x_a)/h − t, squared: weight 1/h² on (x_b − x_a − h t).
+        w.push(1.0 / (h * h));
+    }
+}
+
 /// The runs of samples between tags of every curve, for the normal matrix's Kron reduction
 /// onto the `nodes` ([`KronReduced`]): the edges' least squares is a weighted graph Laplacian
-/// (`edges` in the order [`edges`] gives them).
-fn runs(curves: &[UniformCurve], var_of: &[Vec<usize>], edges: &[Edge], nodes: usize) -> Vec<Run> {
-    runs_by_curve(curves, var_of, edges, nodes).0
+/// (`w` the weights of the edges in the order [`edges`] gives them).
+fn runs<'w>(
+    curves: &[UniformCurve],
+    var_of: &[Vec<usize>],
+    w: &'w [f64],
+    nodes: usize,
+) -> Vec<Run<'w>> {
+    runs_by_curve(curves, var_of, w, nodes).0
 }
 
 /// As [`runs`], with where each curve's runs start in them (#curves + 1 offsets).
-fn runs_by_curve(
+fn runs_by_curve<'w>(
     curves: &[UniformCurve],
     var_of: &[Vec<usize>],
-    edges: &[Edge],
+    w: &'w [f64],
     nodes: usize,
-) -> (Vec<Run>, Vec<usize>) {
-    let w: Vec<f64> = edges.iter().map(|e| e.w).collect();
+) -> (Vec<Run<'w>>, Vec<usize>) {
     let mut out = Vec::new();
     let mut starts = vec![0];
     let mut k = 0;
@@ -450,8 +646,8 @@ fn mean_weight(weights: impl Iterator<Item = f64>, count: usize) -> f64 {
 }
 
 /// Adds the edges' data to the right-hand side (#unknowns by 3).
-fn add_rhs(rhs: &mut [[f64; 3]], edges: &[Edge]) {
-    for e in edges.iter().filter(|e| e.a != e.b) {
+fn add_rhs(rhs: &mut [[f64; 3]], edges: impl IntoIterator<Item = Edge>) {
+    for e in edges.into_iter().filter(|e| e.a != e.b) {
         for (d, v) in e.v.iter().enumerate() {
             rhs[e.b][d] += e.w * v;
             rhs[e.a][d] -= e.w * v;
@@ -460,14 +656,13 @@ fn add_rhs(rhs: &mut [[f64; 3]], edges: &[Edge]) {
 }
 
 /// The residual of the solution `x` (after the slides: an edge at a sliding tag reads
-/// `x_b − x_a − h t ± σ T`).
-#[allow(clippy::too_many_arguments)]
+/// `x_b − x_a − h t ± σ T`); `edges` each edge with its (curve position, sample of its start),
+/// curve by curve in order along each.
 fn misfit(
     curves: &[UniformCurve],
-    edges: &[Edge],
-    edge_at: &[(usize, usize)],
+    edges: impl Iterator<Item = ((usize, usize), Edge)>,
     x: &[Vector3<f64>],
-    tangents: &[Vec<Vector3<f64>>],
+    tangents: &[&[Vector3<f64>]],
     slides: &[(usize, usize)],
     sigma: &[f64],
     components: usize,
@@ -483,7 +678,7 @@ fn misfit(
     let mut h_sum = 0.0;
     // The segment of each edge: the edges come curve by curve, in order along each.
     let (mut curve, mut seg) = (usize::MAX, 0);
-    for (e, &(ci, j)) in edges.iter().zip(edge_at) {
+    for ((ci, j), e) in edges {
         if ci != curve {
             (curve, seg) = (ci, 0);
         }
@@ -528,7 +723,7 @@ fn slide(
     x: &mut [Vector3<f64>],
     curves: &[UniformCurve],
     var_of: &[Vec<usize>],
-    tangents: &[Vec<Vector3<f64>>],
+    tangents: &[&[Vector3<f64>]],
     slides: &[(usize, usize)],
 ) -> Vec<f64> {
     let m = slides.len();
@@ -704,7 +899,8 @@ mod tests {
             let (v, h) = edge_data(&curves[ci], j, &x);
             assert_eq!((e.v, e.w.to_bits()), (v, (1.0 / (h * h)).to_bits()));
         }
-        let runs = runs(&curves, &var_of, &edges0, node_var.len());
+        let w: Vec<f64> = edges0.iter().map(|e| e.w).collect();
+        let runs = runs(&curves, &var_of, &w, node_var.len());
         let mut cache = CachedPattern::default();
         let f = KronReduced::new(n, node_var.len(), &runs, ridge(&edges0), &mut cache).unwrap();
         for s in [[0.01, -0.02, 0.005], [-0.03, 0.0, 0.02]] {
@@ -718,7 +914,7 @@ mod tests {
                 })
                 .collect();
             let mut x = vec![[0.0; 3]; n];
-            add_rhs(&mut x, &scaled);
+            add_rhs(&mut x, scaled.iter().copied());
             f.solve(&mut x);
             let direct: f64 = scaled
                 .iter()
@@ -734,6 +930,52 @@ mod tests {
                 "{predicted} against {direct}"
             );
         }
+    }
+
+    /// Issue 51: a curve solved again the same (its frames, steps, tags and kinks) is not
+    /// prepared again, and the positions are a fresh solver's to the bit; a curve changed in
+    /// one frame is prepared again.
+    #[test]
+    fn issue_51_a_curve_the_same_is_kept_and_solves_to_the_same_bits() {
+        let mut curves = vec![
+            circle(1.0, 200, 0, (0, 1)),
+            circle(0.9, 180, 1, (0, 1)),
+            circle(1.1, 240, 2, (0, 1)),
+        ];
+        let arriving = curves[2].q[119];
+        curves[2].kinks.push((120, arriving));
+        let bits = |p: &Positions| -> Vec<u64> {
+            let points = p
+                .curves
+                .iter()
+                .flat_map(|c| c.points.iter().chain(&c.tangents));
+            (points.flat_map(|v| v.iter().map(|x| x.to_bits())))
+                .chain([p.misfit.chi2.to_bits()])
+                .collect()
+        };
+        let mut kept = PoissonSolver::new();
+        kept.solve(&curves[..2]).unwrap();
+        assert_eq!(kept.prepared_count(), 2);
+        for turn in [0.0, 0.01] {
+            // Curve 1 turned by `turn` at one sample (or not at all), then solved by the
+            // solver that kept the three curves' and by a fresh one.
+            let mut now = curves.clone();
+            now[1].q[50] *= UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn);
+            let before = kept.prepared_count();
+            let got = kept.solve(&now).unwrap();
+            let fresh = PoissonSolver::new().solve(&now).unwrap();
+            assert_eq!(bits(&got), bits(&fresh), "turn {turn}");
+            assert_eq!(got.nodes, fresh.nodes);
+            // Curve 2 is new at the first solve; curve 1 is changed at the second.
+            assert_eq!(kept.prepared_count() - before, 1, "turn {turn}");
+        }
+        // Curve 0's slides (a join pass) read the kept tangents.
+        let (got, sigma) = kept.solve_sliding(&curves, &[(0, 100)]).unwrap();
+        let (fresh, fresh_sigma) = PoissonSolver::new()
+            .solve_sliding(&curves, &[(0, 100)])
+            .unwrap();
+        assert_eq!(bits(&got), bits(&fresh));
+        assert_eq!(sigma[0].to_bits(), fresh_sigma[0].to_bits());
     }
 
     #[test]
