@@ -86,6 +86,9 @@ pub(crate) struct Faces {
     pub by_key: HashMap<FaceKey, Face>,
     /// The target edge of the kept faces, m.
     pub edge: Option<f64>,
+    /// The edge the vertex budget estimated for their network, m: `edge` itself, unless the
+    /// surface came out over the budget and was tessellated again at a longer edge.
+    pub estimate: Option<f64>,
     /// The samples each segment kept for the patch rims (its decimation), by curve, end
     /// nodes and sample count.
     pub samples: HashMap<(usize, u32, u32, usize), Vec<usize>>,
@@ -179,6 +182,33 @@ mod tests {
                 assert!(dev <= 1e-9, "{name} {soft:?}: {dev:e} of the diagonal");
             }
         }
+    }
+
+    /// Issue 51: a network over the vertex budget with its rims alone (a grid of hundreds of
+    /// curves: 35 000 vertices against 20 000) is tessellated at the estimate's edge, then
+    /// again at a longer one. The next curve's update keeps that edge and the faces the curve
+    /// did not touch, where it tessellated every face twice, at the estimate and corrected.
+    #[test]
+    fn issue_51_over_the_budget_the_next_curve_keeps_the_faces() {
+        let net = sphere_grid(6, 5, 0.01);
+        let p = SurfaceParams {
+            max_vertices: 60,
+            reuse_tolerance: 0.5,
+            ..SurfaceParams::default()
+        };
+        let mut s = Surfacer::new();
+        let before = s.run(&without(&net, 1), &p).expect("a surface");
+        assert!(
+            before.positions.len() as f64 > 1.25 * 60.0,
+            "over the budget"
+        );
+        let after = s.run(&net, &p).expect("a surface");
+        let faces = after.cycles.patches.len();
+        assert!(
+            after.faces_kept > faces / 2,
+            "{} of {faces} faces kept",
+            after.faces_kept
+        );
     }
 
     /// Issue 19, points 1 and 5: with a tolerance the kept faces keep their weights; the same

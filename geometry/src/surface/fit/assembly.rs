@@ -59,6 +59,9 @@ pub(super) struct Tessellation {
     pub(super) problems: Vec<SurfaceProblem>,
     /// The target edge, m.
     pub(super) edge: f64,
+    /// The edge the budget estimated for the network before a count over it corrected it
+    /// ([`Faces::estimate`]), m.
+    pub(super) estimate: f64,
     /// The edge and the rims' samples are those a run from scratch takes (not held from the
     /// last surface).
     pub(super) exact: bool,
@@ -77,13 +80,17 @@ pub(super) fn tessellation(
     let mut edge = p
         .edge
         .unwrap_or_else(|| default_edge(net).max(budget_edge(net, &cyc, p.max_vertices)));
-    // Reusing faces, the kept edge holds while the budget's stays within a quarter of it (a
-    // grown network would otherwise be tessellated anew at every curve).
+    let estimate = edge;
+    // Reusing faces, the kept edge holds while the budget's stays within a quarter of what it
+    // was for the kept faces (a grown network would otherwise be tessellated anew at every
+    // curve; and one over the budget twice, at the estimate and again corrected: issue 51).
     let mut exact = true;
+    let mut held = false;
     if let (true, None, Some(kept)) = (p.reuse_tolerance > 0.0, p.edge, faces.edge) {
-        if (0.8..=1.25).contains(&(edge / kept)) {
+        if (0.8..=1.25).contains(&(edge / faces.estimate.unwrap_or(kept))) {
             exact &= edge == kept;
             edge = kept;
+            held = true;
         }
     }
     // Boundary vertices about half an edge apart at least: a network sampled far more finely
@@ -115,9 +122,10 @@ pub(super) fn tessellation(
     let (mut asm, mut skipped) = assemble(net, &cyc, edge, &mut problems, &mut reuse);
     // The budget's area is an estimate (a developed patch can take more room in the plane
     // than on the surface): over it by a quarter, tessellate once more at the edge the count
-    // asks for.
+    // asks for. A held edge was so corrected for the kept faces already (a network whose
+    // rims alone are over the budget would otherwise be tessellated anew at every curve).
     let nv = asm.positions.len() as f64;
-    if p.edge.is_none() && nv > 1.25 * p.max_vertices as f64 {
+    if p.edge.is_none() && !held && nv > 1.25 * p.max_vertices as f64 {
         edge *= (nv / p.max_vertices as f64).sqrt();
         tracing::debug!("surface: {nv} vertices over the budget; edge {edge:.4}");
         problems = cyc.problems.clone();
@@ -133,6 +141,7 @@ pub(super) fn tessellation(
         cycles: cyc,
         problems,
         edge,
+        estimate,
         exact,
     }
 }

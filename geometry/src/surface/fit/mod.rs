@@ -313,6 +313,7 @@ fn surface_with(
         cycles: cyc,
         mut problems,
         edge,
+        estimate,
         exact: exact_rims,
     } = tessellation(net, p, faces);
     lap("tessellation", &mut tt);
@@ -332,7 +333,7 @@ fn surface_with(
     let (triangles, normals) = output(&asm, &nstar, edge, &mut problems)?;
     lap("output", &mut tt);
     let pieces = asm.pieces.len();
-    let faces_kept = keep_faces(faces, &mut asm, used, edge);
+    let faces_kept = keep_faces(faces, &mut asm, used, [edge, estimate]);
     lap("weights kept", &mut tt);
     tracing::debug!(
         "surface: {faces_kept} of {pieces} faces kept{}",
@@ -456,7 +457,13 @@ fn guide_fits(asm: &Assembly, data: &[Vector3<f64>]) -> Vec<GuideFit> {
 /// with (so that the same network again is the same system: back-substitutions only), or
 /// those of this surface where it had none (a provisional surface's new faces). Returns how
 /// many of this surface's faces were kept from the last.
-fn keep_faces(faces: &mut Faces, asm: &mut Assembly, mut used: UsedWeights, edge: f64) -> usize {
+/// `edge` is the surface's target edge and the budget's estimate ([`Faces::estimate`]).
+fn keep_faces(
+    faces: &mut Faces,
+    asm: &mut Assembly,
+    mut used: UsedWeights,
+    [edge, estimate]: [f64; 2],
+) -> usize {
     let planar: Vec<usize> = (0..used.len()).filter(|&i| used[i].is_none()).collect();
     let mut fresh = surface_weights(&asm.pieces, &planar, &asm.positions).into_iter();
     for &i in &planar {
@@ -465,6 +472,7 @@ fn keep_faces(faces: &mut Faces, asm: &mut Assembly, mut used: UsedWeights, edge
     let faces_kept = asm.pieces.iter().filter(|pc| pc.kept).count();
     faces.by_key.clear();
     faces.edge = Some(edge);
+    faces.estimate = Some(estimate);
     for (pc, w) in std::mem::take(&mut asm.pieces).into_iter().zip(used) {
         let mut face = pc.face;
         face.surface = w;
