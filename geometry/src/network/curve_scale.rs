@@ -11,8 +11,9 @@
 //! prior on each scale (the device's spread, `sigma`), the misfit weighed by the noise the
 //! loops show (`chi2 / (loops − curves)` per degree of freedom left; `3 loops − curves`
 //! where that leaves none, [`degrees_of_freedom`], and then only scales an F test finds
-//! significant), and the length-weighted mean scale held at 0: a scale common to every curve only scales the misfit, so the loops would shrink the
-//! network to a point, and the network's size is the wheel's calibration, not theirs.
+//! significant), and the length-weighted mean scale held at 0: a scale common to every
+//! curve only scales the misfit, so the loops would shrink the network to a point, and the
+//! network's size is the wheel's calibration, not theirs.
 //!
 //! ```
 //! use nalgebra::{DMatrix, DVector};

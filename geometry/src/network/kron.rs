@@ -131,6 +131,11 @@ impl<'w> Run<'w> {
         }
     }
 
+    /// No node at either end (a curve without tags): its block carries its component's gauge.
+    pub fn alone(&self) -> bool {
+        self.start.is_none() && self.end.is_none()
+    }
+
     /// The series conductance between its two ends; `None` when it has not two distinct ends
     /// (a curve's end, or a loop back to the node it left: no coupling in the node system).
     fn conductance(&self) -> Option<(usize, usize, f64)> {
@@ -245,7 +250,7 @@ impl<'a> KronReduced<'a> {
 
     /// The ridge of a run's block: `ridge` for a run with no node at all (its gauge).
     pub fn run_ridge(run: &Run, ridge: f64) -> f64 {
-        if run.start.is_none() && run.end.is_none() {
+        if run.alone() {
             ridge
         } else {
             0.0
@@ -281,10 +286,7 @@ impl<'a> KronReduced<'a> {
         for &g in &gauges {
             vals[g] += ridge;
         }
-        let free = runs
-            .iter()
-            .filter(|r| r.start.is_none() && r.end.is_none())
-            .count();
+        let free = runs.iter().filter(|r| r.alone()).count();
         // Kept: the same node system again (another solve of the same curves, or after a
         // live update's loop test on them) is not factorised again.
         let factor = if nodes > 0 {

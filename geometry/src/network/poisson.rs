@@ -157,8 +157,9 @@ impl Prepared {
         self.blocks.clear();
         for s in &self.spans {
             let run = Run::of(s, vars, &self.w);
-            let alone = run.start.is_none() && run.end.is_none();
-            let block = (!alone).then(|| Tridiagonal::of(&run, 0.0)).transpose()?;
+            let block = (!run.alone())
+                .then(|| Tridiagonal::of(&run, 0.0))
+                .transpose()?;
             self.blocks.push(block);
         }
         Ok(())

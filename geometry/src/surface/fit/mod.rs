@@ -333,7 +333,7 @@ fn surface_with(
     let (triangles, normals) = output(&asm, &nstar, edge, &mut problems)?;
     lap("output", &mut tt);
     let pieces = asm.pieces.len();
-    let faces_kept = keep_faces(faces, &mut asm, used, [edge, estimate]);
+    let faces_kept = keep_faces(faces, &mut asm, used, edge, estimate);
     lap("weights kept", &mut tt);
     tracing::debug!(
         "surface: {faces_kept} of {pieces} faces kept{}",
@@ -456,13 +456,14 @@ fn guide_fits(asm: &Assembly, data: &[Vector3<f64>]) -> Vec<GuideFit> {
 /// Keeps the faces for the next surface, each with the 3D weights its last pass was solved
 /// with (so that the same network again is the same system: back-substitutions only), or
 /// those of this surface where it had none (a provisional surface's new faces). Returns how
-/// many of this surface's faces were kept from the last.
-/// `edge` is the surface's target edge and the budget's estimate ([`Faces::estimate`]).
+/// many of this surface's faces were kept from the last. `edge` is the surface's target edge,
+/// `estimate` the budget's ([`Faces::estimate`]).
 fn keep_faces(
     faces: &mut Faces,
     asm: &mut Assembly,
     mut used: UsedWeights,
-    [edge, estimate]: [f64; 2],
+    edge: f64,
+    estimate: f64,
 ) -> usize {
     let planar: Vec<usize> = (0..used.len()).filter(|&i| used[i].is_none()).collect();
     let mut fresh = surface_weights(&asm.pieces, &planar, &asm.positions).into_iter();
