@@ -15,6 +15,12 @@
 //! arithmetic; its cost is the node system's plus O(samples), where the whole Laplacian's
 //! symbolic factorisation (a new pattern at every live update) alone took most of Poisson.
 //!
+//! Where the right-hand side is edge data (Poisson's: `b = Dᵀ W v`), steps 1 and 3 have a
+//! closed form, [`Series`]: a run is one edge of its series conductance and its data summed,
+//! and its samples follow the data with the misfit shared in proportion to each edge's
+//! resistance. No tridiagonal solve, and what a run gives the node system is the run's alone
+//! (kept with it while it stays the same). [`NodeSystem`] is step 2 by itself.
+//!
 //! ```
 //! use sfs_geometry::network::kron::{KronReduced, Run};
 //! // A path 0 – 2 – 3 – 1 with nodes 0 and 1 (unknowns 0..2 are nodes): unit weights, the
@@ -34,6 +40,7 @@
 //! ```
 
 use crate::sparse_llt::{CachedPattern, SolveError, SpdFactor};
+use nalgebra::Vector3;
 use std::borrow::Cow;
 use std::ops::Range;
 use std::sync::Arc;
@@ -91,6 +98,103 @@ impl Span {
     }
 }
 
+impl Span {
+    /// Its edges' series (`w`, `v`: the curve's edges' weights and data, edge `j` from sample
+    /// `j` to `j + 1`), and at each of its samples from its first (its start tag's, or its
+    /// first interior one) to its last interior one, the sums over its edges before it:
+    /// `cum_r[j] = Σ 1/w_e`, `cum_v[j] = Σ v_e` (indexed by the curve's samples).
+    pub fn series(
+        &self,
+        w: &[f64],
+        v: &[Vector3<f64>],
+        cum_r: &mut [f64],
+        cum_v: &mut [Vector3<f64>],
+    ) -> Series {
+        let first = self.start.unwrap_or(self.interior.start);
+        let (mut r, mut sum) = (0.0, Vector3::zeros());
+        for e in self.edges() {
+            if e >= first && e < self.interior.end {
+                cum_r[e] = r;
+                cum_v[e] = sum;
+            }
+            r += w[e].recip();
+            sum += v[e];
+        }
+        // The last interior sample of a run with no end (no edge after it).
+        if self.end.is_none() && self.interior.end > first {
+            cum_r[self.interior.end - 1] = r;
+            cum_v[self.interior.end - 1] = sum;
+        }
+        Series { r, v: sum }
+    }
+}
+
+/// A run's edges in series, in closed form: for edge data `v` with weights `w` along a path,
+/// the least squares `Σ_e w_e |x_{e+1} − x_e − v_e|²` with the path's ends `x_a`, `x_b` held
+/// is one edge of conductance `W = 1/R`, `R = Σ_e 1/w_e`, and data `V = Σ_e v_e`: its
+/// minimum is `W |x_b − x_a − V|²`, at `x_j = x_a + P_j + R_j λ`, `λ = W (x_b − x_a − V)`
+/// (`P_j`, `R_j` the sums over the edges before sample `j`: each edge takes the data's
+/// misfit in proportion to its resistance). The Schur complement of the module's solve, for
+/// a right-hand side that is edge data (Poisson's): no tridiagonal solve, and what a run
+/// gives the node system depends on the run alone.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Series {
+    /// `R = Σ_e 1/w_e` (summed in order along the run, as [`Run::conductance`]'s).
+    pub r: f64,
+    /// `V = Σ_e v_e`.
+    pub v: Vector3<f64>,
+}
+
+impl Series {
+    /// `W = 1/R`: [`Run::conductance`]'s, to the bit.
+    pub fn conductance(&self) -> f64 {
+        1.0 / self.r
+    }
+
+    /// The samples of `span` between its ends (its interior), written to `out` (indexed by
+    /// the curve's samples), given its ends (`None`: no tag there) and the sums before each
+    /// sample ([`Span::series`]). With one end the run follows its data from it; with none
+    /// (a curve without tags) from its first sample at the origin (its gauge).
+    pub fn place(
+        &self,
+        span: &Span,
+        ends: (Option<Vector3<f64>>, Option<Vector3<f64>>),
+        cum_r: &[f64],
+        cum_v: &[Vector3<f64>],
+        out: &mut [Vector3<f64>],
+    ) {
+        let at = span.interior.clone();
+        match ends {
+            (Some(a), Some(b)) => {
+                let lambda = (b - a - self.v) / self.r;
+                for j in at {
+                    out[j] = a + cum_v[j] + lambda * cum_r[j];
+                }
+            }
+            (Some(a), None) => {
+                for j in at {
+                    out[j] = a + cum_v[j];
+                }
+            }
+            (None, Some(b)) => {
+                for j in at {
+                    out[j] = b - (self.v - cum_v[j]);
+                }
+            }
+            (None, None) => {
+                for j in at {
+                    out[j] = cum_v[j];
+                }
+            }
+        }
+    }
+
+    /// Its least squares' minimum with its ends at `a` and `b`: `W |b − a − V|²`.
+    pub fn misfit(&self, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+        (b - a - self.v).norm_squared() / self.r
+    }
+}
+
 /// A run of samples between two tags (or a curve's end) in a network's unknowns: the node
 /// unknowns at its ends, its interior unknowns (consecutive: no node among them), and the
 /// weights of its edges in order (`interior.len() − 1` between the interior samples, one more
@@ -138,7 +242,7 @@ impl<'w> Run<'w> {
 
     /// The series conductance between its two ends; `None` when it has not two distinct ends
     /// (a curve's end, or a loop back to the node it left: no coupling in the node system).
-    fn conductance(&self) -> Option<(usize, usize, f64)> {
+    pub fn conductance(&self) -> Option<(usize, usize, f64)> {
         match (self.start, self.end) {
             (Some(a), Some(b)) if a != b => Some((
                 a,
@@ -226,9 +330,72 @@ fn axpy<const K: usize>(y: &mut [f64; K], a: f64, x: &[f64; K]) {
 pub struct KronReduced<'a> {
     runs: &'a [Run<'a>],
     blocks: Vec<Cow<'a, Tridiagonal>>,
+    system: NodeSystem,
+}
+
+/// The node system `S` alone (step 2 of the module's solve): the Laplacian over the nodes of
+/// the runs' series conductances, one gauge per connected component, factorised.
+pub struct NodeSystem {
     factor: Arc<SpdFactor>,
     nodes: usize,
     components: usize,
+}
+
+impl NodeSystem {
+    /// The Laplacian over `nodes` of the `edges` (`(a, b, conductance)`, `a ≠ b`, in the
+    /// runs' order: [`Run::conductance`], or [`Series::conductance`]), with `ridge` on the
+    /// lowest node of each component, factorised through `cache` (its symbolic
+    /// factorisation kept, and its numeric one for the same values again); `free` runs with
+    /// no node at all are components of their own.
+    pub fn new(
+        nodes: usize,
+        edges: &[(usize, usize, f64)],
+        free: usize,
+        ridge: f64,
+        cache: &mut CachedPattern,
+    ) -> Result<Self, SolveError> {
+        let mut sets = crate::union_find::UnionFind::new(nodes);
+        for &(a, b, _) in edges {
+            sets.union(a, b);
+        }
+        let gauges: Vec<usize> = sets.roots().collect();
+        let mut entries: Vec<(usize, usize)> = (0..nodes).map(|i| (i, i)).collect();
+        entries.extend(edges.iter().map(|&(a, b, _)| (a.max(b), a.min(b))));
+        let mut vals = vec![0.0; entries.len()];
+        for (k, &(a, b, w)) in edges.iter().enumerate() {
+            vals[a] += w;
+            vals[b] += w;
+            vals[nodes + k] -= w;
+        }
+        for &g in &gauges {
+            vals[g] += ridge;
+        }
+        // Kept: the same node system again (another solve of the same curves, or after a
+        // live update's loop test on them) is not factorised again.
+        let factor = if nodes > 0 {
+            cache.factor_kept(nodes, entries, &vals, true)?
+        } else {
+            // No node: every run is a curve alone; a 1 by 1 system stands in for the nodes'.
+            cache.factor_kept(1, vec![(0, 0)], &[1.0], true)?
+        };
+        Ok(NodeSystem {
+            factor,
+            nodes,
+            components: gauges.len() + free,
+        })
+    }
+
+    /// The connected components (each with its gauge).
+    pub fn components(&self) -> usize {
+        self.components
+    }
+
+    /// `node_b ← S⁻¹ node_b` (#nodes by K).
+    pub fn solve<const K: usize>(&self, node_b: &mut [[f64; K]]) {
+        if self.nodes > 0 {
+            self.factor.solve(node_b);
+        }
+    }
 }
 
 impl<'a> KronReduced<'a> {
@@ -269,44 +436,19 @@ impl<'a> KronReduced<'a> {
     ) -> Result<Self, SolveError> {
         debug_assert!(runs.iter().all(|r| r.interior.end <= n));
         debug_assert_eq!(blocks.len(), runs.len());
-        let mut sets = crate::union_find::UnionFind::new(nodes);
         let edges: Vec<(usize, usize, f64)> = runs.iter().filter_map(Run::conductance).collect();
-        for &(a, b, _) in &edges {
-            sets.union(a, b);
-        }
-        let gauges: Vec<usize> = sets.roots().collect();
-        let mut entries: Vec<(usize, usize)> = (0..nodes).map(|i| (i, i)).collect();
-        entries.extend(edges.iter().map(|&(a, b, _)| (a.max(b), a.min(b))));
-        let mut vals = vec![0.0; entries.len()];
-        for (k, &(a, b, w)) in edges.iter().enumerate() {
-            vals[a] += w;
-            vals[b] += w;
-            vals[nodes + k] -= w;
-        }
-        for &g in &gauges {
-            vals[g] += ridge;
-        }
         let free = runs.iter().filter(|r| r.alone()).count();
-        // Kept: the same node system again (another solve of the same curves, or after a
-        // live update's loop test on them) is not factorised again.
-        let factor = if nodes > 0 {
-            cache.factor_kept(nodes, entries, &vals, true)?
-        } else {
-            // No node: every run is a curve alone; a 1 by 1 system stands in for the nodes'.
-            cache.factor_kept(1, vec![(0, 0)], &[1.0], true)?
-        };
+        let system = NodeSystem::new(nodes, &edges, free, ridge, cache)?;
         Ok(KronReduced {
             runs,
             blocks,
-            factor,
-            nodes,
-            components: gauges.len() + free,
+            system,
         })
     }
 
     /// The connected components (each with its gauge).
     pub fn components(&self) -> usize {
-        self.components
+        self.system.components
     }
 
     /// Step 1 of [`solve`](Self::solve) for the runs `which` alone: adds to `node_b` (#nodes
@@ -359,14 +501,13 @@ impl<'a> KronReduced<'a> {
 
     /// `node_b ← S⁻¹ node_b` (#nodes by K): step 2 of [`solve`](Self::solve).
     pub fn solve_nodes<const K: usize>(&self, node_b: &mut [[f64; K]]) {
-        if self.nodes > 0 {
-            self.factor.solve(node_b);
-        }
+        self.system.solve(node_b);
     }
 
     /// `b ← L⁻¹ b` (#unknowns by K).
     pub fn solve<const K: usize>(&self, b: &mut [[f64; K]]) {
-        let mut node_b: Vec<[f64; K]> = b[..self.nodes].to_vec();
+        let nodes = self.system.nodes;
+        let mut node_b: Vec<[f64; K]> = b[..nodes].to_vec();
         self.reduce_runs(b, 0..self.runs.len(), &mut node_b, false);
         self.solve_nodes(&mut node_b);
         for (run, t) in self.runs.iter().zip(&self.blocks) {
@@ -383,7 +524,7 @@ impl<'a> KronReduced<'a> {
             }
             t.solve(z);
         }
-        b[..self.nodes].copy_from_slice(&node_b);
+        b[..nodes].copy_from_slice(&node_b);
     }
 }
 

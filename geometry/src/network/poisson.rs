@@ -3,14 +3,16 @@
 //! `(x_{j+1} − x_j)/h − (T_j + T_{j+1})/2` over every edge of every curve (the midpoint rule,
 //! exact to second order on a circular arc); one gauge vertex per connected component. The
 //! normal matrix is a weighted graph Laplacian. Each run of samples between two tags is a
-//! path in it, eliminated exactly ([`super::kron`]): what is factorised, by sparse Cholesky,
-//! is the Laplacian of the nodes alone, its symbolic factorisation kept and reused while the
-//! pattern (the network's topology) stays the same. What a solve reads of each curve (its
-//! edges' data, its runs' factorised blocks, its tangents and normals: 128 bytes a sample) is
-//! kept while the curve is the same to the bit, so that a live update, which changes a few
-//! curves of many (issue 51), finds again only theirs.
+//! path in it, eliminated exactly ([`super::kron`]): in closed form, its edges in series
+//! ([`super::kron::Series`]: one edge between its tags, its samples placed along it once the
+//! nodes are solved). What is factorised, by sparse Cholesky, is the Laplacian of the nodes
+//! alone, its symbolic factorisation kept and reused while the pattern (the network's
+//! topology) stays the same. What a solve reads of each curve (its edges' data, its runs'
+//! sums, its tangents and normals: 160 bytes a sample) is kept while the curve is the same to
+//! the bit, and found again only where its frames changed, so that a live update, which turns
+//! a few frames of many curves (issue 51), finds again only theirs.
 
-use super::kron::{KronReduced, Run, Span, Tridiagonal};
+use super::kron::{KronReduced, NodeSystem, Run, Series, Span, Tridiagonal};
 use super::prefilter::UniformCurve;
 use crate::sparse_llt::{CachedPattern, SolveError};
 use nalgebra::{UnitQuaternion, Vector3};
@@ -128,6 +130,15 @@ struct Prepared {
     /// Each edge's data `h t` ([`edge_data`]).
     v: Vec<Vector3<f64>>,
     spans: Vec<Span>,
+    /// Each span's edges in series ([`Series`]).
+    series: Vec<Series>,
+    /// The sums over each span's edges before each sample ([`Span::series`]).
+    cum_r: Vec<f64>,
+    cum_v: Vec<Vector3<f64>>,
+    /// Its edges between two unknowns (all but those between two tags of one node on
+    /// adjacent samples), and their steps summed (the misfit's scale: [`Misfit::mean_h`]).
+    used: usize,
+    h_sum: f64,
     /// Each span's block; `None` for a span with no node (its ridge is the network's gauge).
     blocks: Vec<Option<Tridiagonal>>,
 }
@@ -154,6 +165,22 @@ impl Prepared {
             }
         }
         self.spans = Span::along(&node_at);
+        let m = c.q.len();
+        self.cum_r.clear();
+        self.cum_r.resize(m, 0.0);
+        self.cum_v.clear();
+        self.cum_v.resize(m, Vector3::zeros());
+        self.series.clear();
+        (self.used, self.h_sum) = (0, 0.0);
+        for s in &self.spans {
+            let series = s.series(&self.w, &self.v, &mut self.cum_r, &mut self.cum_v);
+            self.series.push(series);
+            self.used += s.edges().len();
+            self.h_sum += self.w[s.edges()]
+                .iter()
+                .map(|w| w.sqrt().recip())
+                .sum::<f64>();
+        }
         self.blocks.clear();
         for s in &self.spans {
             let run = Run::of(s, vars, &self.w);
@@ -391,54 +418,104 @@ impl PoissonSolver {
     ) -> Result<(Positions, Vec<f64>), SolveError> {
         let (node_var, var_of, n) = unknowns(curves);
         let prepared = self.prepare(curves, &var_of)?;
-        let runs: Vec<Run> = prepared
-            .iter()
-            .zip(&var_of)
-            .flat_map(|(p, vars)| p.spans.iter().map(|s| Run::of(s, vars, &p.w)))
-            .collect();
+        let nodes = node_var.len();
         let ridge = mean_weight(
             prepared.iter().flat_map(|p| p.w.iter().copied()),
             prepared.iter().map(|p| p.w.len()).sum(),
         );
-        // The blocks kept with their curves; a run with no node's, whose ridge is the
-        // network's gauge, found again.
-        let blocks = (prepared.iter().flat_map(|p| &p.blocks))
-            .zip(&runs)
-            .map(|(block, run)| match block {
-                Some(b) => Ok(Cow::Borrowed(b)),
-                None => Tridiagonal::of(run, KronReduced::run_ridge(run, ridge)).map(Cow::Owned),
+        // Each run's ends (their unknowns), with its edges in series.
+        let ends = |vars: &[usize], s: &Span| (s.start.map(|i| vars[i]), s.end.map(|i| vars[i]));
+        // The node system: each run one edge of its series conductance, in the runs' order
+        // (the loop test's node Laplacian to the bit: `closure::Kept::node_system`).
+        let mut links = Vec::new();
+        let mut free = 0;
+        let mut node_b = vec![[0.0; 3]; nodes];
+        for (p, vars) in prepared.iter().zip(&var_of) {
+            for (s, series) in p.spans.iter().zip(&p.series) {
+                match ends(vars, s) {
+                    (Some(a), Some(b)) if a != b => {
+                        links.push((a, b, series.conductance()));
+                        let wv = series.v / series.r;
+                        for d in 0..3 {
+                            node_b[b][d] += wv[d];
+                            node_b[a][d] -= wv[d];
+                        }
+                    }
+                    (None, None) => free += 1,
+                    _ => {}
+                }
+            }
+        }
+        let system = NodeSystem::new(nodes, &links, free, ridge, &mut self.pattern)?;
+        system.solve(&mut node_b);
+        let at_node: Vec<Vector3<f64>> = node_b.iter().map(|&v| Vector3::from(v)).collect();
+        // Each curve's samples: its runs placed between their ends.
+        let mut points: Vec<Vec<Vector3<f64>>> = prepared
+            .iter()
+            .zip(&var_of)
+            .map(|(p, vars)| {
+                let mut x = vec![Vector3::zeros(); vars.len()];
+                for (i, &v) in vars.iter().enumerate().filter(|(_, &v)| v < nodes) {
+                    x[i] = at_node[v];
+                }
+                for (s, series) in p.spans.iter().zip(&p.series) {
+                    let (a, b) = ends(vars, s);
+                    let ends = (a.map(|a| at_node[a]), b.map(|b| at_node[b]));
+                    series.place(s, ends, &p.cum_r, &p.cum_v, &mut x);
+                }
+                x
             })
-            .collect::<Result<Vec<_>, _>>()?;
-        let f =
-            KronReduced::with_blocks(n, node_var.len(), &runs, blocks, ridge, &mut self.pattern)?;
-        let edges = || {
-            (prepared.iter().zip(&var_of).enumerate()).flat_map(|(ci, (p, vars))| {
-                p.edges(vars).enumerate().map(move |(j, e)| ((ci, j), e))
-            })
-        };
-        let mut rhs = vec![[0.0; 3]; n];
-        add_rhs(&mut rhs, edges().map(|(_, e)| e));
-        f.solve(&mut rhs);
-        let mut x: Vec<Vector3<f64>> = rhs.iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
+            .collect();
+        let components = system.components();
         let tangents: Vec<&[Vector3<f64>]> = prepared.iter().map(|p| &p.tangents[..]).collect();
-        let sigma = slide(&f, &mut x, curves, &var_of, &tangents, slides);
-        let misfit = misfit(
-            curves,
-            edges(),
-            &x,
-            &tangents,
-            slides,
-            &sigma,
-            f.components(),
-        );
+        let (misfit, sigma) = if slides.is_empty() {
+            let misfit = series_misfit(curves, &prepared, &var_of, &at_node, n, components);
+            (misfit, Vec::new())
+        } else {
+            // The slides' corrections need solves of other right-hand sides than edge data:
+            // the runs' blocks, kept with their curves (a run with no node's, whose ridge is
+            // the network's gauge, found again).
+            let runs: Vec<Run> = prepared
+                .iter()
+                .zip(&var_of)
+                .flat_map(|(p, vars)| p.spans.iter().map(|s| Run::of(s, vars, &p.w)))
+                .collect();
+            let blocks = (prepared.iter().flat_map(|p| &p.blocks))
+                .zip(&runs)
+                .map(|(block, run)| match block {
+                    Some(b) => Ok(Cow::Borrowed(b)),
+                    None => {
+                        Tridiagonal::of(run, KronReduced::run_ridge(run, ridge)).map(Cow::Owned)
+                    }
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            let f = KronReduced::with_blocks(n, nodes, &runs, blocks, ridge, &mut self.pattern)?;
+            let mut x = vec![Vector3::zeros(); n];
+            for (vars, p) in var_of.iter().zip(&points) {
+                for (&v, &xi) in vars.iter().zip(p) {
+                    x[v] = xi;
+                }
+            }
+            let sigma = slide(&f, &mut x, curves, &var_of, &tangents, slides);
+            let edges = (prepared.iter().zip(&var_of).enumerate()).flat_map(|(ci, (p, vars))| {
+                p.edges(vars).enumerate().map(move |(j, e)| ((ci, j), e))
+            });
+            let misfit = misfit(curves, edges, &x, &tangents, slides, &sigma, components);
+            for (vars, p) in var_of.iter().zip(&mut points) {
+                for (&v, xi) in vars.iter().zip(p.iter_mut()) {
+                    *xi = x[v];
+                }
+            }
+            (misfit, sigma)
+        };
         let out_curves = curves
             .iter()
             .zip(&prepared)
-            .enumerate()
-            .map(|(ci, (c, p))| CurvePositions {
+            .zip(points)
+            .map(|((c, p), points)| CurvePositions {
                 index: c.index,
                 kind: c.kind,
-                points: var_of[ci].iter().map(|&v| x[v]).collect(),
+                points,
                 normals: p.normals.clone(),
                 tangents: p.tangents.clone(),
                 across: Vec::new(),
@@ -450,8 +527,8 @@ impl PoissonSolver {
         Ok((
             Positions {
                 curves: out_curves,
-                nodes: node_var.iter().map(|(&nd, &v)| (nd, x[v])).collect(),
-                components: f.components(),
+                nodes: node_var.iter().map(|(&nd, &v)| (nd, at_node[v])).collect(),
+                components,
                 misfit,
             },
             sigma,
@@ -656,6 +733,51 @@ fn add_rhs(rhs: &mut [[f64; 3]], edges: impl IntoIterator<Item = Edge>) {
             rhs[e.b][d] += e.w * v;
             rhs[e.a][d] -= e.w * v;
         }
+    }
+}
+
+/// The misfit of the solution without slides, run by run in closed form ([`Series::misfit`]:
+/// a run's edges' residuals sum to `W |x_b − x_a − V|²`), each run's in the segment its
+/// edges are in (a run at a curve's end, which fits exactly, in none); `at_node` the nodes'
+/// positions, `n` the unknowns.
+fn series_misfit(
+    curves: &[UniformCurve],
+    prepared: &[Arc<Prepared>],
+    var_of: &[Vec<usize>],
+    at_node: &[Vector3<f64>],
+    n: usize,
+    components: usize,
+) -> Misfit {
+    let mut chi2 = 0.0;
+    let (mut used, mut h_sum) = (0usize, 0.0);
+    let mut chi2_segments = Vec::with_capacity(curves.len());
+    for ((c, p), vars) in curves.iter().zip(prepared).zip(var_of) {
+        let mut per = vec![0.0; c.nodes.len().saturating_sub(1)];
+        used += p.used;
+        h_sum += p.h_sum;
+        // The segment of each run's first edge, as along the edges: the last tag at or
+        // before it (the first segment before any).
+        let mut seg = 0;
+        for (s, series) in p.spans.iter().zip(&p.series) {
+            let (Some(a), Some(b)) = (s.start, s.end) else {
+                continue;
+            };
+            while c.nodes.get(seg + 1).is_some_and(|&(i, _)| i <= a) {
+                seg += 1;
+            }
+            let r = series.misfit(&at_node[vars[a]], &at_node[vars[b]]);
+            chi2 += r;
+            if let Some(x) = per.get_mut(seg) {
+                *x += r;
+            }
+        }
+        chi2_segments.push(per);
+    }
+    Misfit {
+        chi2,
+        chi2_segments,
+        loops: (used + components).saturating_sub(n),
+        mean_h: if used == 0 { 0.0 } else { h_sum / used as f64 },
     }
 }
 
@@ -980,6 +1102,86 @@ mod tests {
             .unwrap();
         assert_eq!(bits(&got), bits(&fresh));
         assert_eq!(sigma[0].to_bits(), fresh_sigma[0].to_bits());
+    }
+
+    /// Issue 51: the runs solved in series in closed form ([`Series`]) are the Kron-reduced
+    /// Laplacian's solution, and their misfit the edges' residuals summed, on a network of
+    /// every kind of run: between two nodes, back to the node it left, between tags on
+    /// adjacent samples (of two nodes, and of one), from a curve's end to its one tag, and a
+    /// curve without tags (its own gauge); frames turned so that the loops misfit.
+    #[test]
+    fn issue_51_the_runs_in_series_solve_as_the_reduced_laplacian() {
+        let mut curves = vec![
+            circle(1.0, 200, 0, (0, 1)),
+            circle(0.9, 180, 1, (0, 1)),
+            circle(1.1, 240, 2, (0, 1)),
+            circle(0.7, 90, 3, (0, 0)),
+            circle(0.5, 60, 4, (0, 0)),
+            circle(0.6, 80, 5, (0, 0)),
+        ];
+        // Curve 2 kinked; curve 3 through node 2 then 3 on adjacent samples, and twice
+        // through node 2 on adjacent samples; curve 4 with one tag (node 1) mid-way; curve 5
+        // with none.
+        let arriving = curves[2].q[119];
+        curves[2].kinks.push((120, arriving));
+        curves[3].nodes = vec![(0, 0), (30, 2), (31, 3), (60, 2), (61, 2), (90, 0)];
+        curves[3].h = vec![curves[3].h[0]; 5];
+        curves[4].nodes = vec![(25, 1)];
+        curves[4].h.truncate(1);
+        curves[5].nodes.clear();
+        curves[5].h.truncate(1);
+        for (k, c) in curves.iter_mut().enumerate() {
+            for (j, q) in c.q.iter_mut().enumerate() {
+                let a = 0.05 * ((j as f64) * 0.05 + k as f64).sin();
+                *q *= UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a);
+            }
+        }
+        let got = PoissonSolver::new().solve(&curves).unwrap();
+        // The reduced Laplacian's solve of the edges' data, and their residuals.
+        let (node_var, var_of, n) = unknowns(&curves);
+        let x = Vector3::x();
+        let (edges0, edge_at) = edges(&curves, &var_of, &x, &axes(&curves, &x));
+        let w: Vec<f64> = edges0.iter().map(|e| e.w).collect();
+        let runs = runs(&curves, &var_of, &w, node_var.len());
+        let mut cache = CachedPattern::default();
+        let f = KronReduced::new(n, node_var.len(), &runs, ridge(&edges0), &mut cache).unwrap();
+        let mut rhs = vec![[0.0; 3]; n];
+        add_rhs(&mut rhs, edges0.iter().copied());
+        f.solve(&mut rhs);
+        let want: Vec<Vector3<f64>> = rhs.into_iter().map(Vector3::from).collect();
+        let pairs = edge_at.iter().copied().zip(edges0.iter().copied());
+        let want_misfit = misfit(&curves, pairs, &want, &[], &[], &[], f.components());
+        assert_eq!(got.components, 2);
+        assert_eq!(got.components, f.components());
+        let mut worst = 0.0f64;
+        for (c, vars) in got.curves.iter().zip(&var_of) {
+            for (p, &v) in c.points.iter().zip(vars) {
+                worst = worst.max((p - want[v]).norm());
+            }
+        }
+        for (nd, v) in &node_var {
+            worst = worst.max((got.nodes[nd] - want[*v]).norm());
+        }
+        assert!(worst < 1e-12, "positions {worst:e} m apart");
+        let (m, w) = (&got.misfit, &want_misfit);
+        assert!(w.chi2 > 1e-6, "the loops misfit: {}", w.chi2);
+        assert!(
+            (m.chi2 - w.chi2).abs() <= 1e-9 * w.chi2,
+            "{} {}",
+            m.chi2,
+            w.chi2
+        );
+        assert_eq!(
+            (m.loops, m.chi2_segments.len()),
+            (w.loops, w.chi2_segments.len())
+        );
+        for (a, b) in m.chi2_segments.iter().zip(&w.chi2_segments) {
+            assert_eq!(a.len(), b.len());
+            for (x, y) in a.iter().zip(b) {
+                assert!((x - y).abs() <= 1e-9 * w.chi2, "{a:?} {b:?}");
+            }
+        }
+        assert!((m.mean_h - w.mean_h).abs() <= 1e-12 * w.mean_h);
     }
 
     #[test]
