@@ -192,15 +192,19 @@ impl Prepared {
         Ok(())
     }
 
-    /// Found from the same frames, steps, tags and kinks as `c`'s, to the bit.
-    fn of_same(&self, c: &UniformCurve) -> bool {
-        let bits = |a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>| {
+    /// Brought to `c`: kept as it is when `c` has the same frames, steps, tags and kinks to
+    /// the bit (`false` returned); where only frames changed (a live update's local
+    /// regression turns a few near the new curve's nodes), found again at those samples, at
+    /// their edges and along the runs they are in, the rest kept; else found again whole.
+    /// The same arithmetic on the same bits either way.
+    fn refresh(&mut self, c: &UniformCurve, vars: &[usize]) -> Result<bool, SolveError> {
+        let same_bits = |a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>| {
             a.coords
                 .iter()
                 .zip(b.coords.iter())
                 .all(|(x, y)| x.to_bits() == y.to_bits())
         };
-        self.nodes == c.nodes
+        let same_shape = self.nodes == c.nodes
             && self.h.len() == c.h.len()
             && self
                 .h
@@ -208,9 +212,55 @@ impl Prepared {
                 .zip(&c.h)
                 .all(|(a, b)| a.to_bits() == b.to_bits())
             && self.q.len() == c.q.len()
-            && self.q.iter().zip(&c.q).all(|(a, b)| bits(a, b))
             && self.kinks.len() == c.kinks.len()
-            && (self.kinks.iter().zip(&c.kinks)).all(|(a, b)| a.0 == b.0 && bits(&a.1, &b.1))
+            && (self.kinks.iter().zip(&c.kinks)).all(|(a, b)| a.0 == b.0 && same_bits(&a.1, &b.1));
+        if !same_shape {
+            self.refill(c, vars)?;
+            return Ok(true);
+        }
+        let x = Vector3::x();
+        // The edges whose data changed (edge j: from sample j to j + 1).
+        let mut edges: Vec<usize> = Vec::new();
+        for (j, (kept, now)) in self.q.iter_mut().zip(&c.q).enumerate() {
+            if same_bits(kept, now) {
+                continue;
+            }
+            *kept = *now;
+            self.tangents[j] = now * x;
+            self.normals[j] = now * Vector3::z();
+            if j > 0 && edges.last() != Some(&(j - 1)) {
+                edges.push(j - 1);
+            }
+            if j + 1 < c.q.len() {
+                edges.push(j);
+            }
+        }
+        if edges.is_empty() {
+            return Ok(false);
+        }
+        for &j in &edges {
+            // As `curve_edges`: its step, and the frame arriving at its end.
+            let h = c.edge_h(j);
+            let arriving = if c.kinked(j + 1) {
+                c.arriving(j + 1) * x
+            } else {
+                self.tangents[j + 1]
+            };
+            self.v[j] = (self.tangents[j] + arriving) * (0.5 * h);
+        }
+        // The runs of those edges, in series again (their weights, and so their blocks, are
+        // the same: the steps are).
+        let mut next = 0;
+        for (s, series) in self.spans.iter().zip(&mut self.series) {
+            let range = s.edges();
+            while next < edges.len() && edges[next] < range.start {
+                next += 1;
+            }
+            if next < edges.len() && range.contains(&edges[next]) {
+                *series = s.series(&self.w, &self.v, &mut self.cum_r, &mut self.cum_v);
+            }
+        }
+        Ok(true)
     }
 
     /// Its edges in a network's unknowns (`vars`: its unknown at each sample).
@@ -547,23 +597,18 @@ impl PoissonSolver {
         let mut last = std::mem::take(&mut self.prepared);
         let mut out = Vec::with_capacity(curves.len());
         for (c, vars) in curves.iter().zip(var_of) {
-            let mut p = match last.remove(&c.index) {
-                Some(p) if p.of_same(c) => {
-                    out.push(p);
-                    continue;
-                }
-                Some(p) => p,
-                None => Arc::default(),
-            };
-            match Arc::get_mut(&mut p) {
-                Some(m) => m.refill(c, vars)?,
+            let mut p = last.remove(&c.index).unwrap_or_default();
+            let changed = match Arc::get_mut(&mut p) {
+                Some(m) if !m.q.is_empty() => m.refresh(c, vars)?,
+                Some(m) => m.refill(c, vars).map(|()| true)?,
                 None => {
                     let mut m = Prepared::default();
                     m.refill(c, vars)?;
                     p = Arc::new(m);
+                    true
                 }
-            }
-            self.prepared_count += 1;
+            };
+            self.prepared_count += usize::from(changed);
             out.push(p);
         }
         self.prepared = curves
@@ -1094,6 +1139,24 @@ mod tests {
             assert_eq!(got.nodes, fresh.nodes);
             // Curve 2 is new at the first solve; curve 1 is changed at the second.
             assert_eq!(kept.prepared_count() - before, 1, "turn {turn}");
+        }
+        // Frames turned in place (a live update's local regression) at a curve's ends, at a
+        // tag, and at both sides of a kink: found again there alone, to the same bits.
+        let mut now = curves.clone();
+        kept.solve(&now).unwrap();
+        for (ci, js) in [
+            (2usize, vec![0, 119, 120, 240]),
+            (0, vec![99, 100, 101, 200]),
+        ] {
+            for j in js {
+                now[ci].q[j] *= UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.02);
+            }
+            let before = kept.prepared_count();
+            let got = kept.solve(&now).unwrap();
+            let fresh = PoissonSolver::new().solve(&now).unwrap();
+            assert_eq!(bits(&got), bits(&fresh), "curve {ci}");
+            assert_eq!(got.nodes, fresh.nodes);
+            assert_eq!(kept.prepared_count() - before, 1, "curve {ci}");
         }
         // Curve 0's slides (a join pass) read the kept tangents.
         let (got, sigma) = kept.solve_sliding(&curves, &[(0, 100)]).unwrap();
