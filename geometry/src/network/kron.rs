@@ -96,9 +96,7 @@ impl Span {
         let last = self.end.unwrap_or(self.interior.end.saturating_sub(1));
         first..last.max(first)
     }
-}
 
-impl Span {
     /// Its edges' series (`w`, `v`: the curve's edges' weights and data, edge `j` from sample
     /// `j` to `j + 1`), and at each of its samples from its first (its start tag's, or its
     /// first interior one) to its last interior one, the sums over its edges before it:
@@ -110,20 +108,18 @@ impl Span {
         cum_r: &mut [f64],
         cum_v: &mut [Vector3<f64>],
     ) -> Series {
-        let first = self.start.unwrap_or(self.interior.start);
         let (mut r, mut sum) = (0.0, Vector3::zeros());
+        // Edge e starts at sample e: the sums before it.
         for e in self.edges() {
-            if e >= first && e < self.interior.end {
-                cum_r[e] = r;
-                cum_v[e] = sum;
-            }
+            cum_r[e] = r;
+            cum_v[e] = sum;
             r += w[e].recip();
             sum += v[e];
         }
         // The last interior sample of a run with no end (no edge after it).
-        if self.end.is_none() && self.interior.end > first {
-            cum_r[self.interior.end - 1] = r;
-            cum_v[self.interior.end - 1] = sum;
+        if let (None, Some(last)) = (self.end, self.interior.clone().last()) {
+            cum_r[last] = r;
+            cum_v[last] = sum;
         }
         Series { r, v: sum }
     }

@@ -114,9 +114,10 @@ pub struct PoissonSolver {
 }
 
 /// What Poisson reads of one curve and nothing else: its tangents and normals, its edges'
-/// weights and data, its runs between tags and their factorised blocks. Kept while the
-/// curve's frames, steps, tags and kinks are the same to the bit ([`Prepared::of_same`]): the
-/// same arithmetic on the same bits, so a kept one is what would be found again.
+/// weights and data, its runs between tags, their edges in series and their factorised
+/// blocks (for the slides). Kept while the curve's frames, steps, tags and kinks are the same
+/// to the bit, found again where its frames alone changed ([`Prepared::refresh`]): the same
+/// arithmetic on the same bits, so a kept one is what would be found again.
 #[derive(Debug, Default)]
 struct Prepared {
     q: Vec<UnitQuaternion<f64>>,
@@ -171,6 +172,7 @@ impl Prepared {
         self.cum_v.clear();
         self.cum_v.resize(m, Vector3::zeros());
         self.series.clear();
+        self.blocks.clear();
         (self.used, self.h_sum) = (0, 0.0);
         for s in &self.spans {
             let series = s.series(&self.w, &self.v, &mut self.cum_r, &mut self.cum_v);
@@ -180,9 +182,6 @@ impl Prepared {
                 .iter()
                 .map(|w| w.sqrt().recip())
                 .sum::<f64>();
-        }
-        self.blocks.clear();
-        for s in &self.spans {
             let run = Run::of(s, vars, &self.w);
             let block = (!run.alone())
                 .then(|| Tridiagonal::of(&run, 0.0))
@@ -517,7 +516,6 @@ impl PoissonSolver {
             })
             .collect();
         let components = system.components();
-        let tangents: Vec<&[Vector3<f64>]> = prepared.iter().map(|p| &p.tangents[..]).collect();
         let (misfit, sigma) = if slides.is_empty() {
             let misfit = series_misfit(curves, &prepared, &var_of, &at_node, n, components);
             (misfit, Vec::new())
@@ -546,6 +544,7 @@ impl PoissonSolver {
                     x[v] = xi;
                 }
             }
+            let tangents: Vec<&[Vector3<f64>]> = prepared.iter().map(|p| &p.tangents[..]).collect();
             let sigma = slide(&f, &mut x, curves, &var_of, &tangents, slides);
             let edges = (prepared.iter().zip(&var_of).enumerate()).flat_map(|(ci, (p, vars))| {
                 p.edges(vars).enumerate().map(move |(j, e)| ((ci, j), e))
